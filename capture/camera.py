@@ -1,0 +1,270 @@
+"""Pinhole camera with OpenCV distortion: the one camera model of contourcap.
+
+World frame: metres, right-handed, Z up, floor at z = 0.  ``rotation`` and
+``translation`` map world to camera (OpenCV convention: x right, y down, z
+forward), so ``X_cam = R @ X_world + t``.
+
+Distortion follows OpenCV's order ``(k1, k2, p1, p2, k3)``::
+
+    x, y   = X_cam[0] / X_cam[2], X_cam[1] / X_cam[2]
+    r2     = x² + y²
+    radial = 1 + k1 r2 + k2 r2² + k3 r2³
+    xd     = x radial + 2 p1 x y + p2 (r2 + 2 x²)
+    yd     = y radial + p1 (r2 + 2 y²) + 2 p2 x y
+    u, v   = K @ (xd, yd, 1)
+
+``project_with_jacobian`` also returns the exact 2×3 derivative of ``(u, v)``
+with respect to the world point (the J_I factor of the extremal-contour
+Jacobian); ``tests/test_camera.py`` checks it against finite differences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Camera", "rodrigues_to_matrix", "matrix_to_rodrigues"]
+
+
+def _as_distortion(dist) -> np.ndarray:
+    d = np.zeros(5)
+    arr = np.asarray(dist, dtype=float).ravel()
+    if arr.size not in (0, 4, 5):
+        raise ValueError(f"distortion must have 4 or 5 terms (k1, k2, p1, p2[, k3]), got {arr.size}")
+    d[: arr.size] = arr
+    return d
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated camera.
+
+    Parameters
+    ----------
+    name : str
+    matrix : ndarray, shape (3, 3)
+        Intrinsics K in pixels.
+    distortion : ndarray, shape (5,)
+        OpenCV ``(k1, k2, p1, p2, k3)``; 4 terms are accepted (k3 = 0).
+    rotation : ndarray, shape (3, 3)
+        world2cam rotation matrix.
+    translation : ndarray, shape (3,)
+        world2cam translation, metres.
+    size : tuple of int
+        Image ``(width, height)`` in pixels.
+    """
+
+    name: str
+    matrix: np.ndarray
+    distortion: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    size: tuple[int, int]
+
+    def __post_init__(self):
+        K = np.array(self.matrix, dtype=float).reshape(3, 3)
+        R = np.array(self.rotation, dtype=float)
+        if R.shape == (3,):
+            R = rodrigues_to_matrix(R)
+        R = R.reshape(3, 3)
+        t = np.array(self.translation, dtype=float).reshape(3)
+        if not np.all(np.isfinite(K)) or not np.all(np.isfinite(R)) or not np.all(np.isfinite(t)):
+            raise ValueError(f"camera {self.name!r}: non-finite calibration values")
+        if abs(K[2, 2] - 1.0) > 1e-9 or K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError(f"camera {self.name!r}: matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        if np.abs(R @ R.T - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
+            raise ValueError(f"camera {self.name!r}: rotation is not a proper rotation matrix")
+        w, h = (int(v) for v in self.size)
+        if w <= 0 or h <= 0:
+            raise ValueError(f"camera {self.name!r}: size must be positive (width, height), got {self.size}")
+        for arr in (K, R, t):
+            arr.setflags(write=False)
+        d = _as_distortion(self.distortion)
+        d.setflags(write=False)
+        object.__setattr__(self, "matrix", K)
+        object.__setattr__(self, "rotation", R)
+        object.__setattr__(self, "translation", t)
+        object.__setattr__(self, "distortion", d)
+        object.__setattr__(self, "size", (w, h))
+
+    # ------------------------------------------------------------------ frames
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    @property
+    def center(self) -> np.ndarray:
+        """Optical centre in world coordinates, shape (3,)."""
+        return -self.rotation.T @ self.translation
+
+    @property
+    def world2cam(self) -> np.ndarray:
+        """Homogeneous world2cam transform, shape (4, 4)."""
+        T = np.eye(4)
+        T[:3, :3] = self.rotation
+        T[:3, 3] = self.translation
+        return T
+
+    @property
+    def rvec(self) -> np.ndarray:
+        """Rodrigues vector of the world2cam rotation, shape (3,)."""
+        return matrix_to_rodrigues(self.rotation)
+
+    @property
+    def projection_matrix(self) -> np.ndarray:
+        """P = K [R | t], shape (3, 4) (ignores distortion)."""
+        return self.matrix @ self.world2cam[:3]
+
+    def to_camera(self, points_world: np.ndarray) -> np.ndarray:
+        """World points (..., 3) -> camera-frame points (..., 3)."""
+        return np.asarray(points_world, dtype=float) @ self.rotation.T + self.translation
+
+    # -------------------------------------------------------------- projection
+    def _distort(self, x, y):
+        k1, k2, p1, p2, k3 = self.distortion
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        return xd, yd, r2, radial
+
+    def project(self, points_world: np.ndarray) -> np.ndarray:
+        """Project world points.
+
+        Parameters
+        ----------
+        points_world : ndarray, shape (..., 3)
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+            Pixel coordinates (u, v).  Points at or behind the camera plane
+            give non-finite or meaningless values: check ``depth`` first.
+        """
+        Xc = self.to_camera(points_world)
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = Xc[..., 0] / z
+            y = Xc[..., 1] / z
+        xd, yd, _, _ = self._distort(x, y)
+        K = self.matrix
+        return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
+
+    def depth(self, points_world: np.ndarray) -> np.ndarray:
+        """Camera-frame z of world points, shape (...)."""
+        return self.to_camera(points_world)[..., 2]
+
+    def project_with_jacobian(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points and differentiate.
+
+        Parameters
+        ----------
+        points_world : ndarray, shape (..., 3)
+
+        Returns
+        -------
+        uv : ndarray, shape (..., 2)
+        jac : ndarray, shape (..., 2, 3)
+            d(u, v) / d(X_world).
+        """
+        Xc = self.to_camera(points_world)
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv_z = 1.0 / z
+        x = Xc[..., 0] * inv_z
+        y = Xc[..., 1] * inv_z
+        k1, k2, p1, p2, k3 = self.distortion
+        xd, yd, r2, radial = self._distort(x, y)
+        drad = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+        dxd_dx = radial + 2.0 * x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x
+        dxd_dy = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y
+        dyd_dx = dxd_dy  # the distortion map's Jacobian is symmetric
+        dyd_dy = radial + 2.0 * y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x
+        K = self.matrix
+        # d(u, v)/d(x, y): K's upper 2x2 times the distortion Jacobian
+        du_dx = K[0, 0] * dxd_dx + K[0, 1] * dyd_dx
+        du_dy = K[0, 0] * dxd_dy + K[0, 1] * dyd_dy
+        dv_dx = K[1, 1] * dyd_dx
+        dv_dy = K[1, 1] * dyd_dy
+        # d(x, y)/d(Xc) = [[1/z, 0, -x/z], [0, 1/z, -y/z]]
+        d_uv_dXc = np.stack(
+            [
+                np.stack([du_dx * inv_z, du_dy * inv_z, -(du_dx * x + du_dy * y) * inv_z], axis=-1),
+                np.stack([dv_dx * inv_z, dv_dy * inv_z, -(dv_dx * x + dv_dy * y) * inv_z], axis=-1),
+            ],
+            axis=-2,
+        )
+        jac = d_uv_dXc @ self.rotation  # (..., 2, 3) @ (3, 3): chain rule through X_c = R X + t
+        uv = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
+        return uv, jac
+
+    def in_image(self, uv: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
+        """Boolean mask of pixel positions (..., 2) inside the image."""
+        u, v = uv[..., 0], uv[..., 1]
+        return (u >= -margin) & (v >= -margin) & (u <= self.width - 1 + margin) & (v <= self.height - 1 + margin)
+
+    def with_name(self, name: str) -> "Camera":
+        return Camera(name, self.matrix, self.distortion, self.rotation, self.translation, self.size)
+
+    @classmethod
+    def look_at(
+        cls,
+        name: str,
+        eye,
+        target,
+        *,
+        size: tuple[int, int] = (800, 600),
+        fov_deg: float = 60.0,
+        distortion=(0.0, 0.0, 0.0, 0.0, 0.0),
+        up=(0.0, 0.0, 1.0),
+    ) -> "Camera":
+        """A camera at ``eye`` (world, metres) looking at ``target``, image up ≈ world ``up``.
+
+        ``fov_deg`` is the horizontal field of view.
+        """
+        eye = np.asarray(eye, dtype=float)
+        fwd = np.asarray(target, dtype=float) - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, np.asarray(up, dtype=float))
+        if np.linalg.norm(right) < 1e-9:
+            raise ValueError(f"camera {name!r}: viewing direction is parallel to 'up'")
+        right /= np.linalg.norm(right)
+        down = np.cross(fwd, right)
+        R = np.stack([right, down, fwd])  # rows: camera axes in world
+        w, h = size
+        f = 0.5 * w / np.tan(np.radians(fov_deg) / 2.0)
+        K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        return cls(name, K, np.asarray(distortion, dtype=float), R, -R @ eye, (w, h))
+
+
+def rodrigues_to_matrix(rvec) -> np.ndarray:
+    """Rodrigues vector (3,) -> rotation matrix (3, 3)."""
+    r = np.asarray(rvec, dtype=float).reshape(3)
+    theta = np.linalg.norm(r)
+    if theta < 1e-12:
+        return np.eye(3)
+    k = r / theta
+    Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(theta) * Kx + (1 - np.cos(theta)) * (Kx @ Kx)
+
+
+def matrix_to_rodrigues(R) -> np.ndarray:
+    """Rotation matrix (3, 3) -> Rodrigues vector (3,) (angle in [0, π])."""
+    R = np.asarray(R, dtype=float)
+    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    if theta < 1e-12:
+        return np.zeros(3)
+    if np.pi - theta < 1e-6:
+        # axis from the symmetric part: R = 2 k k^T - I
+        M = (R + np.eye(3)) / 2.0
+        i = int(np.argmax(np.diag(M)))
+        k = M[:, i] / np.sqrt(M[i, i])
+        return k * theta
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * np.sin(theta))
+    return w * theta

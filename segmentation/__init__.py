@@ -1,0 +1,1 @@
+"""Segmentation: background model, silhouettes, edges, distance-transform images (pure numpy/OpenCV)."""

@@ -1,0 +1,1 @@
+"""Service: wire messages, zenoh wiring, workers, CLI, rerun bridge, config."""

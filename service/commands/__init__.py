@@ -1,0 +1,1 @@
+"""Sub-commands of the ``contourcap`` CLI (see ``service/cli.py``)."""

@@ -1,0 +1,58 @@
+import numpy as np
+import pytest
+
+from capture.camera import Camera, matrix_to_rodrigues, rodrigues_to_matrix
+
+
+def random_camera(rng, *, distorted=True):
+    eye = rng.uniform(-4, 4, 3) + np.array([0, 0, 1.5])
+    eye[:2] += np.sign(eye[:2]) * 1.0
+    target = rng.uniform(-0.3, 0.3, 3) + np.array([0, 0, 1.0])
+    dist = rng.normal(0, [0.1, 0.05, 0.002, 0.002, 0.02]) if distorted else np.zeros(5)
+    return Camera.look_at("c", eye, target, size=(800, 600), fov_deg=rng.uniform(40, 80), distortion=dist)
+
+
+def test_project_matches_opencv(rng):
+    cv2 = pytest.importorskip("cv2")
+    for _ in range(5):
+        cam = random_camera(rng)
+        X = rng.uniform(-0.5, 0.5, (50, 3)) + np.array([0, 0, 1.0])
+        ours = cam.project(X)
+        theirs, _ = cv2.projectPoints(X, cam.rvec, cam.translation, cam.matrix, cam.distortion)
+        np.testing.assert_allclose(ours, theirs[:, 0], atol=1e-8)
+
+
+def test_projection_jacobian_matches_central_differences(rng):
+    h = 1e-6
+    for _ in range(10):
+        cam = random_camera(rng)
+        X = rng.uniform(-0.5, 0.5, (30, 3)) + np.array([0, 0, 1.0])
+        uv, J = cam.project_with_jacobian(X)
+        np.testing.assert_allclose(uv, cam.project(X), atol=1e-12)
+        fd = np.stack([(cam.project(X + h * e) - cam.project(X - h * e)) / (2 * h) for e in np.eye(3)], axis=-1)
+        rel = np.abs(J - fd).max() / np.abs(fd).max()
+        assert rel < 1e-6
+
+
+def test_rodrigues_round_trip(rng):
+    for _ in range(50):
+        r = rng.normal(size=3)
+        r *= rng.uniform(0, np.pi - 1e-3) / np.linalg.norm(r)
+        np.testing.assert_allclose(matrix_to_rodrigues(rodrigues_to_matrix(r)), r, atol=1e-9)
+    # angle = pi exactly
+    r = np.array([0.0, np.pi, 0.0])
+    np.testing.assert_allclose(rodrigues_to_matrix(matrix_to_rodrigues(rodrigues_to_matrix(r))), rodrigues_to_matrix(r), atol=1e-9)
+
+
+def test_look_at_puts_target_at_image_centre_and_up_is_up():
+    cam = Camera.look_at("c", [3, 0, 1.5], [0, 0, 1.5], size=(640, 480))
+    np.testing.assert_allclose(cam.project(np.array([0, 0, 1.5])), [319.5, 239.5], atol=1e-9)
+    assert cam.project(np.array([0, 0, 2.0]))[1] < cam.project(np.array([0, 0, 1.0]))[1]
+    np.testing.assert_allclose(cam.center, [3, 0, 1.5], atol=1e-12)
+
+
+def test_bad_camera_rejected_with_its_name():
+    with pytest.raises(ValueError, match="cam7"):
+        Camera("cam7", np.eye(3) * [1, 1, 2], np.zeros(5), np.eye(3), np.zeros(3), (10, 10))
+    with pytest.raises(ValueError, match="cam7.*rotation"):
+        Camera("cam7", np.eye(3), np.zeros(5), np.eye(3) * 2, np.zeros(3), (10, 10))

@@ -1,0 +1,1 @@
+"""Tracker: body model, kinematics, extremal contours, Jacobians, chamfer cost, solver, initialisation, renderer."""
