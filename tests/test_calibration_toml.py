@@ -1,0 +1,25 @@
+import numpy as np
+import pytest
+
+from capture.calibration import CalibrationError, load_calibration, save_calibration
+from capture.camera import Camera
+
+
+def test_anipose_round_trip_is_exact(tmp_path, rng):
+    cams = [
+        Camera.look_at(f"cam{i}", [3 * np.cos(a), 3 * np.sin(a), 1.8], [0, 0, 1], distortion=rng.normal(0, 0.05, 5))
+        for i, a in enumerate(np.linspace(0, 2 * np.pi, 5)[:-1])
+    ]
+    path = save_calibration(tmp_path / "calibration.toml", cams)
+    back = load_calibration(path)
+    X = rng.uniform(-0.5, 0.5, (20, 3)) + [0, 0, 1]
+    assert [c.name for c in back] == [c.name for c in cams]
+    for a, b in zip(cams, back):
+        np.testing.assert_allclose(a.project(X), b.project(X), atol=1e-9)
+
+
+def test_missing_key_named(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text('[cam_00]\nname = "c"\nsize = [10, 10]\nmatrix = [[1,0,0],[0,1,0],[0,0,1]]\ndistortions = [0,0,0,0]\nrotation = [0,0,0]\n')
+    with pytest.raises(CalibrationError, match=r"bad.toml \[cam_00\].*translation"):
+        load_calibration(p)
