@@ -1,0 +1,241 @@
+"""Studio configuration (``studio.toml``): typed, validated, every error names the key.
+
+::
+
+    [studio]
+    name = "lab"                      # zenoh key prefix contourcap/<name>/...
+    delivery = "live"                 # live | lossless
+    session = "sessions/take1"        # replay session (relative to this file) for backend = "replay"
+    model = "knossow40"               # body model name or file
+    jpeg_quality = 90
+
+    [zenoh]                           # see service.bus.ZenohSettings
+    mode = "peer"                     # peer | client | router
+    listen = ["tcp/127.0.0.1:7447"]
+    connect = []
+    tls_root_ca = "certs/ca.pem"      # optional, paths relative to this file
+    user = "contourcap"               # optional usrpwd auth; password from password_file
+    password_file = "secrets/zenoh_password"
+
+    [trigger]                         # optional USB trigger box
+    backend = "none"                  # none | usb
+    fps = 50.0
+
+    [tracker]
+    host = "host-a"
+    set_timeout_ms = 80               # live: wait this long for missing cameras
+    window = 8                        # lossless: frames in flight before the cameras wait
+
+    [router]                          # optional: `contourcap run` on this host also runs the router
+    host = "host-a"
+    listen = ["tcp/0.0.0.0:7447"]
+
+    [[camera]]
+    name = "cam0"
+    host = "host-a"
+    backend = "replay"                # replay | opencv
+    source = "0"                      # opencv device index/URL; ignored by replay (uses studio.session)
+    encoding = "jpeg"                 # raw | jpeg | png on the wire
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from capture.tomlio import tomllib
+from service.bus import MODES, ZenohSettings
+from service.messages import ENCODINGS, check_name, MessageError
+
+BACKENDS = ("replay", "opencv")
+
+
+class ConfigError(ValueError):
+    """A studio configuration problem; the message names the file and key."""
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    name: str
+    host: str
+    backend: str = "replay"
+    source: str = ""
+    encoding: str = "jpeg"
+
+
+@dataclass(frozen=True)
+class TriggerConfig:
+    backend: str = "none"
+    fps: float = 50.0
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class StudioConfig:
+    path: Path | None
+    studio: str
+    delivery: str
+    session: Path | None
+    model: str
+    jpeg_quality: int
+    zenoh: ZenohSettings
+    trigger: TriggerConfig
+    tracker_host: str
+    set_timeout_ms: float
+    window: int
+    router_host: str | None
+    router_listen: tuple[str, ...]
+    cameras: tuple[CameraConfig, ...]
+
+    @property
+    def hosts(self) -> tuple[str, ...]:
+        hs = [c.host for c in self.cameras] + [self.tracker_host] + ([self.router_host] if self.router_host else [])
+        return tuple(dict.fromkeys(hs))
+
+    def cameras_on(self, host: str) -> tuple[CameraConfig, ...]:
+        return tuple(c for c in self.cameras if c.host == host)
+
+    def camera(self, name: str) -> CameraConfig:
+        for c in self.cameras:
+            if c.name == name:
+                return c
+        raise ConfigError(f"{self.path}: no [[camera]] named {name!r} (have {[c.name for c in self.cameras]})")
+
+
+class _Reader:
+    def __init__(self, where: str, base: Path | None) -> None:
+        self.where, self.base = where, base
+
+    def err(self, key: str, msg: str) -> ConfigError:
+        return ConfigError(f"{self.where}: {key}: {msg}")
+
+    def get(self, table: Mapping, key: str, prefix: str, types: tuple, default: Any = ..., choices=None) -> Any:
+        full = f"{prefix}.{key}" if prefix else key
+        if key not in table:
+            if default is ...:
+                raise self.err(full, "missing")
+            return default
+        v = table[key]
+        if isinstance(v, bool) and bool not in types or not isinstance(v, types):
+            raise self.err(full, f"expected {'/'.join(t.__name__ for t in types)}, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.err(full, f"must be one of {list(choices)}, got {v!r}")
+        return v
+
+    def name(self, table: Mapping, key: str, prefix: str, default: Any = ...) -> str:
+        v = self.get(table, key, prefix, (str,), default)
+        try:
+            return check_name(v, f"{prefix}.{key}")
+        except MessageError as exc:
+            raise self.err(f"{prefix}.{key}", str(exc)) from None
+
+    def path(self, table: Mapping, key: str, prefix: str) -> str | None:
+        v = self.get(table, key, prefix, (str,), None)
+        if v is None:
+            return None
+        p = Path(v).expanduser()
+        return str(p if p.is_absolute() or self.base is None else self.base / p)
+
+    def strings(self, table: Mapping, key: str, prefix: str) -> tuple[str, ...]:
+        v = self.get(table, key, prefix, (list,), [])
+        if not all(isinstance(s, str) for s in v):
+            raise self.err(f"{prefix}.{key}", "expected a list of strings")
+        return tuple(v)
+
+    def unknown(self, table: Mapping, allowed: set, prefix: str) -> None:
+        extra = sorted(set(table) - allowed)
+        if extra:
+            raise self.err(f"{prefix}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
+
+
+def _zenoh(r: _Reader, z: Mapping) -> ZenohSettings:
+    r.unknown(z, {"mode", "listen", "connect", "multicast_scouting", "tls_root_ca", "tls_cert", "tls_key",
+                  "tls_mtls", "user", "password_file", "auth_dictionary", "config_file", "connect_timeout_s"},
+              "zenoh")
+    password = None
+    pw_file = r.path(z, "password_file", "zenoh")
+    if pw_file is not None:
+        try:
+            password = Path(pw_file).read_text().strip()
+        except OSError as exc:
+            raise r.err("zenoh.password_file", f"cannot read {pw_file}: {exc.strerror}") from None
+    user = r.get(z, "user", "zenoh", (str,), None)
+    if (user is None) != (password is None):
+        raise r.err("zenoh.user", "user and password_file must be given together")
+    try:
+        return ZenohSettings(
+            mode=r.get(z, "mode", "zenoh", (str,), "peer", choices=("peer", "client", "router")),
+            listen=r.strings(z, "listen", "zenoh"), connect=r.strings(z, "connect", "zenoh"),
+            multicast_scouting=r.get(z, "multicast_scouting", "zenoh", (bool,), False),
+            tls_root_ca=r.path(z, "tls_root_ca", "zenoh"), tls_cert=r.path(z, "tls_cert", "zenoh"),
+            tls_key=r.path(z, "tls_key", "zenoh"), tls_mtls=r.get(z, "tls_mtls", "zenoh", (bool,), False),
+            user=user, password=password, auth_dictionary=r.path(z, "auth_dictionary", "zenoh"),
+            config_file=r.path(z, "config_file", "zenoh"),
+            connect_timeout_s=float(r.get(z, "connect_timeout_s", "zenoh", (int, float), 5.0)))
+    except ValueError as exc:
+        raise r.err("zenoh", str(exc)) from None
+
+
+def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path | None = None) -> StudioConfig:
+    """Validate a parsed studio TOML; relative paths are resolved against ``base``."""
+    r = _Reader(where, base)
+    r.unknown(data, {"studio", "zenoh", "trigger", "tracker", "router", "camera"}, "")
+    s = r.get(data, "studio", "", (dict,))
+    r.unknown(s, {"name", "delivery", "session", "model", "jpeg_quality"}, "studio")
+    cams_raw = r.get(data, "camera", "", (list,))
+    if not cams_raw:
+        raise r.err("camera", "at least one [[camera]] is needed")
+    cams, seen = [], set()
+    for i, c in enumerate(cams_raw):
+        p = f"camera[{i}]"
+        if not isinstance(c, dict):
+            raise r.err(p, "expected a table")
+        r.unknown(c, {"name", "host", "backend", "source", "encoding"}, p)
+        cam = CameraConfig(r.name(c, "name", p), r.name(c, "host", p),
+                           r.get(c, "backend", p, (str,), "replay", choices=BACKENDS),
+                           str(r.get(c, "source", p, (str, int), "")),
+                           r.get(c, "encoding", p, (str,), "jpeg", choices=ENCODINGS))
+        if cam.name in seen:
+            raise r.err(f"{p}.name", f"duplicate camera {cam.name!r}")
+        seen.add(cam.name)
+        cams.append(cam)
+    session = r.path(s, "session", "studio")
+    if session is None and any(c.backend == "replay" for c in cams):
+        raise r.err("studio.session", "replay cameras need a session directory")
+    t = r.get(data, "trigger", "", (dict,), {})
+    trigger = TriggerConfig(r.get(t, "backend", "trigger", (str,), "none", choices=("none", "usb")),
+                            float(r.get(t, "fps", "trigger", (int, float), 50.0)),
+                            {k: v for k, v in t.items() if k not in ("backend", "fps")})
+    tr = r.get(data, "tracker", "", (dict,), {})
+    r.unknown(tr, {"host", "set_timeout_ms", "window"}, "tracker")
+    ro = r.get(data, "router", "", (dict,), None)
+    if ro is not None:
+        r.unknown(ro, {"host", "listen"}, "router")
+    window = r.get(tr, "window", "tracker", (int,), 8)
+    timeout = float(r.get(tr, "set_timeout_ms", "tracker", (int, float), 80.0))
+    quality = r.get(s, "jpeg_quality", "studio", (int,), 90)
+    if window < 1 or timeout <= 0 or not 1 <= quality <= 100:
+        raise r.err("tracker" if quality in range(1, 101) else "studio.jpeg_quality",
+                    "window >= 1, set_timeout_ms > 0, jpeg_quality in 1..100")
+    return StudioConfig(
+        path=Path(where) if base is not None else None, studio=r.name(s, "name", "studio"),
+        delivery=r.get(s, "delivery", "studio", (str,), "live", choices=MODES),
+        session=Path(session) if session else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
+        jpeg_quality=quality, zenoh=_zenoh(r, r.get(data, "zenoh", "", (dict,), {})), trigger=trigger,
+        tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
+        router_host=r.name(ro, "host", "router") if ro is not None else None,
+        router_listen=r.strings(ro, "listen", "router") if ro is not None else (),
+        cameras=tuple(cams))
+
+
+def load_config(path) -> StudioConfig:
+    """Read and validate ``studio.toml``; ConfigError names the file and key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return parse_config(data, where=str(path), base=path.resolve().parent)
