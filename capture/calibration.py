@@ -13,7 +13,19 @@ world Z up, floor at z = 0::
     [metadata]
     units = "m"
 
-``save_calibration`` writes exactly this; ``load_calibration`` reads it.
+``save_calibration`` writes exactly this; ``load_calibration`` reads it and
+the other flavours of the same layout, converting translations to metres:
+
+* **contourcap** -- ``[metadata] units = "m"`` (or ``"mm"``): as stated.
+* **Pose2Sim** -- camera tables carry ``fisheye = false``; Pose2Sim writes
+  metres.  ``fisheye = true`` is refused (not an OpenCV pinhole camera).
+* **FreeMoCap** -- anipose-based, ``[metadata]`` holds ``charuco_*`` keys;
+  translations are in millimetres (the ChArUco square size is given in mm).
+* **anipose** -- no unit stated; translations are in the board's unit,
+  normally millimetres: any camera with ``|t| > 100`` is read as mm.
+
+Other formats (OpenCV XML/YAML, EasyMocap, projection matrices) live in
+``capture.calib_formats``.
 """
 
 from __future__ import annotations
@@ -26,7 +38,7 @@ import numpy as np
 from capture.camera import Camera, rodrigues_to_matrix
 from capture.tomlio import dumps, load_file
 
-__all__ = ["CalibrationError", "load_calibration", "save_calibration", "cameras_to_toml_dict"]
+__all__ = ["CalibrationError", "load_calibration", "save_calibration", "cameras_to_toml_dict", "toml_flavour"]
 
 
 class CalibrationError(ValueError):
@@ -77,12 +89,24 @@ def _array(table: dict, key: str, where: str, shape: tuple) -> np.ndarray:
     return arr
 
 
-def load_calibration(path) -> list[Camera]:
-    """Read an anipose/Pose2Sim calibration TOML into cameras (metres).
+_MM = ("mm", "millimeter", "millimeters", "millimetre", "millimetres")
+_M = ("m", "meter", "meters", "metre", "metres")
 
-    ``[metadata] units = "mm"`` (or translations whose norm suggests
-    millimetres when no unit is stated: any |t| > 100) is converted to metres.
-    """
+
+def toml_flavour(data: dict) -> str:
+    """Which tool wrote a parsed calibration TOML: "contourcap", "pose2sim", "freemocap" or "anipose"."""
+    meta = data.get("metadata", {}) if isinstance(data.get("metadata"), dict) else {}
+    if "units" in meta:
+        return "contourcap"
+    if any("charuco" in str(k).lower() for k in meta) or "freemocap" in str(meta).lower():
+        return "freemocap"
+    if any(isinstance(v, dict) and "fisheye" in v for v in data.values()):
+        return "pose2sim"
+    return "anipose"
+
+
+def load_calibration(path) -> list[Camera]:
+    """Read an anipose / Pose2Sim / FreeMoCap / contourcap calibration TOML (see module doc) into cameras in metres."""
     path = Path(path)
     try:
         data = load_file(path)
@@ -90,7 +114,14 @@ def load_calibration(path) -> list[Camera]:
         raise CalibrationError(f"{path}: calibration file not found") from None
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
-    units = str(data.get("metadata", {}).get("units", "")).lower()
+    flavour = toml_flavour(data)
+    units = str(data.get("metadata", {}).get("units", "")).strip().lower()
+    if flavour == "pose2sim":
+        units = "m"
+    elif flavour == "freemocap":
+        units = "mm"
+    elif units and units not in _M and units not in _MM:
+        raise CalibrationError(f"{path} [metadata]: key 'units' must be \"m\" or \"mm\", got {units!r}")
     sections = [k for k, v in data.items() if isinstance(v, dict) and k != "metadata"]
     if not sections:
         raise CalibrationError(f"{path}: no camera sections found")
@@ -98,6 +129,8 @@ def load_calibration(path) -> list[Camera]:
     for sec in sections:
         table = data[sec]
         where = f"{path} [{sec}]"
+        if table.get("fisheye", False) is True:
+            raise CalibrationError(f"{where}: key 'fisheye' is true; only pinhole cameras with OpenCV distortion are supported")
         name = str(table.get("name", sec))
         size = _array(table, "size", where, (2,))
         K = _array(table, "matrix", where, (3, 3))
@@ -110,9 +143,9 @@ def load_calibration(path) -> list[Camera]:
         else:
             raise CalibrationError(f"{where}: key 'rotation' must be a Rodrigues vector (3,) or a matrix (3, 3), got {rot.shape}")
         t = _array(table, "translation", where, (3,))
-        if units in ("mm", "millimeter", "millimeters", "millimetre", "millimetres"):
+        if units in _MM:
             t = t / 1000.0
-        elif units not in ("m", "meter", "meters", "metre", "metres") and np.linalg.norm(t) > 100.0:
+        elif units not in _M and np.linalg.norm(t) > 100.0:
             t = t / 1000.0  # unit not stated; a camera over 100 m away is millimetres
         try:
             cams.append(Camera(name, K, dist, R, t, (int(size[0]), int(size[1]))))
