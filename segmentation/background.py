@@ -1,0 +1,257 @@
+"""Per-pixel YUV background model with a Mahalanobis test (Caillette & Howard, BMVC'04 §3.2).
+
+Each pixel of the empty scene is a Gaussian in centred YUV, ``p = (Y, U - 128, V - 128)``
+(a linear map of BGR, see :func:`bgr_to_yuv`), with mean ``mu`` and covariance ``K`` learned
+from ~50 background frames (:meth:`BackgroundModel.from_frames`) or, lacking those, from the
+temporal median of session frames (:meth:`BackgroundModel.from_median`).  The test statistic
+of a new pixel is the squared Mahalanobis distance ``(p - mu)^T K^-1 (p - mu)``.
+
+Shadows.  The paper relaxes the luminance variance.  We do that (``luma_relax`` scales the Y
+variance) and, because a cast shadow scales all of R, G, B by the same factor ``s`` and
+therefore scales the *centred* YUV vector ``p`` by ``s`` too (chroma offsets shrink with the
+brightness), we also relax along the pixel's own brightness axis: the distance is taken to
+the nearest point of the segment ``{s * mu : s in shadow_range}``::
+
+    A = mu^T K^-1 mu,   B = p^T K^-1 mu,   C = p^T K^-1 p
+    s = clip(B / A, *shadow_range),   d = C - 2 s B + s^2 A          (d >= 0)
+
+For neutral (grey / white) background colours this axis is exactly the Y axis, i.e. the
+paper's relaxation; for coloured backgrounds (a green floor) it is the physically right one.
+With ``shadow_range = (1, 1)`` it is the plain Mahalanobis distance.
+
+Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only); ``bench/segmentation.py``
+measures both.  All per-frame work is a handful of OpenCV float32 array operations.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import cv2
+import numpy as np
+
+from segmentation.checks import check_image_bgr, check_mask, check_roi
+
+__all__ = ["BackgroundModel", "bgr_to_yuv", "BGR2YUV"]
+
+# rows: Y, U - 128, V - 128 ; columns: B, G, R  (OpenCV's BGR2YUV without the +128 offsets)
+BGR2YUV = np.array(
+    [
+        [0.114, 0.587, 0.299],
+        [0.492 * (1 - 0.114), -0.492 * 0.587, -0.492 * 0.299],
+        [-0.877 * 0.114, -0.877 * 0.587, 0.877 * (1 - 0.299)],
+    ],
+    dtype=np.float32,
+)
+# channel pairs of the off-diagonal terms, in the order (Y,U), (U,V), (V,Y)
+_PERM = BGR2YUV[[1, 2, 0]].copy()
+_ONES = np.ones((1, 3), np.float32)
+_COV_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # layout of the 6 stored covariance terms
+_FORMAT_VERSION = 1
+
+
+def bgr_to_yuv(image_bgr: np.ndarray) -> np.ndarray:
+    """Centred YUV ``(h, w, 3)`` float32 of a BGR uint8 image ``(h, w, 3)`` (Y in 0..255, U, V about 0)."""
+    return cv2.transform(image_bgr.astype(np.float32), BGR2YUV)
+
+
+class BackgroundModel:
+    """Per-pixel Gaussian background in centred YUV; see the module docstring.
+
+    Attributes (read-only by convention):
+        mean_yuv : (h, w, 3) float32, centred YUV mean.
+        cov_yuv : (h, w, 6) float32, learned covariance terms yy, uu, vv, yu, uv, yv (before
+            regularisation); the off-diagonal terms are zero for ``covariance="diag"``.
+        covariance : "full" or "diag".
+        luma_relax : factor on the Y variance (>= 1).
+        shadow_range : (s_lo, s_hi) brightness factors still explained as background.
+        min_sigma : floor of the per-channel standard deviation (YUV levels).
+
+    ``update`` changes the mean in place (slow adaptation); everything else is fixed.
+    """
+
+    def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "full",
+                 luma_relax: float = 2.0, shadow_range: tuple[float, float] = (0.45, 1.1),
+                 min_sigma: float = 2.5) -> None:
+        mean_yuv = np.asarray(mean_yuv, dtype=np.float32)
+        cov_yuv = np.asarray(cov_yuv, dtype=np.float32)
+        if mean_yuv.ndim != 3 or mean_yuv.shape[2] != 3 or min(mean_yuv.shape[:2]) < 1:
+            raise ValueError(f"mean_yuv: expected shape (h, w, 3), got {mean_yuv.shape}")
+        if cov_yuv.shape != mean_yuv.shape[:2] + (6,):
+            raise ValueError(f"cov_yuv: expected shape {mean_yuv.shape[:2] + (6,)}, got {cov_yuv.shape}")
+        if not (np.isfinite(mean_yuv).all() and np.isfinite(cov_yuv).all()):
+            raise ValueError("mean_yuv / cov_yuv: contain NaN or inf")
+        if covariance not in ("full", "diag"):
+            raise ValueError(f"covariance: expected 'full' or 'diag', got {covariance!r}")
+        lo, hi = (float(v) for v in shadow_range)
+        if not (0.0 < lo <= 1.0 <= hi and np.isfinite(hi)):
+            raise ValueError(f"shadow_range: expected 0 < lo <= 1 <= hi, got {shadow_range!r}")
+        if not (np.isfinite(luma_relax) and luma_relax >= 1.0):
+            raise ValueError(f"luma_relax: expected a finite number >= 1, got {luma_relax!r}")
+        if not (np.isfinite(min_sigma) and min_sigma > 0):
+            raise ValueError(f"min_sigma: expected a finite number > 0, got {min_sigma!r}")
+        self.mean_yuv = np.ascontiguousarray(mean_yuv)
+        self.cov_yuv = np.ascontiguousarray(cov_yuv)
+        if covariance == "diag":
+            self.cov_yuv[..., 3:] = 0.0
+        self.covariance = covariance
+        self.luma_relax = float(luma_relax)
+        self.shadow_range = (lo, hi)
+        self.min_sigma = float(min_sigma)
+        self._precision()
+        self._derive_mean_terms()
+
+    # ----------------------------------------------------------------- construction
+    @classmethod
+    def from_frames(cls, frames: Iterable[np.ndarray], **options) -> "BackgroundModel":
+        """Learn mean and covariance from background frames (BGR uint8 ``(h, w, 3)`` each, >= 2).
+
+        ``options``: ``covariance``, ``luma_relax``, ``shadow_range``, ``min_sigma`` (see class).
+        """
+        n = 0
+        s1 = s2 = None
+        for i, frame in enumerate(frames):
+            check_image_bgr(frame, f"frames[{i}]")
+            if s1 is None:
+                h, w = frame.shape[:2]
+                s1 = np.zeros((h, w, 3), np.float64)
+                s2 = np.zeros((h, w, 6), np.float64)
+            elif frame.shape[:2] != s1.shape[:2]:
+                raise ValueError(f"frames[{i}]: shape {frame.shape} differs from frames[0] {s1.shape[:2] + (3,)}")
+            p = bgr_to_yuv(frame).astype(np.float64)
+            s1 += p
+            for k, (a, b) in enumerate(_COV_INDEX):
+                s2[..., k] += p[..., a] * p[..., b]
+            n += 1
+        if n < 2:
+            raise ValueError(f"frames: need at least 2 background frames, got {n}")
+        mean = s1 / n
+        cov = np.empty_like(s2)
+        for k, (a, b) in enumerate(_COV_INDEX):
+            cov[..., k] = (s2[..., k] - n * mean[..., a] * mean[..., b]) / (n - 1)
+        return cls(mean, cov, **options)
+
+    @classmethod
+    def from_median(cls, frames: Sequence[np.ndarray], **options) -> "BackgroundModel":
+        """Background from the temporal median of session frames (the person must move).
+
+        Variances are robust: ``(1.4826 * MAD)^2`` per channel; covariance is diagonal.
+        ``frames``: sequence of >= 3 BGR uint8 ``(h, w, 3)`` frames.
+        """
+        frames = list(frames)
+        if len(frames) < 3:
+            raise ValueError(f"frames: need at least 3 frames for a median background, got {len(frames)}")
+        for i, frame in enumerate(frames):
+            check_image_bgr(frame, f"frames[{i}]")
+            if frame.shape != frames[0].shape:
+                raise ValueError(f"frames[{i}]: shape {frame.shape} differs from frames[0] {frames[0].shape}")
+        stack = np.stack([bgr_to_yuv(f) for f in frames])  # (n, h, w, 3)
+        med = np.median(stack, axis=0)
+        mad = np.median(np.abs(stack - med), axis=0)
+        cov = np.zeros(med.shape[:2] + (6,), np.float32)
+        cov[..., :3] = (1.4826 * mad) ** 2
+        options.setdefault("covariance", "diag")
+        return cls(med, cov, **options)
+
+    # ----------------------------------------------------------------- derived terms
+    def _precision(self) -> None:
+        """Regularised inverse covariance: diagonal (h, w, 3) and 2 x off-diagonal (h, w, 3) planes."""
+        h, w = self.mean_yuv.shape[:2]
+        cov = self.cov_yuv.astype(np.float64)
+        full = np.empty((h, w, 3, 3))
+        for k, (a, b) in enumerate(_COV_INDEX):
+            full[..., a, b] = full[..., b, a] = cov[..., k]
+        full[..., 0, :] *= np.sqrt(self.luma_relax)
+        full[..., :, 0] *= np.sqrt(self.luma_relax)
+        floor = self.min_sigma ** 2
+        for c in range(3):
+            full[..., c, c] = np.maximum(full[..., c, c], 0.0) + floor
+        if self.covariance == "diag":
+            inv = np.zeros_like(full)
+            for c in range(3):
+                inv[..., c, c] = 1.0 / full[..., c, c]
+        else:
+            inv = np.linalg.inv(full)
+        self._inv = inv.astype(np.float32)  # (h, w, 3, 3)
+        self._pdiag = np.ascontiguousarray(np.stack([inv[..., 0, 0], inv[..., 1, 1], inv[..., 2, 2]], -1),
+                                           dtype=np.float32)
+        self._pcross = np.ascontiguousarray(2 * np.stack([inv[..., 0, 1], inv[..., 1, 2], inv[..., 2, 0]], -1),
+                                            dtype=np.float32)
+
+    def _derive_mean_terms(self) -> None:
+        a = np.einsum("hwij,hwj->hwi", self._inv, self.mean_yuv)  # K^-1 mu, (h, w, 3)
+        big_a = np.einsum("hwi,hwi->hw", a, self.mean_yuv)
+        self._a = np.ascontiguousarray(a, dtype=np.float32)
+        self._big_a = np.ascontiguousarray(big_a, dtype=np.float32)
+        self._inv_a = (1.0 / np.maximum(big_a, 1e-6)).astype(np.float32)
+
+    # ----------------------------------------------------------------- per frame
+    @property
+    def size(self) -> tuple[int, int]:
+        """Image size ``(w, h)`` the model was learned at."""
+        return int(self.mean_yuv.shape[1]), int(self.mean_yuv.shape[0])
+
+    def distance(self, image_bgr: np.ndarray, *, roi=None) -> np.ndarray:
+        """Squared Mahalanobis distance (shadow-relaxed) of each pixel, float32 ``(y1-y0, x1-x0)``.
+
+        ``image_bgr``: full image ``(h, w, 3)`` uint8; ``roi = (x0, y0, x1, y1)`` limits the work
+        to that box (the result covers only the box).
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        x0, y0, x1, y1 = check_roi(roi, self.size)
+        sl = (slice(y0, y1), slice(x0, x1))
+        bgr = image_bgr[sl].astype(np.float32)
+        p = cv2.transform(bgr, BGR2YUV)
+        c3 = cv2.multiply(cv2.multiply(p, p), self._pdiag[sl])
+        if self.covariance == "full":
+            q = cv2.transform(bgr, _PERM)  # (U, V, Y): pairs (Y,U), (U,V), (V,Y) with p
+            c3 = cv2.add(c3, cv2.multiply(cv2.multiply(p, q), self._pcross[sl]))
+        big_c = cv2.transform(c3, _ONES)
+        big_b = cv2.transform(cv2.multiply(p, self._a[sl]), _ONES)
+        big_a = self._big_a[sl]
+        s = cv2.multiply(big_b, self._inv_a[sl])
+        lo, hi = self.shadow_range
+        s = cv2.min(cv2.max(s, lo), hi)
+        t = cv2.scaleAdd(big_b, -2.0, cv2.multiply(s, big_a))  # s A - 2 B
+        d = cv2.add(big_c, cv2.multiply(s, t))  # C - 2 s B + s^2 A
+        return cv2.max(d, 0.0)
+
+    def update(self, image_bgr: np.ndarray, foreground: np.ndarray, *, rate: float = 0.01) -> None:
+        """Slow adaptation: ``mu += rate * (p - mu)`` where ``foreground == 0`` (in place).
+
+        ``foreground``: ``(h, w)`` uint8/bool, non-zero = person (do not learn there).
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        fg = check_mask(foreground, "foreground", shape=self.mean_yuv.shape[:2])
+        if not (np.isfinite(rate) and 0.0 < rate <= 1.0):
+            raise ValueError(f"rate: expected 0 < rate <= 1, got {rate!r}")
+        background = cv2.compare(fg, 0, cv2.CMP_EQ)
+        cv2.accumulateWeighted(bgr_to_yuv(image_bgr), self.mean_yuv, float(rate), mask=background)
+        self._derive_mean_terms()
+
+    # ----------------------------------------------------------------- persistence
+    def save(self, path) -> Path:
+        """Write the model as ``.npz`` (no pickles); returns the path."""
+        path = Path(path)
+        np.savez_compressed(
+            path, format_version=np.int64(_FORMAT_VERSION), mean_yuv=self.mean_yuv, cov_yuv=self.cov_yuv,
+            covariance=np.array(self.covariance), luma_relax=np.float64(self.luma_relax),
+            shadow_range=np.array(self.shadow_range, np.float64), min_sigma=np.float64(self.min_sigma))
+        return path
+
+    @classmethod
+    def load(cls, path) -> "BackgroundModel":
+        """Read a model written by :meth:`save`; a malformed file raises ``ValueError`` naming it."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                version = int(z["format_version"])
+                if version != _FORMAT_VERSION:
+                    raise ValueError(f"format_version {version} (expected {_FORMAT_VERSION})")
+                return cls(z["mean_yuv"], z["cov_yuv"], covariance=str(z["covariance"]),
+                           luma_relax=float(z["luma_relax"]),
+                           shadow_range=tuple(float(v) for v in z["shadow_range"]),
+                           min_sigma=float(z["min_sigma"]))
+        except (KeyError, ValueError, TypeError, OSError) as exc:
+            raise ValueError(f"{path}: not a background model file ({exc})") from exc

@@ -1,0 +1,93 @@
+"""One call per camera frame: background test -> silhouette -> edges -> chamfer images."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from segmentation.background import BackgroundModel
+from segmentation.checks import check_image_bgr, check_roi
+from segmentation.distance import ChamferImages, chamfer_images
+from segmentation.edges import silhouette_edges
+from segmentation.silhouette import silhouette_from_distance
+
+__all__ = ["FrameSegmentation", "SegmentationParams", "segment_frame"]
+
+
+@dataclass(frozen=True)
+class SegmentationParams:
+    """Options of :func:`segment_frame` (defaults tuned on uu_studio and the synthetic scenes).
+
+    low, high : hysteresis pair on the squared Mahalanobis distance.
+    person_area_px : expected person area in pixels (None: 2 % of the image).
+    min_area_fraction : components below this fraction of ``person_area_px`` are dropped.
+    max_hole_fraction : holes below this fraction of ``person_area_px`` are filled.
+    open_px, close_px : radii of the morphological opening / closing.
+    canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
+    max_distance_px, resolution_px, precise : chamfer images (see :func:`chamfer_images`).
+    """
+
+    low: float = 16.0
+    high: float = 64.0
+    person_area_px: float | None = None
+    min_area_fraction: float = 0.2
+    max_hole_fraction: float = 0.02
+    open_px: int = 1
+    close_px: int = 2
+    canny_low: float = 30.0
+    canny_high: float = 90.0
+    edge_dilate_px: int = 3
+    blur_sigma: float = 1.0
+    max_distance_px: float = 48.0
+    resolution_px: float = 0.25
+    precise: bool = True
+
+    def areas(self, image_size: tuple[int, int]) -> tuple[float, float]:
+        """(min component area, max filled-hole area) in pixels for an image of ``(w, h)``."""
+        person = self.person_area_px if self.person_area_px is not None else 0.02 * image_size[0] * image_size[1]
+        return self.min_area_fraction * person, self.max_hole_fraction * person
+
+
+@dataclass(frozen=True)
+class FrameSegmentation:
+    """Result of :func:`segment_frame` for one camera frame.
+
+    silhouette, edges : (h, w) uint8 0/255, full image (zero outside the ROI).
+    chamfer : the quantised distance images (cropped, with offset).
+    foreground_fraction : silhouette pixels / image pixels.
+    roi : (x0, y0, x1, y1) that was processed.
+    """
+
+    silhouette: np.ndarray
+    edges: np.ndarray
+    chamfer: ChamferImages
+    foreground_fraction: float
+    roi: tuple[int, int, int, int]
+
+
+def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
+                  params: SegmentationParams | None = None) -> FrameSegmentation:
+    """Segment one BGR uint8 frame ``(h, w, 3)`` against ``model``; only ``roi = (x0, y0, x1, y1)``
+    is processed when given.  Does not adapt the model (call ``model.update`` for that)."""
+    params = params or SegmentationParams()
+    check_image_bgr(image_bgr, "image_bgr", size=model.size)
+    w, h = model.size
+    x0, y0, x1, y1 = box = check_roi(roi, (w, h))
+    min_area, max_hole = params.areas((w, h))
+    d = model.distance(image_bgr, roi=box)
+    sil_roi = silhouette_from_distance(d, low=params.low, high=params.high, min_area_px=min_area,
+                                       max_hole_area_px=max_hole, open_px=params.open_px,
+                                       close_px=params.close_px)
+    edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
+                                 high=params.canny_high, dilate_px=params.edge_dilate_px,
+                                 blur_sigma=params.blur_sigma)
+    chamfer = chamfer_images(sil_roi, edges_roi, max_distance_px=params.max_distance_px,
+                             resolution_px=params.resolution_px, precise=params.precise,
+                             offset_xy=(x0, y0), image_size=(w, h))
+    silhouette = np.zeros((h, w), np.uint8)
+    edges = np.zeros((h, w), np.uint8)
+    silhouette[y0:y1, x0:x1] = sil_roi
+    edges[y0:y1, x0:x1] = edges_roi
+    fraction = float(np.count_nonzero(sil_roi)) / float(w * h)
+    return FrameSegmentation(silhouette, edges, chamfer, fraction, box)

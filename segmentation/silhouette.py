@@ -1,0 +1,94 @@
+"""Foreground decision and silhouette clean-up.
+
+From the per-pixel background distance ``d`` (:meth:`BackgroundModel.distance`):
+
+1. hysteresis pair: ``weak = d > low``, ``strong = d > high``;
+2. morphology on ``weak``: opening (drops specks) then closing (joins small gaps);
+3. connected components (outer contours): a component is kept when its area is at least
+   ``min_area_px`` (a fraction of the expected person size) *and* it holds a strong pixel
+   (the hysteresis: weak pixels survive only when connected to strong ones);
+4. holes smaller than ``max_hole_area_px`` are filled; bigger ones (the gap between an arm
+   and the body) are kept open.
+
+Everything works on the region of interest only; the output is a 0/255 uint8 mask.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from segmentation.checks import check_roi
+
+__all__ = ["silhouette_from_distance", "largest_components"]
+
+
+def _disk(radius_px: int) -> np.ndarray:
+    r = int(radius_px)
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: float = 64.0,
+                             min_area_px: float = 400.0, max_hole_area_px: float = 400.0,
+                             open_px: int = 1, close_px: int = 2, roi=None) -> np.ndarray:
+    """Clean binary silhouette ``(h, w)`` uint8 (0 / 255) of a distance image ``(h, w)`` float32.
+
+    ``roi = (x0, y0, x1, y1)`` (pixels of ``distance``): only that box is processed, the rest
+    of the output is 0.  ``open_px`` / ``close_px`` are the radii of the morphological opening
+    and closing (0 skips).
+    """
+    if not isinstance(distance, np.ndarray) or distance.ndim != 2:
+        raise ValueError(f"distance: expected a 2-D array, got {getattr(distance, 'shape', type(distance))}")
+    if distance.dtype != np.float32:
+        raise TypeError(f"distance: expected dtype float32, got {distance.dtype}")
+    if not (0 <= low <= high) or not np.isfinite(high):
+        raise ValueError(f"low, high: expected 0 <= low <= high < inf, got {low!r}, {high!r}")
+    h, w = distance.shape
+    x0, y0, x1, y1 = check_roi(roi, (w, h))
+    d = distance[y0:y1, x0:x1]
+    weak = cv2.compare(d, float(low), cv2.CMP_GT)
+    if open_px > 0:
+        weak = cv2.morphologyEx(weak, cv2.MORPH_OPEN, _disk(open_px))
+    if close_px > 0:
+        weak = cv2.morphologyEx(weak, cv2.MORPH_CLOSE, _disk(close_px))
+    out = np.zeros((h, w), np.uint8)
+    out[y0:y1, x0:x1] = _keep_components(weak, d, high=float(high), min_area_px=float(min_area_px),
+                                         max_hole_area_px=float(max_hole_area_px))
+    return out
+
+
+def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_px: float,
+                     max_hole_area_px: float) -> np.ndarray:
+    """Components of ``weak`` big enough and holding a pixel with ``d > high``; small holes filled."""
+    contours, hierarchy = cv2.findContours(weak, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+    out = np.zeros_like(weak)
+    if not contours:
+        return out
+    hier = hierarchy[0]  # (n, 4): next, previous, first child, parent
+    outers = []
+    for i in np.flatnonzero(hier[:, 3] < 0):  # loop over components (few after the opening), not pixels
+        area = cv2.contourArea(contours[i])
+        if area < min_area_px:
+            continue
+        x, y, bw, bh = cv2.boundingRect(contours[i])
+        comp = np.zeros((bh, bw), np.uint8)
+        cv2.drawContours(comp, contours, int(i), 255, thickness=cv2.FILLED, offset=(-x, -y))
+        if cv2.minMaxLoc(d[y:y + bh, x:x + bw], mask=comp)[1] <= high:
+            continue  # hysteresis: no strong pixel in this component
+        outers.append((area, int(i)))
+    for _, i in sorted(outers, reverse=True):  # big first, so islands inside big holes are redrawn
+        cv2.drawContours(out, contours, i, 255, thickness=cv2.FILLED)
+        child = hier[i, 2]
+        while child >= 0:
+            if cv2.contourArea(contours[child]) >= max_hole_area_px:
+                cv2.drawContours(out, contours, int(child), 0, thickness=cv2.FILLED)
+                cv2.drawContours(out, contours, int(child), 255, thickness=1)  # the hole's rim is silhouette
+            child = hier[child, 0]
+    return out
+
+
+def largest_components(mask: np.ndarray, *, count: int = 2) -> np.ndarray:
+    """Pixel areas of the ``count`` largest 8-connected components of ``mask``, descending (for stats/tests)."""
+    n, _, stats, _ = cv2.connectedComponentsWithStats((mask > 0).astype(np.uint8), connectivity=8)
+    areas = np.sort(stats[1:, cv2.CC_STAT_AREA])[::-1]
+    return np.pad(areas[:count], (0, max(0, count - areas.size)))
