@@ -25,7 +25,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Generic, TypeVar
+from typing import Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
@@ -105,7 +105,9 @@ class ZenohSettings:
     def loopback(port: int, *, listen: bool) -> "ZenohSettings":
         """The embedded default: a peer on ``tcp/127.0.0.1:<port>`` (listening or connecting)."""
         ep = (f"tcp/127.0.0.1:{int(port)}",)
-        return ZenohSettings(listen=ep) if listen else ZenohSettings(connect=ep)
+        # connecting peers also listen on an ephemeral loopback port so that gossip scouting can
+        # mesh them with each other (peers do not forward for one another)
+        return ZenohSettings(listen=ep) if listen else ZenohSettings(connect=ep, listen=("tcp/127.0.0.1:0",))
 
 
 def free_port() -> int:
@@ -170,13 +172,26 @@ def open_session(s: ZenohSettings, *, clock: Callable[[], float] = time.monotoni
     return session
 
 
+class Received(NamedTuple):
+    """One decoded message: its key, the message, and the sender's wall-clock ``sent_ns`` (or None)."""
+
+    key: str
+    message: object
+    sent_ns: int | None
+
+
+def attachment_ns(wall_ns: int) -> bytes:
+    """The 8-byte attachment carrying a capture wall-clock time (latency measurement)."""
+    return int(wall_ns).to_bytes(8, "little", signed=False)
+
+
 class Inbox(Generic[T]):
     """A bounded queue filled by a zenoh subscriber callback with decoded, validated messages.
 
     ``mode="live"``: holds at most ``depth`` items, the oldest is overwritten (counted in
     ``dropped``).  ``mode="lossless"``: FIFO up to ``depth`` (producers keep under it via credits;
     overflow is still counted, never blocking zenoh's thread).  ``recv(timeout_s)`` returns
-    ``(key, message)`` or None.
+    :class:`Received` ``(key, message, sent_ns)`` or None.
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], T], *,
@@ -193,6 +208,11 @@ class Inbox(Generic[T]):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
+        att = sample.attachment
+        sent_ns = None
+        if att is not None:
+            raw = att.to_bytes()
+            sent_ns = int.from_bytes(raw, "little") if len(raw) == 8 else None
         try:
             msg = self._decode(sample.payload.to_bytes())
         except MessageError as exc:
@@ -208,16 +228,16 @@ class Inbox(Generic[T]):
             if len(self._items) >= self.depth:
                 self._items.popleft()
                 self.dropped += 1
-            self._items.append((key, msg))
+            self._items.append(Received(key, msg, sent_ns))
             self._cv.notify()
 
-    def recv(self, timeout_s: float | None = None) -> tuple[str, T] | None:
+    def recv(self, timeout_s: float | None = None) -> Received | None:
         with self._cv:
             if not self._items and not self._cv.wait_for(lambda: bool(self._items), timeout_s):
                 return None
             return self._items.popleft()
 
-    def drain(self) -> list[tuple[str, T]]:
+    def drain(self) -> list[Received]:
         with self._cv:
             out = list(self._items)
             self._items.clear()
@@ -248,8 +268,8 @@ class CreditGate:
     in ``consumers`` has acknowledged frame ``k - window`` (or earlier frames were never sent)."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, consumers: tuple[str, ...], *, window: int = 8,
-                 first_frame: int = 0) -> None:
-        self.window, self.first_frame = int(window), int(first_frame)
+                 first_frame: int | None = None) -> None:
+        self.window, self.first_frame = int(window), first_frame  # None: the first frame waited for
         self._acked = {c: -1 for c in consumers}
         self._inbox = Inbox(session, keys.credit("*"), CreditMessage.from_bytes, mode="live", depth=64)
 
@@ -259,13 +279,15 @@ class CreditGate:
 
     def acked(self) -> int:
         """The lowest frame id every consumer has finished (-1 if none)."""
-        for _, credit in self._inbox.drain():
-            self._take(credit)
+        for item in self._inbox.drain():
+            self._take(item.message)
         return min(self._acked.values()) if self._acked else 2**62
 
     def wait(self, frame_id: int, *, timeout_s: float, stop: threading.Event | None = None) -> bool:
         """Block until ``frame_id`` may be sent; False on timeout or ``stop``."""
         deadline = time.monotonic() + timeout_s
+        if self.first_frame is None:
+            self.first_frame = frame_id
         while frame_id - self.window > self.acked() and frame_id - self.window >= self.first_frame:
             if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
                 return False
@@ -276,6 +298,30 @@ class CreditGate:
 
     def close(self) -> None:
         self._inbox.close()
+
+
+def wait_until_alive(session: zenoh.Session, keys: Keys, components: tuple[str, ...], *, timeout_s: float,
+                     stop: threading.Event | None = None) -> bool:
+    """Wait until every component's liveliness token is visible (False on timeout or ``stop``)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        alive = {str(r.ok.key_expr) for r in session.liveliness().get(keys.status("*"), timeout=1.0)
+                 if r.ok is not None}
+        if all(keys.status(c) in alive for c in components):
+            return True
+        if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+
+
+def wait_until_matched(publishers, *, timeout_s: float, stop: threading.Event | None = None) -> bool:
+    """Wait until every publisher has at least one matching subscriber."""
+    deadline = time.monotonic() + timeout_s
+    while not all(p.matching_status.matching for p in publishers):
+        if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
 
 
 class StatusReporter:

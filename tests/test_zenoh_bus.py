@@ -78,7 +78,7 @@ def test_live_inbox_keeps_newest_and_counts_drops(pair):
     for k in range(10):
         pub.put(CreditMessage("x", k).to_bytes())
     assert _wait(lambda: inbox.received == 10)
-    assert [m.frame_id for _, m in inbox.drain()] == [8, 9]
+    assert [r.message.frame_id for r in inbox.drain()] == [8, 9]
     assert inbox.dropped == 8
 
 

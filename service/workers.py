@@ -1,0 +1,223 @@
+"""The three worker loops: camera -> frames, segment -> chamfer images, track -> poses.
+
+Each ``run_*`` function takes an open zenoh session, the studio :class:`~service.bus.Keys`, its
+sources or processing callable, and a ``stop`` event; it returns a dict of counters when ``stop``
+is set or its input ends.  Processes, argparse and signals live in ``service/commands/worker.py``.
+
+Seams (adapted to the real components in ``service/components.py``):
+
+- ``Segmenter``: ``(frame: FrameMessage, image_bgr (h, w, 3) uint8) -> ChamferMessage``
+- ``Fitter``: ``(frame_id, timestamp_ns, chamfer: dict[camera, ChamferMessage]) -> dict`` (a DESIGN.md
+  pose record, ``ok``/``reason`` included)
+
+Latency: the camera worker attaches its wall-clock publish time (8 bytes) to each frame, the segment
+worker forwards it, and the tracker reports ``latency_ms = now - earliest capture time of the set``
+(across hosts this relies on NTP/PTP-synchronised clocks).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable, Mapping
+
+import zenoh
+
+from capture.sources import EndOfStream, Source, SourceError, SourceTimeout
+from service.assembler import FrameSetAssembler
+from service.bus import (CreditGate, Inbox, Keys, StatusReporter, attachment_ns, declare_publisher,
+                         wait_until_alive, wait_until_matched)
+from service.messages import ChamferMessage, FrameMessage, MessageError
+from service.records import CreditMessage, PoseRecord
+
+log = logging.getLogger("contourcap.worker")
+Segmenter = Callable[[FrameMessage, object], ChamferMessage]
+Fitter = Callable[[int, int, dict], dict]
+TRACK_CONSUMER = "track"
+
+
+def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, Source], *, mode: str = "live",
+                      encodings: Mapping[str, str] | None = None, jpeg_quality: int = 90, window: int = 8,
+                      stop: threading.Event, credit_timeout_s: float = 30.0,
+                      wall_ns: Callable[[], int] = time.time_ns, component: str = "camera") -> dict:
+    """Read every source round-robin and publish its frames until all end or ``stop``.
+
+    Lossless: frame ``k`` is published only once the tracker acknowledged ``k - window``
+    (:class:`~service.bus.CreditGate`); a missing credit for ``credit_timeout_s`` ends the worker.
+    Sources must already be open (context managers entered by the caller).
+    """
+    encodings = dict(encodings or {})
+    pubs = {name: declare_publisher(session, keys.frame(name), mode=mode) for name in sources}
+    gate = CreditGate(session, keys, (TRACK_CONSUMER,), window=window) if mode == "lossless" else None
+    status = StatusReporter(session, keys, component)
+    active = dict(sources)
+    try:
+        if gate is not None:  # lossless: nothing may be published before the consumers listen
+            ready = (wait_until_alive(session, keys, (TRACK_CONSUMER,), timeout_s=credit_timeout_s, stop=stop)
+                     and wait_until_matched(pubs.values(), timeout_s=credit_timeout_s, stop=stop))
+            if not ready:
+                log.error("lossless: tracker or segment workers not reachable within %g s", credit_timeout_s)
+                return dict(status.counters)
+        while active and not stop.is_set():
+            for name, src in list(active.items()):
+                try:
+                    frame = src.read()
+                except SourceTimeout:
+                    status.count("timeouts")
+                    continue
+                except EndOfStream:
+                    del active[name]
+                    continue
+                except SourceError as exc:
+                    log.error("camera %s: %s", name, exc)
+                    status.count("errors")
+                    del active[name]
+                    continue
+                if gate is not None:
+                    if not gate.wait(frame.frame_id, timeout_s=credit_timeout_s, stop=stop):
+                        if not stop.is_set():
+                            log.error("camera %s: no credit for frame %d within %g s", name, frame.frame_id,
+                                      credit_timeout_s)
+                        return dict(status.counters)
+                msg = FrameMessage.from_image(name, frame.frame_id, frame.timestamp_ns, frame.image,
+                                              encoding=encodings.get(name, "raw"), jpeg_quality=jpeg_quality)
+                pubs[name].put(msg.to_bytes(), attachment=attachment_ns(wall_ns()))
+                status.count("processed")
+            status.tick(cameras=len(active))
+        status.tick(state="finished", force=True)
+        return dict(status.counters)
+    finally:
+        if gate is not None:
+            gate.close()
+        status.close()
+
+
+def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[str, Segmenter], *,
+                       mode: str = "live", stop: threading.Event, component: str = "segment",
+                       idle_exit_s: float | None = None) -> dict:
+    """One thread per camera: newest frame (live) or every frame in order (lossless) -> chamfer.
+
+    ``idle_exit_s``: return after that long without any frame (tests, replay); None = run until stop.
+    """
+    lock = threading.Lock()
+    last_frame = [time.monotonic()]
+    wires = {name: (Inbox(session, keys.frame(name), FrameMessage.from_bytes, mode=mode,
+                          depth=1 if mode == "live" else 4096),
+                    declare_publisher(session, keys.chamfer(name), mode=mode)) for name in segmenters}
+    status = StatusReporter(session, keys, component)  # liveliness only once subscribed
+
+    def loop(name: str, segment: Segmenter) -> None:
+        inbox, pub = wires[name]
+        try:
+            while not stop.is_set():
+                got = inbox.recv(0.05)
+                if got is None:
+                    continue
+                last_frame[0] = time.monotonic()
+                try:
+                    out = segment(got.message, got.message.image())
+                except MessageError as exc:
+                    log.warning("camera %s frame %d: %s", name, got.message.frame_id, exc)
+                    with lock:
+                        status.count("bad")
+                    continue
+                att = attachment_ns(got.sent_ns) if got.sent_ns is not None else None
+                pub.put(out.to_bytes(), attachment=att)
+                with lock:
+                    status.count("processed")
+        finally:
+            with lock:
+                status.count("bad", inbox.bad)
+                status.count("dropped", inbox.dropped)
+            inbox.close()
+
+    threads = [threading.Thread(target=loop, args=item, name=f"segment-{item[0]}", daemon=True)
+               for item in segmenters.items()]
+    for t in threads:
+        t.start()
+    try:
+        while not stop.is_set() and all(t.is_alive() for t in threads):
+            if idle_exit_s is not None and time.monotonic() - last_frame[0] > idle_exit_s:
+                break
+            with lock:
+                status.tick()
+            stop.wait(0.1)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(2.0)
+        status.tick(state="finished", force=True)
+        status.close()
+    return dict(status.counters)
+
+
+def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
+                     mode: str = "live", set_timeout_s: float = 0.08, stop: threading.Event,
+                     clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
+                     component: str = "track", max_frames: int | None = None,
+                     on_pose: Callable[[PoseRecord], None] | None = None) -> dict:
+    """Assemble chamfer sets, fit, publish one pose record per released set (``ok: false`` + reason
+    when fitting fails — never silently dropped).  Lossless mode acknowledges each frame id."""
+    lossless = mode == "lossless"
+    inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
+                  depth=16 * len(cameras) if lossless else 2 * len(cameras))
+    asm: FrameSetAssembler = FrameSetAssembler(cameras, mode=mode, timeout_s=set_timeout_s if not lossless
+                                               else max(set_timeout_s, 5.0))
+    pose_pub = declare_publisher(session, keys.pose, mode=mode)
+    credit_pub = declare_publisher(session, keys.credit(TRACK_CONSUMER), mode="lossless") if lossless else None
+    status = StatusReporter(session, keys, component, clock=clock)
+    sent: dict[int, int] = {}
+    done = 0
+    try:
+        while not stop.is_set() and (max_frames is None or done < max_frames):
+            deadline = asm.next_deadline()
+            wait = 0.05 if deadline is None else min(0.05, max(0.0, deadline - clock()))
+            got = inbox.recv(wait)
+            while got is not None:
+                msg: ChamferMessage = got.message
+                cam = keys.camera_of(got.key)
+                if cam != msg.camera:
+                    status.count("mismatched_key")
+                else:
+                    asm.add(msg.camera, msg.frame_id, msg, clock())
+                    if got.sent_ns is not None:
+                        sent[msg.frame_id] = min(sent.get(msg.frame_id, got.sent_ns), got.sent_ns)
+                got = inbox.recv(0) if len(inbox) else None
+            for fs in asm.pop_ready(clock()):
+                first = next(iter(fs.items.values()))
+                try:
+                    record = dict(fit(fs.frame_id, first.timestamp_ns, fs.items))
+                except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
+                    log.exception("frame %d: fitting failed", fs.frame_id)
+                    record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
+                              "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
+                record.setdefault("cameras", len(fs.items))
+                t0 = sent.pop(fs.frame_id, None)
+                if t0 is not None:
+                    record["latency_ms"] = (wall_ns() - t0) / 1e6
+                    status.latency(record["latency_ms"])
+                try:
+                    pose = PoseRecord.from_dict(record)
+                except MessageError as exc:
+                    pose = PoseRecord.from_dict({"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns,
+                                                 "ok": False, "reason": f"invalid pose record: {exc}"[:200],
+                                                 "cameras": len(fs.items)})
+                pose_pub.put(pose.to_bytes())
+                if on_pose is not None:
+                    on_pose(pose)
+                if credit_pub is not None:
+                    credit_pub.put(CreditMessage(TRACK_CONSUMER, fs.frame_id).to_bytes())
+                status.count("processed")
+                status.count("missing_cameras", len(fs.missing))
+                done += 1
+            for fid in [f for f in sent if f <= asm.last_released]:
+                del sent[fid]
+            status.tick(queue_depth=len(inbox), stale_sets=asm.stale, late=asm.late, bad=inbox.bad,
+                        dropped=inbox.dropped, cameras=len(asm.present(clock())))
+        return {**status.counters, "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,
+                "dropped": inbox.dropped}
+    finally:
+        status.tick(state="finished", force=True)
+        inbox.close()
+        status.close()
