@@ -1,0 +1,190 @@
+"""A synthetic studio: a ring of cameras, a textured room and a light.
+
+Everything here is pure: arrays in, arrays out, randomness from an explicit
+seed.  The room is a floor (z = 0) inside a vertical cylindrical wall of
+radius ``wall_radius_m`` centred on the world origin; both carry a seeded
+procedural texture (smooth value noise plus tiles on the floor and stripes on
+the wall) so that a background model has something to learn and a
+segmenter cannot win by thresholding a flat colour.
+
+``render_background(camera, texture)`` ray-casts every pixel centre through
+the camera model (OpenCV distortion inverted with ``cv2.undistortPoints``)
+and looks up the texture of the surface hit, so the background seen by the
+several cameras is one consistent 3-D scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from capture.camera import Camera
+
+__all__ = ["ring_cameras", "RoomTexture", "make_room_texture", "render_background", "pixel_rays"]
+
+
+def ring_cameras(
+    n: int,
+    *,
+    size: tuple[int, int] = (800, 600),
+    radius_m: float = 4.0,
+    height_m: float = 1.5,
+    target=(0.0, 0.0, 1.0),
+    fov_deg: float = 60.0,
+    distortion=(0.0, 0.0, 0.0, 0.0, 0.0),
+    start_deg: float = 0.0,
+) -> list[Camera]:
+    """``n`` cameras evenly spaced on a horizontal circle, all looking at ``target``.
+
+    Camera ``i`` (named ``cam{i}``) sits at azimuth ``start_deg + 360 i / n``
+    degrees (0 = on the +X axis, so camera 0 sees the front of a subject at
+    Φ = 0), ``radius_m`` from the world Z axis and ``height_m`` above the
+    floor.  ``fov_deg`` is the horizontal field of view: 60° at 4 m with a 4:3
+    image sees about ±2.3 m horizontally and ±1.7 m vertically around the
+    target, i.e. a standing 1.75 m person with a metre of margin for motion.
+    """
+    if n < 1:
+        raise ValueError(f"ring_cameras: n must be >= 1, got {n}")
+    if radius_m <= 0:
+        raise ValueError(f"ring_cameras: radius_m must be positive, got {radius_m}")
+    if not 1.0 < fov_deg < 179.0:
+        raise ValueError(f"ring_cameras: fov_deg must be in (1, 179), got {fov_deg}")
+    target = np.asarray(target, dtype=float)
+    cams = []
+    for i in range(n):
+        az = np.radians(start_deg + 360.0 * i / n)
+        eye = np.array([target[0] + radius_m * np.cos(az), target[1] + radius_m * np.sin(az), height_m])
+        cams.append(Camera.look_at(f"cam{i}", eye, target, size=size, fov_deg=fov_deg, distortion=distortion))
+    return cams
+
+
+@dataclass(frozen=True, eq=False)
+class RoomTexture:
+    """Procedural room textures.
+
+    Attributes
+    ----------
+    floor : ndarray, shape (n, n, 3) uint8
+        Floor colour over ``[-extent, extent]²`` metres (rows = y, cols = x).
+    wall : ndarray, shape (m, n_az, 3) uint8
+        Wall colour over azimuth [-π, π) (cols) and height [0, wall_height_m] (rows, bottom first).
+    extent_m, wall_radius_m, wall_height_m : float
+    """
+
+    floor: np.ndarray
+    wall: np.ndarray
+    extent_m: float
+    wall_radius_m: float
+    wall_height_m: float
+
+
+def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int]) -> np.ndarray:
+    """Smooth noise in [0, 1], shape ``shape``: a random ``cells`` grid, bicubically upsampled."""
+    coarse = rng.random((cells[0] + 1, cells[1] + 1)).astype(np.float32)
+    return np.clip(cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC), 0.0, 1.0)
+
+
+def make_room_texture(
+    seed: int = 0,
+    *,
+    extent_m: float = 8.0,
+    wall_radius_m: float = 7.0,
+    wall_height_m: float = 3.0,
+    resolution_px_per_m: int = 64,
+) -> RoomTexture:
+    """A seeded floor and wall texture (deterministic for a given seed)."""
+    rng = np.random.default_rng(seed)
+    n = int(2 * extent_m * resolution_px_per_m)
+    base_floor = rng.uniform(90, 160, 3)
+    noise = _value_noise(rng, (n, n), (24, 24)) * 0.6 + _value_noise(rng, (n, n), (160, 160)) * 0.4
+    ij = np.arange(n) / resolution_px_per_m
+    tiles = ((np.floor(ij[:, None] / 0.5) + np.floor(ij[None, :] / 0.5)) % 2) * 2 - 1  # 0.5 m tiles
+    floor = base_floor[None, None, :] * (0.75 + 0.35 * noise[..., None]) + 12.0 * tiles[..., None]
+    m = int(wall_height_m * resolution_px_per_m)
+    n_az = int(2 * np.pi * wall_radius_m * resolution_px_per_m / 2)
+    base_wall = rng.uniform(120, 200, 3)
+    wnoise = _value_noise(rng, (m, n_az), (12, 64))
+    stripes = np.sin(np.linspace(0, 2 * np.pi * 40, n_az, endpoint=False))[None, :]
+    wall = base_wall[None, None, :] * (0.7 + 0.4 * wnoise[..., None]) + 10.0 * stripes[..., None]
+    return RoomTexture(
+        floor=np.clip(floor, 0, 255).astype(np.uint8),
+        wall=np.clip(wall, 0, 255).astype(np.uint8),
+        extent_m=float(extent_m),
+        wall_radius_m=float(wall_radius_m),
+        wall_height_m=float(wall_height_m),
+    )
+
+
+def pixel_rays(camera: Camera) -> np.ndarray:
+    """Unit world directions of the rays through every pixel centre, shape (h, w, 3).
+
+    Distortion is inverted with ``cv2.undistortPoints`` (iterative), so the
+    ray through pixel (u, v) projects back to (u, v).
+    """
+    w, h = camera.size
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    uv = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
+    if np.any(camera.distortion != 0):
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+        xy = cv2.undistortPoints(uv, camera.matrix, camera.distortion, criteria=crit).reshape(-1, 2)
+    else:
+        Kinv = np.linalg.inv(camera.matrix)
+        xy = uv.reshape(-1, 2) @ Kinv[:2, :2].T + Kinv[:2, 2]
+    d_cam = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
+    d = d_cam @ camera.rotation  # rows: R^T d_cam
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return d.reshape(h, w, 3)
+
+
+def render_background(camera: Camera, texture: RoomTexture) -> np.ndarray:
+    """The empty room seen by ``camera``, BGR uint8, shape (h, w, 3).
+
+    Every pixel's ray hits the floor (z = 0) or the cylindrical wall; rays
+    that hit neither (above the wall) see a plain ceiling grey.
+    """
+    rays = pixel_rays(camera)
+    c = camera.center
+    h, w = rays.shape[:2]
+    d = rays.reshape(-1, 3)
+    # wall: |c_xy + t d_xy| = R, the positive root
+    a = d[:, 0] ** 2 + d[:, 1] ** 2
+    b = 2 * (c[0] * d[:, 0] + c[1] * d[:, 1])
+    cc = c[0] ** 2 + c[1] ** 2 - texture.wall_radius_m**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_wall = (-b + np.sqrt(np.maximum(b * b - 4 * a * cc, 0.0))) / (2 * a)
+        t_floor = np.where(d[:, 2] < -1e-9, -c[2] / d[:, 2], np.inf)
+    hit_floor = t_floor < t_wall
+    out = np.full((h * w, 3), 170, np.uint8)
+    # floor lookup
+    P = c + t_floor[hit_floor, None] * d[hit_floor]
+    res = texture.floor.shape[0] / (2 * texture.extent_m)
+    map_x = ((P[:, 0] + texture.extent_m) * res).astype(np.float32)
+    map_y = ((P[:, 1] + texture.extent_m) * res).astype(np.float32)
+    out[hit_floor] = _lookup(texture.floor, map_x, map_y)
+    # wall lookup
+    wall = ~hit_floor & np.isfinite(t_wall)
+    Q = c + t_wall[wall, None] * d[wall]
+    az = np.arctan2(Q[:, 1], Q[:, 0])
+    m, n_az = texture.wall.shape[:2]
+    wx = ((az + np.pi) / (2 * np.pi) * n_az).astype(np.float32)
+    wy = ((1.0 - Q[:, 2] / texture.wall_height_m) * m).astype(np.float32)
+    below = Q[:, 2] <= texture.wall_height_m
+    colour = _lookup(texture.wall, wx, wy)
+    colour[~below] = 170
+    out[wall] = colour
+    return out.reshape(h, w, 3)
+
+
+def _lookup(tex: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
+    """Bilinear texture lookup at float pixel coordinates (n,), returns (n, 3) uint8."""
+    if map_x.size == 0:
+        return np.zeros((0, 3), np.uint8)
+    n = map_x.size
+    cols = 1024  # cv2.remap wants maps narrower than SHRT_MAX: lay the n lookups out as rows
+    pad = (-n) % cols
+    mx = np.concatenate([map_x, np.zeros(pad, np.float32)]).reshape(-1, cols)
+    my = np.concatenate([map_y, np.zeros(pad, np.float32)]).reshape(-1, cols)
+    out = cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    return out.reshape(-1, 3)[:n]
