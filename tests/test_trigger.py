@@ -1,0 +1,292 @@
+"""Trigger box driver through pyusb's real code path, on a fake device behind ``usb.backend.IBackend``.
+
+``FakeTriggerBackend`` simulates protocol v1 the way the reference firmware
+(deploy/trigger/firmware) does, on an injected device clock, and logs every
+control transfer so the tests can assert the bytes on the wire.
+"""
+
+from __future__ import annotations
+
+import errno
+import struct
+from types import SimpleNamespace
+
+import pytest
+import usb.backend
+import usb.backend.libusb0
+import usb.backend.libusb1
+import usb.backend.openusb
+import usb.core
+
+from capture.trigger import (
+    PRODUCT_ID,
+    VENDOR_ID,
+    SoftwareTrigger,
+    TriggerBox,
+    TriggerDisconnectedError,
+    TriggerError,
+    TriggerNotFoundError,
+    TriggerProtocolError,
+    UsbUnavailableError,
+)
+
+HOST_OFFSET_NS = 7_000_000_123  # host_ns = device_us * 1000 + HOST_OFFSET_NS in these tests
+
+
+class FakeBox:
+    """Device state of one simulated trigger box (device clock in µs)."""
+
+    def __init__(self, *, serial="TB0001", vid=VENDOR_ID, pid=PRODUCT_ID, magic=b"CCTB", protocol=1, clock_us=None):
+        self.now_us = 1_000_000 if clock_us is None else clock_us
+        self.serial, self.magic, self.protocol = serial, magic, protocol
+        self.period_us, self.width_us = 33_333, 1000
+        self.t_start_us: int | None = None
+        self.limit: int | None = None
+        self.stopped_count: int | None = None
+        self.unplugged_errno: int | None = None
+        self.open_errno: int | None = None
+        self.stall: set[int] = set()
+        self.short_reply: set[int] = set()
+        self.descriptor = SimpleNamespace(
+            bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0, bDeviceProtocol=0,
+            bMaxPacketSize0=64, idVendor=vid, idProduct=pid, bcdDevice=0x0100, iManufacturer=0, iProduct=0,
+            iSerialNumber=3 if serial else 0, bNumConfigurations=1, address=5, bus=1, port_number=2,
+            port_numbers=(2,), speed=2,
+        )
+
+    def count(self) -> int:
+        if self.t_start_us is None or self.now_us < self.t_start_us:
+            return 0
+        c = (self.now_us - self.t_start_us) // self.period_us + 1
+        for cap in (self.limit, self.stopped_count):
+            if cap is not None:
+                c = min(c, cap)
+        return c
+
+    def handle(self, rtype, req, data) -> bytes | int:
+        """Firmware behaviour: returns the IN reply or the OUT byte count; raises USBError on STALL."""
+        if req in self.stall:
+            raise usb.core.USBError("Pipe error", errno=errno.EPIPE)
+        if rtype == 0x80 and req == 0x06:  # standard GET_DESCRIPTOR(string)
+            return b"\x04\x03\x09\x04" if data == 0 else bytes([2 + 2 * len(self.serial), 3]) + self.serial.encode("utf-16-le")
+        if rtype == 0xC0:
+            if req == 0x01:
+                out = struct.pack("<4sBBBB", self.magic, self.protocol, 1, 2, 4)
+            elif req == 0x06:
+                c = self.count()
+                running = self.t_start_us is not None and self.stopped_count is None and (self.limit is None or c < self.limit)
+                flags = int(running) | (2 if running and self.limit is not None else 0)
+                last = self.t_start_us + (c - 1) * self.period_us if c else 0
+                out = struct.pack("<IIQ", c, flags, last)
+            elif req == 0x07:
+                out = struct.pack("<Q", self.now_us)
+            else:
+                raise usb.core.USBError("Pipe error", errno=errno.EPIPE)
+            return out[:-2] if req in self.short_reply else out
+        payload = bytes(data)
+        if req == 0x02 and len(payload) == 8:
+            period, width = struct.unpack("<II", payload)
+            if period < 1000 or not 1 <= width < period:
+                raise usb.core.USBError("Pipe error", errno=errno.EPIPE)
+            self.period_us, self.width_us = period, width
+        elif req == 0x03 and not payload:
+            self.t_start_us, self.limit, self.stopped_count = self.now_us, None, None
+        elif req == 0x04 and not payload:
+            self.stopped_count = self.count()
+        elif req == 0x05 and len(payload) == 4:
+            self.t_start_us, self.limit, self.stopped_count = self.now_us, struct.unpack("<I", payload)[0], None
+        else:
+            raise usb.core.USBError("Pipe error", errno=errno.EPIPE)
+        return len(payload)
+
+
+class FakeTriggerBackend(usb.backend.IBackend):
+    """A pyusb backend whose bus holds the given fake devices."""
+
+    def __init__(self, *boxes: FakeBox):
+        self.boxes = list(boxes)
+        self.log: list[tuple] = []
+
+    def enumerate_devices(self):
+        return iter(self.boxes)
+
+    def get_device_descriptor(self, dev):
+        return dev.descriptor
+
+    def get_configuration_descriptor(self, dev, config):
+        return SimpleNamespace(bLength=9, bDescriptorType=2, wTotalLength=18, bNumInterfaces=1, bConfigurationValue=1,
+                               iConfiguration=0, bmAttributes=0x80, bMaxPower=50, extra_descriptors=[])
+
+    def open_device(self, dev):
+        if dev.open_errno is not None:
+            raise usb.core.USBError("Access denied", errno=dev.open_errno)
+        return dev
+
+    def close_device(self, dev_handle):
+        pass
+
+    def ctrl_transfer(self, dev_handle, bmRequestType, bRequest, wValue, wIndex, data, timeout):
+        box = dev_handle
+        if box.unplugged_errno is not None:
+            raise usb.core.USBError("No such device (it may have been disconnected)", errno=box.unplugged_errno)
+        is_in = bool(bmRequestType & 0x80)
+        self.log.append((bmRequestType, bRequest, wValue, wIndex, len(data) if is_in else bytes(data)))
+        reply = box.handle(bmRequestType, bRequest, (wValue & 0xFF) if bmRequestType == 0x80 else data)
+        if not is_in:
+            return reply
+        n = min(len(reply), len(data))
+        data[:n] = type(data)("B", reply[:n])
+        return n
+
+
+def host_clock(box: FakeBox):
+    return lambda: box.now_us * 1000 + HOST_OFFSET_NS
+
+
+@pytest.fixture
+def rig():
+    box = FakeBox()
+    backend = FakeTriggerBackend(box)
+    return box, backend, TriggerBox.find(backend=backend, clock=host_clock(box))
+
+
+def test_identify_bytes_and_info(rig):
+    box, backend, tb = rig
+    assert backend.log[0] == (0xC0, 0x01, 0, 0, 8)
+    assert tb.info.protocol == 1 and tb.info.firmware == (1, 2) and tb.info.outputs == 4
+    assert tb.info.serial == "TB0001"
+
+
+def test_out_requests_on_the_wire(rig):
+    _, backend, tb = rig
+    backend.log.clear()
+    tb.set_rate(50)
+    tb.start()
+    tb.stop()
+    tb.arm(100)
+    tb.set_rate(120, pulse_width_us=200)
+    assert backend.log == [
+        (0x40, 0x02, 0, 0, bytes.fromhex("204e0000" "e8030000")),  # period 20000 us, width 1000 us
+        (0x40, 0x03, 0, 0, b""),
+        (0x40, 0x04, 0, 0, b""),
+        (0x40, 0x05, 0, 0, bytes.fromhex("64000000")),
+        (0x40, 0x02, 0, 0, bytes.fromhex("8d200000" "c8000000")),  # 8333 us, 200 us
+    ]
+    with pytest.raises(ValueError, match="pulse_width_us"):
+        tb.set_rate(50, pulse_width_us=20000)
+    with pytest.raises(ValueError, match="fps"):
+        tb.set_rate(0)
+    assert len(backend.log) == 5  # nothing sent for rejected arguments
+
+
+def test_counter_and_frame_ids(rig):
+    box, backend, tb = rig
+    tb.set_rate(50)
+    tb.start()
+    t0_us = box.now_us
+    box.now_us += 95_000  # pulses at 0, 20, 40, 60, 80 ms
+    backend.log.clear()
+    c = tb.read_counter()
+    assert backend.log == [(0xC0, 0x06, 0, 0, 16)]
+    assert (c.count, c.last_frame_id, c.running, c.armed, c.last_pulse_us) == (5, 4, True, False, t0_us + 80_000)
+    assert tb.sync_clock() == HOST_OFFSET_NS
+    host_t0 = t0_us * 1000 + HOST_OFFSET_NS
+    ms = 1_000_000
+    assert tb.frame_id_at(host_t0 + 80 * ms) == 4
+    assert tb.frame_id_at(host_t0 + 99 * ms) == 4
+    assert tb.frame_id_at(host_t0 + 100 * ms) == 5  # a pulse after the counter read
+    assert tb.frame_id_at(host_t0 + 45 * ms) == 2
+    assert tb.frame_id_at(host_t0 + 45 * ms, latency_ns=10 * ms) == 1
+    assert tb.frame_id_at(host_t0 - 500 * ms) == 0
+
+
+def test_arm_stops_after_n_pulses(rig):
+    box, _, tb = rig
+    tb.set_rate(100)
+    tb.arm(3)
+    box.now_us += 5_000
+    c = tb.read_counter()
+    assert (c.count, c.running, c.armed) == (1, True, True)
+    box.now_us += 1_000_000
+    c = tb.read_counter()
+    assert (c.count, c.running, c.armed) == (3, False, False)
+
+
+@pytest.mark.parametrize("code", [errno.ENODEV, errno.ENOENT])
+def test_unplugged_mid_session(rig, code):
+    box, _, tb = rig
+    tb.set_rate(50)
+    tb.start()
+    box.unplugged_errno = code
+    with pytest.raises(TriggerDisconnectedError, match="COUNTER"):
+        tb.read_counter()
+    with pytest.raises(TriggerDisconnectedError, match="STOP"):
+        tb.stop()
+
+
+def test_not_found_and_serial_selection():
+    with pytest.raises(TriggerNotFoundError, match="1209:0001"):
+        TriggerBox.find(backend=FakeTriggerBackend())
+    with pytest.raises(TriggerNotFoundError, match="udev"):
+        TriggerBox.find(backend=FakeTriggerBackend(FakeBox(vid=0x1234)))
+    a, b = FakeBox(serial="A1"), FakeBox(serial="B2")
+    backend = FakeTriggerBackend(a, b)
+    assert TriggerBox.find(backend=backend, serial="B2").info.serial == "B2"
+    with pytest.raises(TriggerNotFoundError, match="'C3'"):
+        TriggerBox.find(backend=backend, serial="C3")
+
+
+def test_protocol_errors():
+    with pytest.raises(TriggerProtocolError, match="magic"):
+        TriggerBox.find(backend=FakeTriggerBackend(FakeBox(magic=b"XXXX")))
+    with pytest.raises(TriggerProtocolError, match="v2"):
+        TriggerBox.find(backend=FakeTriggerBackend(FakeBox(protocol=2)))
+    box = FakeBox()
+    tb = TriggerBox.find(backend=FakeTriggerBackend(box))
+    box.short_reply.add(0x06)
+    with pytest.raises(TriggerProtocolError, match="14 bytes"):
+        tb.read_counter()
+    box.stall.add(0x03)
+    with pytest.raises(TriggerProtocolError, match="refused START"):
+        tb.start()
+    with pytest.raises(TriggerError, match="frame_id_at needs"):
+        tb.frame_id_at(0)
+    tb.close()
+    with pytest.raises(TriggerError, match="closed"):
+        tb.start()
+
+
+def test_permission_denied_points_at_udev_rule():
+    box = FakeBox(serial=None)
+    box.open_errno = errno.EACCES
+    with pytest.raises(TriggerError, match="udev"):
+        TriggerBox.find(backend=FakeTriggerBackend(box))
+
+
+def test_missing_libusb_reported():
+    modules = (usb.backend.libusb1, usb.backend.libusb0, usb.backend.openusb)
+    if any(getattr(m, "_lib_object", None) is not None or getattr(m, "_lib", None) is not None for m in modules):
+        pytest.skip("a libusb backend is already loaded in this process")
+    with pytest.raises(UsbUnavailableError, match="libusb"):
+        TriggerBox.find(find_library=lambda name: None)
+
+
+def test_software_trigger_same_interface():
+    now = [10_000_000_000]
+    trig = SoftwareTrigger(clock=lambda: now[0], fps=50)
+    assert trig.read_counter().count == 0
+    with pytest.raises(TriggerError, match="before start"):
+        trig.frame_id_at(now[0])
+    trig.start()
+    t0 = now[0]
+    now[0] += 95_000_000
+    c = trig.read_counter()
+    assert (c.count, c.last_frame_id, c.running, c.last_pulse_us) == (5, 4, True, (t0 + 80_000_000) // 1000)
+    assert trig.frame_id_at(t0 + 99_000_000) == 4 and trig.frame_id_at(t0 + 100_000_000) == 5
+    trig.stop()
+    now[0] += 1_000_000_000
+    assert trig.read_counter().count == 5 and not trig.read_counter().running
+    trig.arm(2)
+    now[0] += 1_000_000_000
+    c = trig.read_counter()
+    assert (c.count, c.running) == (2, False)
