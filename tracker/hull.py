@@ -1,0 +1,376 @@
+"""Hierarchical (coarse-to-fine) visual hull from calibrated silhouettes (Caillette & Howard, BMVC'04 §3.3).
+
+A coarse grid of cubic voxels (``coarse`` cells along the longest side of the bounds) is
+classified against every silhouette at once; only the voxels the silhouettes cannot decide are
+split into 8 and classified again, down to ``min_voxel_m``.  A voxel's footprint in a view is the
+pixel box enclosing its 8 projected corners (grown to whole pixels, so the tests are
+conservative); with an integral image of the mask the box's foreground count is 4 lookups:
+
+- count == 0 in any view (or the box is off the image / behind the camera): **empty**;
+- count == box area in every view: **full** (kept at its size, not split);
+- otherwise: split into 8 (at the finest level: kept iff its centre projects on the
+  silhouette in every view).
+
+Everything is vectorised per level over all voxels and cameras.  The result is a list of cubes
+of mixed sizes (``VoxelHull``) with volume-weighted moments for initialisation (centroid,
+principal axes, height) and a point cloud for clients.  ``render_hull`` rasterises a hull back
+into a camera (ray/box slab test per pixel of each voxel's footprint), for consistency checks.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from capture.camera import Camera
+
+__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou"]
+
+# the 8 corners of the unit cube, (8, 3)
+_CORNERS = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
+# the 8 children's lower-corner offsets in units of the child size, (8, 3)
+_CHILDREN = _CORNERS
+
+
+@dataclass(frozen=True, eq=False)
+class VoxelHull:
+    """A visual hull as cubes of mixed sizes (world frame, metres).
+
+    Attributes
+    ----------
+    centres : ndarray, shape (n, 3)
+        Voxel centres.
+    sizes : ndarray, shape (n,)
+        Voxel edge lengths.
+    full : ndarray of bool, shape (n,)
+        True for voxels proven inside every silhouette; False for finest-level voxels kept
+        because their centre projects inside every silhouette (the hull's surface layer).
+    bounds : ndarray, shape (2, 3)
+        The reconstructed box ``[lower, upper]`` (the grid, cube-aligned).
+    min_voxel_m : float
+        Finest voxel size.
+    """
+
+    centres: np.ndarray
+    sizes: np.ndarray
+    full: np.ndarray
+    bounds: np.ndarray
+    min_voxel_m: float
+
+    @property
+    def n_voxels(self) -> int:
+        return len(self.sizes)
+
+    @property
+    def empty(self) -> bool:
+        return self.n_voxels == 0
+
+    @property
+    def volumes(self) -> np.ndarray:
+        """Voxel volumes, shape (n,), m³."""
+        return self.sizes**3
+
+    @property
+    def volume(self) -> float:
+        return float(self.volumes.sum())
+
+    def _require(self) -> None:
+        if self.empty:
+            raise ValueError("the visual hull is empty (no voxel inside every silhouette)")
+
+    def centroid(self) -> np.ndarray:
+        """Volume-weighted centre of mass, shape (3,)."""
+        self._require()
+        w = self.volumes
+        return (self.centres * w[:, None]).sum(0) / w.sum()
+
+    def covariance(self) -> np.ndarray:
+        """Volume-weighted second moment about the centroid, shape (3, 3) (includes each cube's own spread)."""
+        self._require()
+        w = self.volumes / self.volumes.sum()
+        d = self.centres - self.centroid()
+        own = (w * self.sizes**2 / 12.0).sum() * np.eye(3)  # a cube's inertia about its centre
+        return (d * w[:, None]).T @ d + own
+
+    def principal_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Eigenvalues (3,) descending and unit axes as columns (3, 3) of ``covariance``."""
+        vals, vecs = np.linalg.eigh(self.covariance())
+        order = np.argsort(vals)[::-1]
+        return vals[order], vecs[:, order]
+
+    def floor_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Principal axes of the horizontal (x, y) spread: eigenvalues (2,) descending, axes (2, 2) as columns."""
+        vals, vecs = np.linalg.eigh(self.covariance()[:2, :2])
+        return vals[::-1], vecs[:, ::-1]
+
+    def extent(self) -> np.ndarray:
+        """Tight box of the voxels' cubes, shape (2, 3): ``[lower, upper]``."""
+        self._require()
+        h = 0.5 * self.sizes[:, None]
+        return np.stack([(self.centres - h).min(0), (self.centres + h).max(0)])
+
+    def height(self) -> float:
+        """Vertical extent of the hull (top minus bottom of its cubes), metres."""
+        lo, hi = self.extent()
+        return float(hi[2] - lo[2])
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Whether world points (m, 3) lie in a voxel of the hull, shape (m,) bool."""
+        P = np.asarray(points, dtype=float).reshape(-1, 3)
+        if self.empty:
+            return np.zeros(len(P), bool)
+        # finest-cell keys of every voxel, then a sorted lookup of the points' cells
+        cells = np.floor((self.points() - self.bounds[0]) / self.min_voxel_m).astype(np.int64)
+        dims = np.ceil((self.bounds[1] - self.bounds[0]) / self.min_voxel_m).astype(np.int64) + 1
+        keys = np.unique(np.ravel_multi_index(cells.T, dims, mode="clip"))
+        q = np.floor((P - self.bounds[0]) / self.min_voxel_m).astype(np.int64)
+        inside = np.all((q >= 0) & (q < dims), axis=1)
+        qk = np.ravel_multi_index(np.clip(q, 0, dims - 1).T, dims)
+        pos = np.clip(np.searchsorted(keys, qk), 0, len(keys) - 1)
+        return inside & (keys[pos] == qk)
+
+    def points(self, *, spacing_m: float | None = None) -> np.ndarray:
+        """A point cloud filling the hull: each cube split into cells of ``spacing_m`` (default the
+        finest voxel size), their centres, shape (m, 3)."""
+        s = self.min_voxel_m if spacing_m is None else float(spacing_m)
+        if s <= 0:
+            raise ValueError(f"spacing_m must be > 0, got {spacing_m}")
+        out = []
+        for size in np.unique(self.sizes):
+            sel = self.sizes == size
+            n = max(1, int(round(size / s)))
+            g = (np.arange(n) + 0.5) / n - 0.5
+            sub = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) * size
+            out.append((self.centres[sel][:, None, :] + sub[None]).reshape(-1, 3))
+        return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def common_view_bounds(cameras: Sequence[Camera], *, z_range=(0.0, 2.5), step_m: float = 0.2, margin_m: float = 0.2) -> np.ndarray:
+    """Box ``(2, 3)`` around the floor region every camera sees (heights in ``z_range``).
+
+    Samples a grid over the cameras' horizontal footprint (their centres' box grown by half its
+    size) and keeps points in front of and inside every image.
+    """
+    centres = np.array([c.center for c in cameras])
+    lo, hi = centres[:, :2].min(0), centres[:, :2].max(0)
+    pad = 0.5 * (hi - lo) + 1.0
+    xs = np.arange(lo[0] - pad[0], hi[0] + pad[0] + step_m, step_m)
+    ys = np.arange(lo[1] - pad[1], hi[1] + pad[1] + step_m, step_m)
+    zs = np.arange(z_range[0], z_range[1] + 0.5 * step_m, step_m)
+    P = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3)
+    seen = np.ones(len(P), bool)
+    for cam in cameras:
+        uv, z = _project(cam, P)
+        seen &= (z > 1e-3) & cam.in_image(np.nan_to_num(uv, nan=-1.0))
+    if not seen.any():
+        raise ValueError("the cameras share no common view between z = %.2f and %.2f m" % tuple(z_range))
+    Q = P[seen]
+    lo, hi = Q.min(0) - margin_m, Q.max(0) + margin_m
+    lo[2] = max(lo[2], z_range[0])  # nothing below the floor
+    return np.stack([lo, hi])
+
+
+def _check_inputs(cameras, silhouettes) -> list[np.ndarray]:
+    if len(cameras) == 0:
+        raise ValueError("visual_hull needs at least one camera")
+    if len(silhouettes) != len(cameras):
+        raise ValueError(f"silhouettes: got {len(silhouettes)} masks for {len(cameras)} cameras")
+    masks = []
+    for cam, m in zip(cameras, silhouettes):
+        m = np.asarray(m)
+        if m.shape != (cam.height, cam.width):
+            raise ValueError(f"silhouettes[{cam.name!r}]: shape {m.shape} != camera size (h, w) = {(cam.height, cam.width)}")
+        masks.append((m > 0).astype(np.uint8))
+    return masks
+
+
+def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (n, 2) and depths (n,) of world points X (n, 3); one matrix product without distortion."""
+    if np.any(cam.distortion != 0):
+        return cam.project(X), cam.depth(X)
+    x = X @ cam.projection_matrix[:, :3].T + cam.projection_matrix[:, 3]
+    z = x[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return x[:, :2] / z[:, None], z
+
+
+def _classify(lower: np.ndarray, size: float, cameras, integrals) -> tuple[np.ndarray, np.ndarray]:
+    """Classify cubes ``lower`` (n, 3) of edge ``size``: returns (empty (n,), full (n,)) bool."""
+    n = len(lower)
+    corners = (lower[:, None, :] + size * _CORNERS[None]).reshape(-1, 3)  # (n*8, 3)
+    empty = np.zeros(n, bool)
+    full = np.ones(n, bool)
+    for cam, ii in zip(cameras, integrals):
+        h, w = cam.height, cam.width
+        uv, z = _project(cam, corners)
+        front = (z > 1e-6).reshape(n, 8)
+        u, v = uv[:, 0].reshape(n, 8), uv[:, 1].reshape(n, 8)
+        all_front, any_front = front.all(1), front.any(1)
+        if not all_front.all():
+            u, v = np.where(front, u, np.nan), np.where(front, v, np.nan)
+            with warnings.catch_warnings():  # all-NaN rows: cubes wholly behind the camera
+                warnings.simplefilter("ignore", RuntimeWarning)
+                u0, u1 = np.nanmin(u, 1), np.nanmax(u, 1)
+                v0, v1 = np.nanmin(v, 1), np.nanmax(v, 1)
+            u0, u1, v0, v1 = (np.nan_to_num(a, nan=-1.0) for a in (u0, u1, v0, v1))
+        else:
+            u0, u1, v0, v1 = u.min(1), u.max(1), v.min(1), v.max(1)
+        u0, v0, u1, v1 = np.floor(u0), np.floor(v0), np.ceil(u1), np.ceil(v1)
+        inside_img = all_front & (u0 >= 0) & (v0 >= 0) & (u1 <= w - 1) & (v1 <= h - 1)
+        # clipped pixel box [c0, c1) x [r0, r1) in integral-image indices
+        c0 = np.clip(u0, 0, w).astype(np.intp)
+        c1 = np.clip(u1 + 1, 0, w).astype(np.intp)
+        r0 = np.clip(v0, 0, h).astype(np.intp)
+        r1 = np.clip(v1 + 1, 0, h).astype(np.intp)
+        count = ii[r1, c1] - ii[r0, c1] - ii[r1, c0] + ii[r0, c0]
+        area = (c1 - c0) * (r1 - r0)
+        # wholly behind the camera or off the image: empty; partly behind: undecided
+        empty |= ~any_front | (area <= 0) | (all_front & (count == 0))
+        full &= inside_img & (count == area)
+    return empty, full & ~empty
+
+
+def visual_hull(
+    cameras: Sequence[Camera],
+    silhouettes: Sequence[np.ndarray],
+    *,
+    bounds=None,
+    min_voxel_m: float = 0.015,
+    coarse: int = 16,
+) -> VoxelHull:
+    """Coarse-to-fine visual hull.
+
+    Parameters
+    ----------
+    cameras : sequence of Camera
+    silhouettes : sequence of ndarray, each shape (h, w) of its camera
+        Masks, non-zero = body.
+    bounds : array_like, shape (2, 3), optional
+        Box ``[lower, upper]`` to reconstruct in (world, metres); default
+        ``common_view_bounds(cameras)``.
+    min_voxel_m : float
+        Finest voxel edge length.
+    coarse : int
+        Cells of the first grid along the longest side of ``bounds`` (the grid is grown so that
+        the finest size is exactly ``min_voxel_m``).
+    """
+    masks = _check_inputs(cameras, silhouettes)
+    if not (min_voxel_m > 0 and np.isfinite(min_voxel_m)):
+        raise ValueError(f"min_voxel_m must be > 0, got {min_voxel_m}")
+    if int(coarse) < 1:
+        raise ValueError(f"coarse must be >= 1, got {coarse}")
+    box = common_view_bounds(cameras) if bounds is None else np.asarray(bounds, dtype=float).reshape(2, 3)
+    if not np.all(box[1] > box[0]):
+        raise ValueError(f"bounds must be [lower, upper] with upper > lower, got {box.tolist()}")
+    span = float((box[1] - box[0]).max())
+    levels = max(0, int(np.ceil(np.log2(span / (int(coarse) * min_voxel_m)))))
+    size = min_voxel_m * 2.0**levels
+    counts = np.maximum(1, np.ceil((box[1] - box[0]) / size - 1e-9).astype(int))
+    origin = box[0].copy()  # grid anchored at the lower corner (the floor stays a voxel face)
+    idx = np.stack(np.meshgrid(*(np.arange(c) for c in counts), indexing="ij"), -1).reshape(-1, 3)
+    lower = origin + idx * size
+    integrals = [cv2.integral(m).astype(np.int64) for m in masks]
+    kept_c, kept_s, kept_f = [], [], []
+    for level in range(levels + 1):
+        if len(lower) == 0:
+            break
+        empty, full = _classify(lower, size, cameras, integrals)
+        kept_c.append(lower[full] + 0.5 * size)
+        kept_s.append(np.full(int(full.sum()), size))
+        kept_f.append(np.ones(int(full.sum()), bool))
+        todo = lower[~empty & ~full]
+        if level == levels:
+            centre = todo + 0.5 * size
+            on = np.ones(len(centre), bool)
+            for cam, m in zip(cameras, masks):
+                ok = cam.depth(centre) > 1e-6
+                uv = np.rint(cam.project(centre)).astype(np.int64, copy=False) if len(centre) else np.zeros((0, 2), int)
+                inside = ok & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
+                hit = np.zeros(len(centre), bool)
+                hit[inside] = m[uv[inside, 1], uv[inside, 0]] > 0
+                on &= hit
+            kept_c.append(centre[on])
+            kept_s.append(np.full(int(on.sum()), size))
+            kept_f.append(np.zeros(int(on.sum()), bool))
+            break
+        size *= 0.5
+        lower = (todo[:, None, :] + size * _CHILDREN[None]).reshape(-1, 3)
+    centres = np.concatenate(kept_c) if kept_c else np.zeros((0, 3))
+    sizes = np.concatenate(kept_s) if kept_s else np.zeros(0)
+    full = np.concatenate(kept_f) if kept_f else np.zeros(0, bool)
+    grid = np.stack([origin, origin + counts * min_voxel_m * 2.0**levels])
+    return VoxelHull(centres, sizes, full, grid, float(min_voxel_m))
+
+
+def _pixel_rays(camera: Camera, uv: np.ndarray) -> np.ndarray:
+    """World ray directions (n, 3) through pixels ``uv`` (n, 2) (distortion undone)."""
+    if np.any(camera.distortion != 0):
+        xy = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), camera.matrix, camera.distortion).reshape(-1, 2)
+        rays_c = np.column_stack([xy, np.ones(len(xy))])
+    else:
+        rays_c = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(camera.matrix).T
+    return rays_c @ camera.rotation  # R^T applied to row vectors
+
+
+def render_hull(hull: VoxelHull, camera: Camera, *, max_pairs: int = 4_000_000) -> np.ndarray:
+    """Rasterise the hull into ``camera``: (h, w) uint8 mask, 255 where a pixel's ray meets a voxel.
+
+    Each voxel's footprint box is enumerated (ragged, vectorised) and every pixel centre's ray
+    is tested against the cube (slab test), so the result is exact up to pixel sampling.
+    """
+    h, w = camera.height, camera.width
+    out = np.zeros((h, w), np.uint8)
+    if hull.empty:
+        return out
+    lo = hull.centres - 0.5 * hull.sizes[:, None]
+    hi = hull.centres + 0.5 * hull.sizes[:, None]
+    corners = (lo[:, None, :] + hull.sizes[:, None, None] * _CORNERS[None]).reshape(-1, 3)
+    front = (camera.depth(corners) > 1e-6).reshape(-1, 8).all(1)
+    uv = camera.project(corners).reshape(-1, 8, 2)
+    c0 = np.clip(np.floor(uv[..., 0].min(1)), 0, w).astype(int)
+    c1 = np.clip(np.ceil(uv[..., 0].max(1)) + 1, 0, w).astype(int)
+    r0 = np.clip(np.floor(uv[..., 1].min(1)), 0, h).astype(int)
+    r1 = np.clip(np.ceil(uv[..., 1].max(1)) + 1, 0, h).astype(int)
+    bw, bh = np.maximum(c1 - c0, 0) * front, np.maximum(r1 - r0, 0) * front
+    n_pix = bw * bh
+    C = camera.center
+    cols, rows = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    rays = _pixel_rays(camera, np.column_stack([cols.ravel(), rows.ravel()]))  # (h*w, 3)
+    start = 0
+    # process voxels in chunks so the ragged expansion stays under max_pairs
+    cum = np.cumsum(n_pix)
+    while start < len(n_pix):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + max_pairs, side="right")))
+        sel = np.arange(start, min(stop, len(n_pix)))
+        start = sel[-1] + 1
+        counts = n_pix[sel]
+        if counts.sum() == 0:
+            continue
+        vox = np.repeat(sel, counts)
+        k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        col = c0[vox] + k % bw[vox]
+        row = r0[vox] + k // bw[vox]
+        d = rays[row * w + col]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+            t1 = (lo[vox] - C) * inv
+            t2 = (hi[vox] - C) * inv
+        t1 = np.where(np.isnan(t1), -np.inf, t1)
+        t2 = np.where(np.isnan(t2), np.inf, t2)
+        tmin = np.minimum(t1, t2).max(1)
+        tmax = np.maximum(t1, t2).min(1)
+        hit = tmax >= np.maximum(tmin, 0.0)
+        out[row[hit], col[hit]] = 255
+    return out
+
+
+def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two masks (non-zero = set); 1.0 when both are empty."""
+    a, b = np.asarray(a) > 0, np.asarray(b) > 0
+    union = np.count_nonzero(a | b)
+    return 1.0 if union == 0 else np.count_nonzero(a & b) / union
