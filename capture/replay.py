@@ -63,7 +63,7 @@ class _Reader:
             if cam.background.suffix.lower() in _IMAGE_SUFFIXES:
                 self.single = cam.background
             else:
-                self.capture = _open_video(cam.background)
+                self.capture = _VideoChain([cam.background])
             return
         if cam.timestamps is not None:
             try:
@@ -72,7 +72,7 @@ class _Reader:
                 raise OpenError(str(exc)) from None
         if cam.video is not None:
             self.where = str(cam.video)
-            self.capture = _open_video(cam.video)
+            self.capture = _VideoChain(cam.video_files)
         else:
             self.where = cam.images
             self.pattern = cam.images
@@ -121,6 +121,49 @@ class _Reader:
         if self.capture is not None:
             self.capture.release()
             self.capture = None
+
+
+class _VideoChain:
+    """Video segment files read back to back (one file = one segment).
+
+    A last segment that cannot be opened (a recording cut mid-segment) ends
+    the stream; an earlier one is an error naming the file.
+    """
+
+    def __init__(self, paths: Sequence[Path]):
+        self.paths = list(paths)
+        if not self.paths:
+            raise OpenError("no video segment files found")
+        self.index = 0
+        self.capture = _open_video(self.paths[0])
+
+    def _advance(self) -> bool:
+        self.capture.release()
+        self.index += 1
+        if self.index >= len(self.paths):
+            return False
+        try:
+            self.capture = _open_video(self.paths[self.index])
+        except OpenError:
+            if self.index == len(self.paths) - 1:
+                return False
+            raise
+        return True
+
+    def read(self):
+        while True:
+            ok, image = self.capture.read()
+            if ok or not self._advance():
+                return ok, image
+
+    def grab(self):
+        while True:
+            ok = self.capture.grab()
+            if ok or not self._advance():
+                return ok
+
+    def release(self):
+        self.capture.release()
 
 
 def _open_video(path: Path):

@@ -21,14 +21,19 @@ Layout (the DESIGN.md contract)::
 
     [[camera]]
     name = "cam0"
-    video = "cam0.avi"            # or: images = "cam0/%06d.png" (printf pattern, number = frame id)
+    video = "cam0.avi"            # or segments: "cam0/%06d.avi" (number = first stored frame's index)
+                                  # or: images = "cam0/%06d.png" (printf pattern, number = frame id)
     background = "background/cam0.avi"   # optional
     timestamps = "cam0.csv"              # optional
 
 Frame numbering: row ``i`` of a camera's CSV describes the ``i``-th frame
 stored in its video; for an image sequence the file number *is* the frame id.
 Without a CSV, video frame ``k`` has frame id ``k`` and
-``timestamp_ns = k * 1e9 / fps``.  Paths are relative to the session root.
+``timestamp_ns = k * 1e9 / fps``.  A ``video`` holding a printf pattern names
+segment files read back to back as one video (the recorder writes 1-second
+segments so a crash loses at most the last one); read media through
+``capture.replay`` rather than opening ``video`` directly.  Paths are relative
+to the session root.
 """
 
 from __future__ import annotations
@@ -81,6 +86,15 @@ class SessionCamera:
     images: str | None
     background: Path | None
     timestamps: Path | None
+
+    @property
+    def video_files(self) -> tuple[Path, ...]:
+        """The video file, or the segment files of a ``%0Nd`` video pattern in order; () for images."""
+        if self.video is None:
+            return ()
+        if "%" not in self.video.name:
+            return (self.video,)
+        return tuple(image_path(str(self.video), n) for n in image_frame_ids(str(self.video)))
 
 
 @dataclass(frozen=True)
@@ -213,7 +227,10 @@ def _parse_camera(root: Path, table, index: int, where_file: Path) -> SessionCam
     video = images = None
     if "video" in table:
         video = _resolve(root, table["video"], f"{where} key 'video'")
-        if not video.is_file():
+        if "%" in video.name:
+            if image_frame_ids(str(video)).size == 0:
+                raise SessionError(f"{where}: no video segment files match pattern {str(video)!r}")
+        elif not video.is_file():
             raise SessionError(f"{where}: video file {video} not found")
     else:
         images = str(_resolve(root, table["images"], f"{where} key 'images'"))

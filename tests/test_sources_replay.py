@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from capture.replay import ReplaySource, iter_frame_sets, read_frames
-from capture.session import SessionError, load_session
+from capture.session import SessionError, load_session, write_session_toml
 from capture.sources import EndOfStream, OpenError, SourceTimeout
-from test_session_factory import make_session
+from test_session_factory import make_images, make_session, write_video
 
 
 class FakeClock:
@@ -155,3 +155,21 @@ def test_real_uu_studio_video(shared_data, tmp_path):
     assert frames[0].image.shape == (486, 644, 3) and frames[0].image.dtype == np.uint8
     assert frames[4].timestamp_ns == 80_000_000
     assert 20 < float(frames[0].image.mean()) < 235  # a real, lit room, not a blank frame
+
+
+def test_video_segments_read_back_to_back(tmp_path, rng):
+    images = make_images(rng, 7)
+    (tmp_path / "cam0").mkdir()
+    write_video(tmp_path / "cam0" / "000000.avi", images[:4])
+    write_video(tmp_path / "cam0" / "000004.avi", images[4:])
+    (tmp_path / "cam0" / "000007.avi").write_bytes(b"cut short")  # last segment of a crashed recording
+    write_session_toml(tmp_path, name="seg", fps=25, cameras=[{"name": "cam0", "video": "cam0/%06d.avi"}])
+    session = load_session(tmp_path, require_calibration=False)
+    assert [p.name for p in session.camera("cam0").video_files] == ["000000.avi", "000004.avi", "000007.avi"]
+    frames = list(read_frames(session, "cam0"))
+    assert [f.frame_id for f in frames] == list(range(7))
+    assert all(np.array_equal(f.image, img) for f, img in zip(frames, images))
+    assert [f.frame_id for f in read_frames(session, "cam0", frames=range(3, 6))] == [3, 4, 5]
+    (tmp_path / "cam0" / "000004.avi").write_bytes(b"broken in the middle")
+    with pytest.raises(OpenError, match="000004.avi"):
+        list(read_frames(load_session(tmp_path, require_calibration=False), "cam0"))
