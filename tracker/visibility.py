@@ -1,0 +1,141 @@
+"""Occlusion of contour points by the other parts of the body.
+
+A point P seen from camera centre C is hidden when the segment ``C + s (P - C)``,
+``s in [0, 1]``, meets the solid truncated cone of another part (its end caps
+included).  In a part's frame the solid is::
+
+    (x/a)² + (y/b)² <= (1 + k z)²,   z1 <= z <= z2
+
+(``1 + k z > 0`` on ``[z1, z2]``, so this is one nappe: a convex solid).  Along
+the segment, with ``g = (m1/a, m2/b, 1 + k m3)`` from the camera centre m and
+``h = (d1/a, d2/b, k d3)`` from the direction d (both in the part frame), the
+cone test is the quadratic ``q(s) = |g + s h|²_(+,+,-) <= 0`` and the caps cut
+``s`` to the slab interval.  The segment meets the solid when the minimum of
+``q`` over ``[0, 1] ∩ slab`` is negative: the minimum of a quadratic on an
+interval is at an end or at its vertex.
+
+Speed: (point, part) pairs are first culled in the image plane: the part's
+bounding box, projected by the pinhole model (a central projection maps the
+box's convex hull inside the hull of its corners' images, so the cull is
+exact for boxes in front of the camera), must contain the point's image.  The
+exact test then runs on the few remaining pairs, all at once.
+
+A point inside another part's solid counts as hidden (it is not on the body's
+outline).  A point exactly on another part's surface is not (tolerance 1e-9
+on ``q``).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from tracker.kinematics import Pose
+from tracker.model import BodyModel
+
+__all__ = ["hidden_points"]
+
+_Q_TOL = 1e-9
+
+
+def hidden_points(
+    model: BodyModel,
+    pose: Pose,
+    cameras: Sequence[Camera],
+    cam: np.ndarray,
+    part: np.ndarray,
+    points: np.ndarray,
+    *,
+    only: np.ndarray | None = None,
+) -> np.ndarray:
+    """Which points are hidden from their camera by another part.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+    cameras : sequence of Camera, length n_cams
+    cam, part : ndarray of int, shape (n,)
+        Camera index and own part index of each point (the own part is not an occluder).
+    points : ndarray, shape (n, 3)
+        World points.
+    only : ndarray of bool, shape (n,), optional
+        Test only these points; the others are reported not hidden.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    n = points.shape[0]
+    hidden = np.zeros(n, dtype=bool)
+    rows = np.arange(n) if only is None else np.flatnonzero(only)
+    if rows.size == 0:
+        return hidden
+    cam_R = np.stack([cm.rotation for cm in cameras])  # world2cam (n_cams, 3, 3)
+    cam_t = np.stack([cm.translation for cm in cameras])  # (n_cams, 3)
+    centres = -np.einsum("cji,cj->ci", cam_R, cam_t)  # (n_cams, 3) world
+    c, own, P = cam[rows], part[rows], points[rows]
+    i, q = _candidate_pairs(model, pose, cam_R, cam_t, c, own, P)
+    if i.size == 0:
+        return hidden
+    cones = model.cones[q]
+    a, b, k, z1, z2 = (cones[:, j] for j in range(5))
+    Rq, tq = pose.rotation[q], pose.translation[q]
+    Cw = centres[c[i]]
+    m = np.einsum("nji,nj->ni", Rq, Cw - tq)  # camera centre in the occluder's frame (pairs, 3)
+    d = np.einsum("nji,nj->ni", Rq, P[i] - Cw)  # segment direction in the occluder's frame
+    g1, g2, g3 = m[:, 0] / a, m[:, 1] / b, 1.0 + k * m[:, 2]
+    h1, h2, h3 = d[:, 0] / a, d[:, 1] / b, k * d[:, 2]
+    qa = h1 * h1 + h2 * h2 - h3 * h3
+    qb = g1 * h1 + g2 * h2 - g3 * h3
+    qc = g1 * g1 + g2 * g2 - g3 * g3
+    # slab z1 <= m3 + s d3 <= z2, intersected with s in [0, 1]
+    m3, d3 = m[:, 2], d[:, 2]
+    flat = np.abs(d3) < 1e-15
+    safe = np.where(flat, 1.0, d3)
+    sa, sb = (z1 - m3) / safe, (z2 - m3) / safe
+    inside_slab = (m3 >= z1) & (m3 <= z2)
+    lo = np.where(flat, np.where(inside_slab, 0.0, 1.0), np.maximum(np.minimum(sa, sb), 0.0))
+    hi = np.where(flat, np.where(inside_slab, 1.0, 0.0), np.minimum(np.maximum(sa, sb), 1.0))
+    ok = (lo <= hi) & (~flat | inside_slab)
+    # the minimum of q on [lo, hi]: at an end, or at the vertex when q is convex
+    vertex = np.clip(-qb / np.where(qa > 0, qa, 1.0), lo, hi)
+    vertex = np.where(qa > 0, vertex, lo)
+
+    def q_at(s):
+        return (qa * s + 2.0 * qb) * s + qc
+
+    qmin = np.minimum(np.minimum(q_at(lo), q_at(hi)), q_at(vertex))
+    blocked = ok & (qmin < -_Q_TOL)
+    hidden[rows[np.unique(i[blocked])]] = True
+    return hidden
+
+
+def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
+    """(point, occluder) pairs whose pinhole images overlap: indices (pairs,), (pairs,)."""
+    a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
+    s_max = np.maximum(1.0 + k * z1, 1.0 + k * z2)
+    corners = np.empty((model.n_parts, 8, 3))  # part-frame bounding box of each solid
+    sx, sy, sz = np.array(np.meshgrid([-1, 1], [-1, 1], [0, 1], indexing="ij")).reshape(3, 8)
+    corners[..., 0] = (a * s_max)[:, None] * sx
+    corners[..., 1] = (b * s_max)[:, None] * sy
+    corners[..., 2] = np.where(sz[None, :] > 0, z2[:, None], z1[:, None])
+    world = np.einsum("pij,pkj->pki", pose.rotation, corners) + pose.translation[:, None, :]
+    Xc = np.einsum("cij,pkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
+    depth = Xc[..., 2]
+    front = depth.min(axis=-1) > 1e-9  # (n_cams, n_parts)
+    zc = np.where(front[..., None], depth, 1.0)
+    xn, yn = Xc[..., 0] / zc, Xc[..., 1] / zc
+    inf = np.where(front, 0.0, np.inf)
+    box = np.stack([xn.min(-1) - inf, xn.max(-1) + inf, yn.min(-1) - inf, yn.max(-1) + inf], axis=1)
+    Pc = np.einsum("nij,nj->ni", cam_R[c], P) + cam_t[c]
+    ahead = Pc[:, 2] > 1e-9
+    zp = np.where(ahead, Pc[:, 2], 1.0)
+    xp, yp = (Pc[:, 0] / zp)[:, None], (Pc[:, 1] / zp)[:, None]
+    bb = box[c]  # (r, 4, n_parts)
+    cand = (xp >= bb[:, 0]) & (xp <= bb[:, 1]) & (yp >= bb[:, 2]) & (yp <= bb[:, 3])
+    cand |= ~ahead[:, None]
+    cand[np.arange(own.size), own] = False  # a part does not hide its own contour
+    return np.nonzero(cand)
