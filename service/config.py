@@ -6,6 +6,7 @@
     name = "lab"                      # zenoh key prefix contourcap/<name>/...
     delivery = "live"                 # live | lossless
     session = "sessions/take1"        # replay session (relative to this file) for backend = "replay"
+    calibration = "calibration.toml"  # default: the session's calibration.toml
     model = "knossow40"               # body model name or file
     jpeg_quality = 90
 
@@ -77,6 +78,7 @@ class StudioConfig:
     studio: str
     delivery: str
     session: Path | None
+    calibration: Path | None
     model: str
     jpeg_quality: int
     zenoh: ZenohSettings
@@ -182,7 +184,7 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     r = _Reader(where, base)
     r.unknown(data, {"studio", "zenoh", "trigger", "tracker", "router", "camera"}, "")
     s = r.get(data, "studio", "", (dict,))
-    r.unknown(s, {"name", "delivery", "session", "model", "jpeg_quality"}, "studio")
+    r.unknown(s, {"name", "delivery", "session", "calibration", "model", "jpeg_quality"}, "studio")
     cams_raw = r.get(data, "camera", "", (list,))
     if not cams_raw:
         raise r.err("camera", "at least one [[camera]] is needed")
@@ -221,7 +223,8 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     return StudioConfig(
         path=Path(where) if base is not None else None, studio=r.name(s, "name", "studio"),
         delivery=r.get(s, "delivery", "studio", (str,), "live", choices=MODES),
-        session=Path(session) if session else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
+        session=Path(session) if session else None,
+        calibration=Path(c) if (c := r.path(s, "calibration", "studio")) else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
         jpeg_quality=quality, zenoh=_zenoh(r, r.get(data, "zenoh", "", (dict,), {})), trigger=trigger,
         tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
         router_host=r.name(ro, "host", "router") if ro is not None else None,

@@ -75,13 +75,14 @@ def _float(meta: Mapping, key: str) -> float:
     return float(v)
 
 
-def _shape(value: Any, key: str, ndims: tuple[int, ...]) -> tuple[int, ...]:
+def _shape(value: Any, key: str, ndims: tuple[int, ...], *, allow_empty: bool = False) -> tuple[int, ...]:
     if not isinstance(value, (list, tuple)) or len(value) not in ndims:
         raise MessageError(f"{key}: expected a list of {ndims} dimensions, got {value!r:.80}")
     out = []
+    lo = 0 if allow_empty else 1
     for d in value:
-        if isinstance(d, bool) or not isinstance(d, int) or not 0 < d <= MAX_DIM:
-            raise MessageError(f"{key}: dimension {d!r:.20} outside 1..{MAX_DIM}")
+        if isinstance(d, bool) or not isinstance(d, int) or not lo <= d <= MAX_DIM:
+            raise MessageError(f"{key}: dimension {d!r:.20} outside {lo}..{MAX_DIM}")
         out.append(d)
     return tuple(out)
 
@@ -260,7 +261,9 @@ class ChamferMessage:
     ``arrays``: ``((name, array), ...)``, each array 2-D ``(roi_h, roi_w)`` uint8/uint16 (or float32)
     covering the region of interest whose top-left pixel is ``roi_xy`` in an image of ``image_size``
     ``(w, h)``.  A stored value ``q`` means a distance of ``q / scale`` pixels, saturated at
-    ``truncation_px``.  ``attrs`` carries extra finite numbers (name -> float).
+    ``truncation_px``; arrays may be empty ``(0, 0)`` (nothing seen: truncation everywhere).
+    ``attrs`` carries extra finite numbers (name -> float).  ``service.components`` converts to and
+    from ``segmentation.ChamferImages`` (arrays ``silhouette`` and ``edges``).
     """
 
     camera: str
@@ -320,7 +323,7 @@ class ChamferMessage:
                 raise MessageError(f"camera {camera}: duplicate array {name}")
             names.add(name)
             dtype = _dtype(spec.get("dtype"), f"{name}.dtype")
-            rh, rw = _shape(spec.get("shape"), f"{name}.shape", (2,))
+            rh, rw = _shape(spec.get("shape"), f"{name}.shape", (2,), allow_empty=True)
             if x0 + rw > w or y0 + rh > h:
                 raise MessageError(f"camera {camera}: array {name} {rh}x{rw} at {x0},{y0} exceeds image {w}x{h}")
             arr = _array(payload, offset, dtype, (rh, rw), f"camera {camera} array {name}")

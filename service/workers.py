@@ -6,7 +6,8 @@ is set or its input ends.  Processes, argparse and signals live in ``service/com
 
 Seams (adapted to the real components in ``service/components.py``):
 
-- ``Segmenter``: ``(frame: FrameMessage, image_bgr (h, w, 3) uint8) -> ChamferMessage``
+- ``Segmenter``: ``(frame: FrameMessage, image_bgr (h, w, 3) uint8) -> ChamferMessage | None``
+  (None: nothing to publish yet, e.g. still learning the background)
 - ``Fitter``: ``(frame_id, timestamp_ns, chamfer: dict[camera, ChamferMessage]) -> dict`` (a DESIGN.md
   pose record, ``ok``/``reason`` included)
 
@@ -37,15 +38,36 @@ Fitter = Callable[[int, int, dict], dict]
 TRACK_CONSUMER = "track"
 
 
+class EpochPacer:
+    """Live replay pacing shared by all camera workers of a studio: a frame with session time ``t``
+    is due at wall time ``epoch_ns + t``; frames already late by more than ``max_late_ns`` are
+    skipped (so a restarted camera worker rejoins at the present, not at frame 0)."""
+
+    def __init__(self, epoch_ns: int, *, max_late_ns: int = 20_000_000, wall_ns: Callable[[], int] = time.time_ns,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.epoch_ns, self.max_late_ns, self._wall_ns, self._sleep = int(epoch_ns), int(max_late_ns), wall_ns, sleep
+
+    def __call__(self, timestamp_ns: int) -> bool:
+        due = self.epoch_ns + int(timestamp_ns)
+        now = self._wall_ns()
+        if now - due > self.max_late_ns:
+            return False
+        if due > now:
+            self._sleep((due - now) / 1e9)
+        return True
+
+
 def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, Source], *, mode: str = "live",
                       encodings: Mapping[str, str] | None = None, jpeg_quality: int = 90, window: int = 8,
                       stop: threading.Event, credit_timeout_s: float = 30.0,
-                      wall_ns: Callable[[], int] = time.time_ns, component: str = "camera") -> dict:
+                      wall_ns: Callable[[], int] = time.time_ns, component: str = "camera",
+                      pace: Callable[[int], bool] | None = None) -> dict:
     """Read every source round-robin and publish its frames until all end or ``stop``.
 
     Lossless: frame ``k`` is published only once the tracker acknowledged ``k - window``
     (:class:`~service.bus.CreditGate`); a missing credit for ``credit_timeout_s`` ends the worker.
-    Sources must already be open (context managers entered by the caller).
+    Sources must already be open (context managers entered by the caller).  ``pace(timestamp_ns)``
+    (e.g. :class:`EpochPacer`) may sleep and returns False to skip a frame (counted in ``skipped``).
     """
     encodings = dict(encodings or {})
     pubs = {name: declare_publisher(session, keys.frame(name), mode=mode) for name in sources}
@@ -73,6 +95,9 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
                     log.error("camera %s: %s", name, exc)
                     status.count("errors")
                     del active[name]
+                    continue
+                if pace is not None and not pace(frame.timestamp_ns):
+                    status.count("skipped")
                     continue
                 if gate is not None:
                     if not gate.wait(frame.frame_id, timeout_s=credit_timeout_s, stop=stop):
@@ -122,6 +147,10 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                     with lock:
                         status.count("bad")
                     continue
+                if out is None:  # still learning the background
+                    with lock:
+                        status.count("learning")
+                    continue
                 att = attachment_ns(got.sent_ns) if got.sent_ns is not None else None
                 pub.put(out.to_bytes(), attachment=att)
                 with lock:
@@ -155,10 +184,11 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
 def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
                      mode: str = "live", set_timeout_s: float = 0.08, stop: threading.Event,
                      clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
-                     component: str = "track", max_frames: int | None = None,
+                     component: str = "track", max_frames: int | None = None, idle_exit_s: float | None = None,
                      on_pose: Callable[[PoseRecord], None] | None = None) -> dict:
     """Assemble chamfer sets, fit, publish one pose record per released set (``ok: false`` + reason
-    when fitting fails — never silently dropped).  Lossless mode acknowledges each frame id."""
+    when fitting fails — never silently dropped).  Lossless mode acknowledges each frame id.
+    Returns after ``max_frames`` poses, ``idle_exit_s`` without input, or ``stop``."""
     lossless = mode == "lossless"
     inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
                   depth=16 * len(cameras) if lossless else 2 * len(cameras))
@@ -169,11 +199,16 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     status = StatusReporter(session, keys, component, clock=clock)
     sent: dict[int, int] = {}
     done = 0
+    last_input = clock()
     try:
         while not stop.is_set() and (max_frames is None or done < max_frames):
+            if idle_exit_s is not None and clock() - last_input > idle_exit_s and not len(asm):
+                break
             deadline = asm.next_deadline()
             wait = 0.05 if deadline is None else min(0.05, max(0.0, deadline - clock()))
             got = inbox.recv(wait)
+            if got is not None:
+                last_input = clock()
             while got is not None:
                 msg: ChamferMessage = got.message
                 cam = keys.camera_of(got.key)

@@ -1,0 +1,111 @@
+"""``contourcap worker camera|segment|track``: one worker process (usually started by ``contourcap run``)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import socket
+import sys
+import threading
+
+HELP = "run one worker process (camera, segment or track) of a studio"
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("role", choices=("camera", "segment", "track"), help="which worker")
+    parser.add_argument("--config", required=True, help="studio TOML (see deploy/studio.example.toml)")
+    parser.add_argument("--cameras", default=None,
+                        help="comma-separated camera names (default: this host's cameras; track: all)")
+    parser.add_argument("--host", default=None, help="host name in the config (default: this machine's)")
+    parser.add_argument("--hub", default=None,
+                        help="peer mode: the supervisor's hub endpoint to connect to (set by `contourcap run`)")
+    parser.add_argument("--plugin", default=None,
+                        help="module:factory replacing the segmenter (f(camera)) or the fitter (f(config))")
+    parser.add_argument("--idle-exit-s", type=float, default=None,
+                        help="segment/track: exit 0 after this long without input (replays)")
+    parser.add_argument("--max-frames", type=int, default=None, help="track: exit after this many poses")
+    parser.add_argument("--epoch-ns", type=int, default=None,
+                        help="camera, live replay: wall-clock ns at which session time 0 is due (set by run)")
+    parser.add_argument("--log-level", default="INFO")
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+
+    from service.bus import BusError, Keys, open_session
+    from service.config import ConfigError, load_config
+    from service.runtime import build_fitter, build_segmenters, build_sources, stop_on_signals, worker_settings
+
+    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+                        format=f"%(asctime)s {args.role} %(levelname)s %(message)s")
+    log = logging.getLogger("contourcap.worker")
+    cv2.setNumThreads(1)
+    stop = threading.Event()
+    stop_on_signals(stop)
+    try:
+        cfg = load_config(args.config)
+        host = args.host or socket.gethostname()
+        if args.cameras:
+            cams = tuple(c.strip() for c in args.cameras.split(",") if c.strip())
+            for c in cams:
+                cfg.camera(c)
+        elif args.role == "track":
+            cams = tuple(c.name for c in cfg.cameras)
+        else:
+            cams = tuple(c.name for c in cfg.cameras_on(host))
+            if not cams:
+                raise ConfigError(f"{cfg.path}: no camera on host {host!r} (hosts: {list(cfg.hosts)}); "
+                                  "pass --host or --cameras")
+        session = open_session(worker_settings(cfg, args.hub))
+    except (ConfigError, BusError) as exc:
+        print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)
+        return 2
+    keys = Keys(cfg.studio)
+    component = "track" if args.role == "track" else f"{args.role}-{'-'.join(cams) if args.cameras else host}"
+    try:
+        if args.role == "camera":
+            from service.workers import EpochPacer, run_camera_worker
+
+            paced = args.epoch_ns is not None and cfg.delivery == "live"
+            sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced)
+            try:
+                stats = run_camera_worker(session, keys, sources, mode=cfg.delivery, stop=stop,
+                                          encodings={c: cfg.camera(c).encoding for c in cams},
+                                          jpeg_quality=cfg.jpeg_quality, window=cfg.window, component=component,
+                                          pace=EpochPacer(args.epoch_ns) if paced else None)
+            finally:
+                for src in sources.values():
+                    src.close()
+        elif args.role == "segment":
+            from service.workers import run_segment_worker
+
+            stats = run_segment_worker(session, keys, build_segmenters(cfg, cams, plugin=args.plugin),
+                                       mode=cfg.delivery, stop=stop, component=component,
+                                       idle_exit_s=args.idle_exit_s)
+        else:
+            from service.workers import run_track_worker
+
+            fitter = build_fitter(cfg, plugin=args.plugin)
+            idle = None if args.idle_exit_s is None else args.idle_exit_s
+            stats = run_track_worker(session, keys, cams, fitter, mode=cfg.delivery,
+                                     set_timeout_s=cfg.set_timeout_ms / 1e3, stop=stop,
+                                     max_frames=args.max_frames, idle_exit_s=idle)
+        log.info("finished: %s", {k: v for k, v in sorted(stats.items())})
+        return 0
+    except ConfigError as exc:
+        print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        session.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m service.commands.worker ROLE ...``: the same command without loading every other
+    sub-command (fast start-up, used by the supervisor)."""
+    parser = argparse.ArgumentParser(prog="contourcap worker", description=HELP)
+    add_args(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

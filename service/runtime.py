@@ -1,0 +1,123 @@
+"""Building a worker's parts from the studio config (sources, segmenters, fitter, zenoh settings),
+plug-in loading and signal handling.  Used by ``service/commands/worker.py`` and the supervisor.
+
+Single-host peer mode: the supervisor opens a *hub* session listening on ``[zenoh] listen``
+(default ``tcp/127.0.0.1:7447``); each worker is a peer that connects to the hub and listens on an
+ephemeral loopback port, so gossip scouting meshes the workers with each other (multicast off).
+Multi-host: ``mode = "client"`` and ``connect`` to ``contourcap router``; the workers use
+``[zenoh]`` as written.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import signal
+import threading
+from dataclasses import replace
+from typing import Callable
+
+from service.bus import ZenohSettings
+from service.config import ConfigError, StudioConfig
+
+log = logging.getLogger("contourcap.runtime")
+DEFAULT_HUB = "tcp/127.0.0.1:7447"
+
+
+def hub_endpoint(cfg: StudioConfig) -> str:
+    """Where this host's workers connect in peer mode (the hub's first listen endpoint, on loopback)."""
+    ep = cfg.zenoh.listen[0] if cfg.zenoh.listen else DEFAULT_HUB
+    proto, _, addr = ep.partition("/")
+    host, _, port = addr.rpartition(":")
+    if host in ("0.0.0.0", "[::]", ""):
+        host = "127.0.0.1"
+    return f"{proto}/{host}:{port}"
+
+
+def worker_settings(cfg: StudioConfig, hub: str | None) -> ZenohSettings:
+    """Zenoh settings of a worker: a loopback peer of ``hub``, or ``[zenoh]`` as written."""
+    if hub is None:
+        return cfg.zenoh
+    return replace(cfg.zenoh, mode="peer", connect=(hub,), listen=("tcp/127.0.0.1:0",), config_file=None)
+
+
+def load_plugin(spec: str) -> Callable:
+    """``module:callable`` -> the callable (a local, user-given plug-in; never from the network)."""
+    mod, _, attr = spec.partition(":")
+    if not mod or not attr:
+        raise ConfigError(f"plug-in {spec!r}: expected 'module:callable'")
+    try:
+        obj = getattr(importlib.import_module(mod), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"plug-in {spec!r}: {exc}") from None
+    if not callable(obj):
+        raise ConfigError(f"plug-in {spec!r}: not callable")
+    return obj
+
+
+def stop_on_signals(stop: threading.Event) -> None:
+    """SIGINT/SIGTERM set ``stop`` (the loops then finish cleanly)."""
+    def handler(signum, frame):
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+
+
+def _session(cfg: StudioConfig):
+    from capture.session import load_session
+
+    if cfg.session is None:
+        raise ConfigError(f"{cfg.path}: studio.session: needed for replay cameras / calibration")
+    return load_session(cfg.session)
+
+
+def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, paced: bool = False) -> dict:
+    """Open camera sources: replay (realtime pacing live, as fast as credits allow lossless, or
+    ``paced`` externally by an EpochPacer) or OpenCV."""
+    out = {}
+    for name in cameras:
+        cam = cfg.camera(name)
+        if cam.backend == "replay":
+            from capture.replay import ReplaySource
+
+            src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast")
+        else:
+            from capture.opencv_source import OpenCVSource
+
+            device = int(cam.source) if cam.source.isdigit() else cam.source
+            src = OpenCVSource(device, name=name, fps=cfg.trigger.fps)
+        src.open()
+        out[name] = src
+    return out
+
+
+def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str | None = None) -> dict:
+    """One segmenter per camera: a plug-in factory ``f(camera) -> Segmenter``, else
+    :class:`~service.components.BackgroundSegmenter` with the session's background (replay) or learnt
+    from the first frames (live cameras: the studio must be empty at start-up)."""
+    if plugin:
+        factory = load_plugin(plugin)
+        return {c: factory(c) for c in cameras}
+    from service.components import BackgroundSegmenter, background_from_session
+
+    out = {}
+    for c in cameras:
+        model = background_from_session(_session(cfg), c) if cfg.camera(c).backend == "replay" else None
+        out[c] = BackgroundSegmenter(model=model)
+    return out
+
+
+def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
+    """The tracker (``tracker.tracking.Tracker`` via :class:`~service.components.TrackerFitter`) or a
+    plug-in factory ``f(cfg) -> Fitter``."""
+    if plugin:
+        return load_plugin(plugin)(cfg)
+    from service.components import TrackerFitter
+
+    session = _session(cfg)
+    if cfg.calibration is not None:
+        from capture.calibration import load_calibration
+
+        session = replace(session, calibration=tuple(load_calibration(cfg.calibration)))
+    return TrackerFitter.from_session(session, model=cfg.model)
