@@ -1,0 +1,89 @@
+"""``contourcap replay SESSION``: replay a session's cameras and print per-camera frame rates."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+
+HELP = "replay a recorded session (no hardware) and print per-camera frames, drops and fps"
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("session", help="session directory (with session.toml)")
+    parser.add_argument("--cameras", default=None, help="comma-separated camera names (default: all)")
+    parser.add_argument("--pacing", choices=("fast", "realtime"), default="fast",
+                        help="fast: decode throughput; realtime: at the session's fps")
+    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded)")
+    parser.add_argument("--background", action="store_true", help="replay the background media instead")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _range(text: str | None) -> range | None:
+    if not text:
+        return None
+    try:
+        start, stop = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ValueError(f"--frames: expected START:STOP, got {text!r}") from None
+    return range(start, stop)
+
+
+def _replay_camera(session, name, args, out: dict) -> None:
+    from capture.replay import ReplaySource
+    from capture.sources import EndOfStream, SourceError
+
+    n, first, last, t0 = 0, None, None, time.perf_counter()
+    try:
+        with ReplaySource(session, name, pacing=args.pacing, frames=_range(args.frames), background=args.background) as src:
+            while True:
+                try:
+                    frame = src.read()
+                except EndOfStream:
+                    break
+                n += 1
+                first = frame.frame_id if first is None else first
+                last = frame.frame_id
+        error = None
+    except SourceError as exc:
+        error = str(exc)
+    elapsed = time.perf_counter() - t0
+    out[name] = {
+        "frames": n, "first_frame_id": first, "last_frame_id": last,
+        "dropped": 0 if first is None else last - first + 1 - n,
+        "seconds": round(elapsed, 4), "fps": round(n / elapsed, 2) if elapsed > 0 else None, "error": error,
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from capture.session import SessionError, load_session
+
+    try:
+        session = load_session(args.session, require_calibration=False)
+        names = session.camera_names
+        if args.cameras:
+            names = tuple(n.strip() for n in args.cameras.split(",") if n.strip())
+            for n in names:
+                session.camera(n)
+        _range(args.frames)
+    except (SessionError, ValueError) as exc:
+        print(f"replay: error: {exc}", file=sys.stderr)
+        return 2
+    results: dict = {}
+    threads = [threading.Thread(target=_replay_camera, args=(session, n, args, results)) for n in names]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    report = {"session": str(session.root), "fps_nominal": session.fps, "pacing": args.pacing,
+              "cameras": {n: results[n] for n in names}}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        for n in names:
+            r = results[n]
+            tail = f"  ERROR: {r['error']}" if r["error"] else ""
+            print(f"{n}: {r['frames']} frames ({r['dropped']} dropped) in {r['seconds']:.3f} s = {r['fps']} fps{tail}")
+    return 1 if any(r["error"] for r in results.values()) else 0
