@@ -71,8 +71,8 @@ class BackgroundModel:
     ``update`` changes the mean in place (slow adaptation); everything else is fixed.
     """
 
-    def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "full",
-                 luma_relax: float = 2.0, shadow_range: tuple[float, float] = (0.45, 1.1),
+    def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "diag",
+                 luma_relax: float = 1.0, shadow_range: tuple[float, float] = (0.5, 1.1),
                  min_sigma: float = 2.5) -> None:
         mean_yuv = np.asarray(mean_yuv, dtype=np.float32)
         cov_yuv = np.asarray(cov_yuv, dtype=np.float32)

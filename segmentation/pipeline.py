@@ -22,7 +22,7 @@ class SegmentationParams:
     low, high : hysteresis pair on the squared Mahalanobis distance.
     person_area_px : expected person area in pixels (None: 2 % of the image).
     min_area_fraction : components below this fraction of ``person_area_px`` are dropped.
-    max_hole_fraction : holes below this fraction of ``person_area_px`` are filled.
+    max_hole_fraction : holes below this fraction of their component's area are filled.
     open_px, close_px : radii of the morphological opening / closing.
     canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
     max_distance_px, resolution_px, precise : chamfer images (see :func:`chamfer_images`).
@@ -32,7 +32,7 @@ class SegmentationParams:
     high: float = 64.0
     person_area_px: float | None = None
     min_area_fraction: float = 0.2
-    max_hole_fraction: float = 0.02
+    max_hole_fraction: float = 0.05
     open_px: int = 1
     close_px: int = 2
     canny_low: float = 30.0
@@ -43,10 +43,10 @@ class SegmentationParams:
     resolution_px: float = 0.25
     precise: bool = True
 
-    def areas(self, image_size: tuple[int, int]) -> tuple[float, float]:
-        """(min component area, max filled-hole area) in pixels for an image of ``(w, h)``."""
+    def min_area_px(self, image_size: tuple[int, int]) -> float:
+        """Smallest component kept, in pixels, for an image of ``(w, h)``."""
         person = self.person_area_px if self.person_area_px is not None else 0.02 * image_size[0] * image_size[1]
-        return self.min_area_fraction * person, self.max_hole_fraction * person
+        return self.min_area_fraction * person
 
 
 @dataclass(frozen=True)
@@ -74,10 +74,9 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w, h = model.size
     x0, y0, x1, y1 = box = check_roi(roi, (w, h))
-    min_area, max_hole = params.areas((w, h))
     d = model.distance(image_bgr, roi=box)
-    sil_roi = silhouette_from_distance(d, low=params.low, high=params.high, min_area_px=min_area,
-                                       max_hole_area_px=max_hole, open_px=params.open_px,
+    sil_roi = silhouette_from_distance(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
+                                       max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
                                        close_px=params.close_px)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,

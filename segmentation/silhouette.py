@@ -7,8 +7,8 @@ From the per-pixel background distance ``d`` (:meth:`BackgroundModel.distance`):
 3. connected components (outer contours): a component is kept when its area is at least
    ``min_area_px`` (a fraction of the expected person size) *and* it holds a strong pixel
    (the hysteresis: weak pixels survive only when connected to strong ones);
-4. holes smaller than ``max_hole_area_px`` are filled; bigger ones (the gap between an arm
-   and the body) are kept open.
+4. holes smaller than ``max_hole_fraction`` of their component's area are filled; bigger ones
+   (the gap between an arm and the body) are kept open, with any islands inside them.
 
 Everything works on the region of interest only; the output is a 0/255 uint8 mask.
 """
@@ -29,7 +29,7 @@ def _disk(radius_px: int) -> np.ndarray:
 
 
 def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: float = 64.0,
-                             min_area_px: float = 400.0, max_hole_area_px: float = 400.0,
+                             min_area_px: float = 400.0, max_hole_fraction: float = 0.05,
                              open_px: int = 1, close_px: int = 2, roi=None) -> np.ndarray:
     """Clean binary silhouette ``(h, w)`` uint8 (0 / 255) of a distance image ``(h, w)`` float32.
 
@@ -53,19 +53,19 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
         weak = cv2.morphologyEx(weak, cv2.MORPH_CLOSE, _disk(close_px))
     out = np.zeros((h, w), np.uint8)
     out[y0:y1, x0:x1] = _keep_components(weak, d, high=float(high), min_area_px=float(min_area_px),
-                                         max_hole_area_px=float(max_hole_area_px))
+                                         max_hole_fraction=float(max_hole_fraction))
     return out
 
 
 def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_px: float,
-                     max_hole_area_px: float) -> np.ndarray:
-    """Components of ``weak`` big enough and holding a pixel with ``d > high``; small holes filled."""
-    contours, hierarchy = cv2.findContours(weak, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+                     max_hole_fraction: float) -> np.ndarray:
+    """Components of ``weak`` big enough and holding a pixel with ``d > high``; holes smaller than
+    ``max_hole_fraction`` of their component's area filled; islands inside kept holes kept."""
+    contours, hierarchy = cv2.findContours(weak, cv2.RETR_TREE, cv2.CHAIN_APPROX_SIMPLE)
     out = np.zeros_like(weak)
     if not contours:
         return out
     hier = hierarchy[0]  # (n, 4): next, previous, first child, parent
-    outers = []
     for i in np.flatnonzero(hier[:, 3] < 0):  # loop over components (few after the opening), not pixels
         area = cv2.contourArea(contours[i])
         if area < min_area_px:
@@ -75,16 +75,26 @@ def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_p
         cv2.drawContours(comp, contours, int(i), 255, thickness=cv2.FILLED, offset=(-x, -y))
         if cv2.minMaxLoc(d[y:y + bh, x:x + bw], mask=comp)[1] <= high:
             continue  # hysteresis: no strong pixel in this component
-        outers.append((area, int(i)))
-    for _, i in sorted(outers, reverse=True):  # big first, so islands inside big holes are redrawn
-        cv2.drawContours(out, contours, i, 255, thickness=cv2.FILLED)
-        child = hier[i, 2]
-        while child >= 0:
-            if cv2.contourArea(contours[child]) >= max_hole_area_px:
-                cv2.drawContours(out, contours, int(child), 0, thickness=cv2.FILLED)
-                cv2.drawContours(out, contours, int(child), 255, thickness=1)  # the hole's rim is silhouette
-            child = hier[child, 0]
+        _draw_component(out, contours, hier, int(i), area * max_hole_fraction)
     return out
+
+
+def _draw_component(out, contours, hier, i: int, max_hole_area_px: float) -> None:
+    """Fill outer contour ``i``; re-open its big holes and redraw the islands inside them."""
+    stack = [i]
+    while stack:  # depth of nesting, not pixels
+        k = stack.pop()
+        cv2.drawContours(out, contours, k, 255, thickness=cv2.FILLED)
+        hole = hier[k, 2]
+        while hole >= 0:
+            if cv2.contourArea(contours[hole]) >= max_hole_area_px:
+                cv2.drawContours(out, contours, int(hole), 0, thickness=cv2.FILLED)
+                cv2.drawContours(out, contours, int(hole), 255, thickness=1)  # the hole's rim is silhouette
+                island = hier[hole, 2]
+                while island >= 0:
+                    stack.append(int(island))
+                    island = hier[island, 0]
+            hole = hier[hole, 0]
 
 
 def largest_components(mask: np.ndarray, *, count: int = 2) -> np.ndarray:

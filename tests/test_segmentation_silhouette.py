@@ -22,7 +22,7 @@ def _distance_image(h=200, w=240):
 
 def test_hysteresis_holes_and_small_components():
     d = _distance_image()
-    sil = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_area_px=400, open_px=1, close_px=0)
+    sil = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_fraction=0.05, open_px=1, close_px=0)
     assert sil.dtype == np.uint8 and set(np.unique(sil)) <= {0, 255}
     assert sil[80, 110] == 255  # small hole filled
     assert (sil[125:155, 85:125] == 0).all()  # big hole kept open
@@ -35,8 +35,8 @@ def test_hysteresis_holes_and_small_components():
 def test_roi_restricts_processing():
     d = _distance_image()
     roi = (50, 30, 170, 190)
-    sil = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_area_px=400, roi=roi)
-    full = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_area_px=400)
+    sil = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_fraction=0.05, roi=roi)
+    full = silhouette_from_distance(d, low=16, high=64, min_area_px=300, max_hole_fraction=0.05)
     inside = np.zeros(d.shape, bool)
     inside[30:190, 50:170] = True
     assert not sil[~inside].any()

@@ -1,0 +1,213 @@
+"""Segmentation benchmark: per camera frame, single thread (cv2.setNumThreads(1)).
+
+Prints median milliseconds per stage (background test, clean-up, edges, distance transforms,
+quantisation, total = ``segment_frame``) at 800x600 and 644x486, full image and with an ROI
+covering 30 % of the image; full vs diagonal covariance; precise vs 5x5 distance transform;
+OpenCV's MOG2 as a baseline (time and IoU on the synthetic set); and, when ../shared/data is
+there, the real uu_studio held-out background false-positive rate.
+
+    python bench/segmentation.py [--json] [--repeats N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from segmentation import (BackgroundModel, SegmentationParams, distance_to_mask,  # noqa: E402
+                          segment_frame, silhouette_edges, silhouette_from_distance)
+from segmentation.distance import content_box, quantise  # noqa: E402
+from segmentation.synthetic import synthetic_scene  # noqa: E402
+
+SHARED = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
+
+
+def _iou(a, b) -> float:
+    a, b = a > 0, b > 0
+    return float(np.count_nonzero(a & b)) / max(np.count_nonzero(a | b), 1)
+
+
+def _ms(fn, repeats: int) -> tuple[float, object]:
+    out = fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts) * 1e3), out
+
+
+def _roi_30(person: np.ndarray) -> tuple[int, int, int, int]:
+    """A box of ~30 % of the image around the person."""
+    h, w = person.shape
+    ys, xs = np.nonzero(person)
+    rh = min(h, int(ys.max() - ys.min()) + 40)
+    rw = min(w, int(0.30 * w * h / rh))
+    cx, cy = (xs.min() + xs.max()) // 2, (ys.min() + ys.max()) // 2
+    x0 = int(np.clip(cx - rw // 2, 0, w - rw))
+    y0 = int(np.clip(cy - rh // 2, 0, h - rh))
+    return x0, y0, x0 + rw, y0 + rh
+
+
+def stage_times(model, frame, params: SegmentationParams, roi, repeats: int) -> dict:
+    """Median ms of each stage, called exactly as segment_frame calls them."""
+    w, h = model.size
+    box = roi or (0, 0, w, h)
+    x0, y0, x1, y1 = box
+    t = {}
+    t["background_ms"], d = _ms(lambda: model.distance(frame, roi=box), repeats)
+    t["cleanup_ms"], sil = _ms(lambda: silhouette_from_distance(
+        d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
+        max_hole_fraction=params.max_hole_fraction,
+        open_px=params.open_px, close_px=params.close_px), repeats)
+    t["edges_ms"], edges = _ms(lambda: silhouette_edges(
+        frame[y0:y1, x0:x1], sil, low=params.canny_low, high=params.canny_high,
+        dilate_px=params.edge_dilate_px, blur_sigma=params.blur_sigma), repeats)
+    cx0, cy0, cx1, cy1 = content_box((sil, edges), margin_px=int(np.ceil(params.max_distance_px)) + 1,
+                                     region=(0, 0, x1 - x0, y1 - y0))
+    s_c, e_c = sil[cy0:cy1, cx0:cx1], edges[cy0:cy1, cx0:cx1]
+    t["distance_ms"], (ds, de) = _ms(lambda: (
+        distance_to_mask(s_c, max_distance_px=params.max_distance_px, precise=params.precise),
+        distance_to_mask(e_c, max_distance_px=params.max_distance_px, precise=params.precise)), repeats)
+    t["quantise_ms"], _ = _ms(lambda: (quantise(ds, resolution_px=params.resolution_px, dtype=np.uint8),
+                                       quantise(de, resolution_px=params.resolution_px, dtype=np.uint8)), repeats)
+    t["total_ms"], seg = _ms(lambda: segment_frame(model, frame, roi=roi, params=params), repeats)
+    t["chamfer_crop_wh"] = [int(cx1 - cx0), int(cy1 - cy0)]
+    return t
+
+
+def bench_size(size, repeats: int, seed: int) -> dict:
+    scene = synthetic_scene(np.random.default_rng(seed), size=size, n_background=50, n_frames=5)
+    out: dict = {"size": list(size)}
+    for cov in ("full", "diag"):
+        model = BackgroundModel.from_frames(scene.background_frames, covariance=cov)
+        ious = [_iou(segment_frame(model, f).silhouette, p) for f, p in zip(scene.frames, scene.person_masks)]
+        shadow_bg = [float(np.mean(segment_frame(model, f).silhouette[s] == 0))
+                     for f, s in zip(scene.frames, scene.shadow_masks)]
+        entry = {"iou_min": min(ious), "iou_mean": float(np.mean(ious)), "shadow_background_min": min(shadow_bg)}
+        for label, params in (("precise", SegmentationParams()), ("mask5", SegmentationParams(precise=False))):
+            if cov == "diag" and label == "mask5":
+                continue
+            for roi_label in ("full_image", "roi30"):
+                per_frame = []
+                for f, p in zip(scene.frames, scene.person_masks):
+                    roi = _roi_30(p) if roi_label == "roi30" else None
+                    per_frame.append(stage_times(model, f, params, roi, repeats))
+                entry[f"{label}_{roi_label}"] = {k: float(np.median([t[k] for t in per_frame]))
+                                                 for k in per_frame[0] if k.endswith("_ms")}
+                if roi_label == "roi30":
+                    r = _roi_30(scene.person_masks[0])
+                    entry[f"{label}_{roi_label}"]["roi_fraction"] = (r[2] - r[0]) * (r[3] - r[1]) / (size[0] * size[1])
+        out[f"ours_{cov}"] = entry
+    out["mog2"] = bench_mog2(scene, repeats)
+    return out
+
+
+def bench_mog2(scene, repeats: int) -> dict:
+    """MOG2 (shadow detection on) trained on the background frames, then frozen (learningRate 0)."""
+    mog = cv2.createBackgroundSubtractorMOG2(history=len(scene.background_frames), detectShadows=True)
+    for f in scene.background_frames:
+        mog.apply(f, learningRate=-1)
+    ious, ious_clean, ms = [], [], []
+    h, w = scene.frames.shape[1:3]
+    min_area = SegmentationParams().min_area_px((w, h))
+    for f, p in zip(scene.frames, scene.person_masks):
+        t, mask = _ms(lambda: mog.apply(f, learningRate=0), repeats)
+        ms.append(t)
+        fg = (mask == 255).astype(np.float32) * 100.0  # 127 = shadow -> background
+        ious.append(_iou(fg, p))
+        ious_clean.append(_iou(silhouette_from_distance(fg, min_area_px=min_area), p))
+    return {"apply_ms": float(np.median(ms)), "iou_mean_raw": float(np.mean(ious)),
+            "iou_mean_with_our_cleanup": float(np.mean(ious_clean))}
+
+
+def bench_real(repeats: int) -> dict:
+    """uu_studio: model from background frames 0-49, held-out frames 104-133 and video frame timing."""
+    root = SHARED / "uu_studio"
+    if not root.is_dir():
+        return {"skipped": f"{root} not found"}
+    out = {}
+    for cam in sorted(p.name for p in root.iterdir() if p.is_dir()):
+        cap = cv2.VideoCapture(str(root / cam / "background.avi"))
+        frames = []
+        while True:
+            ok, f = cap.read()
+            if not ok:
+                break
+            frames.append(f)
+        cap = cv2.VideoCapture(str(root / cam / "video.avi"))
+        ok, video0 = cap.read()
+        entry = {}
+        for cov in ("full", "diag"):
+            model = BackgroundModel.from_frames(frames[:50], covariance=cov)
+            held = frames[-30:]
+            d = np.stack([model.distance(f) for f in held])
+            entry[cov] = {
+                "heldout_pixels_d_gt_16": float(np.mean(d > 16)),
+                "heldout_pixels_d_gt_64": float(np.mean(d > 64)),
+                "heldout_foreground_fraction_max": max(segment_frame(model, f).foreground_fraction for f in held),
+                "video_foreground_fraction": segment_frame(model, video0).foreground_fraction,
+                "video_total_ms": _ms(lambda: segment_frame(model, video0), repeats)[0],
+                "video_background_ms": _ms(lambda: model.distance(video0), repeats)[0],
+            }
+        yuv = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2YUV) for f in frames[:50]]).astype(np.float64)
+        yuv = yuv - yuv.mean(0)
+        sd = yuv.std(0) + 1e-9
+        corr = [float(np.median(np.abs((yuv[..., a] * yuv[..., b]).mean(0) / (sd[..., a] * sd[..., b]))))
+                for a, b in ((0, 1), (0, 2), (1, 2))]
+        entry["median_abs_corr_yu_yv_uv"] = corr
+        out[cam] = entry
+    return out
+
+
+def bench_distance_accuracy() -> dict:
+    """Max error (px) of the 5x5 chamfer mask vs the precise L2 transform, on a person-sized mask."""
+    m = np.zeros((600, 800), np.uint8)
+    cv2.ellipse(m, (400, 300), (70, 200), 10, 0, 360, 255, -1)
+    precise = distance_to_mask(m, max_distance_px=48.0, precise=True)
+    mask5 = distance_to_mask(m, max_distance_px=48.0, precise=False)
+    return {"mask5_max_abs_err_px": float(np.abs(precise - mask5).max())}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--seed", type=int, default=7)
+    args = ap.parse_args(argv)
+    cv2.setNumThreads(1)
+    result = {
+        "threads": 1,
+        "opencv": cv2.__version__,
+        "sizes": [bench_size(s, args.repeats, args.seed) for s in ((800, 600), (644, 486))],
+        "real_uu_studio": bench_real(args.repeats),
+        "distance_accuracy": bench_distance_accuracy(),
+    }
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for s in result["sizes"]:
+            print(f"== {s['size'][0]}x{s['size'][1]}")
+            for key in ("ours_full", "ours_diag"):
+                e = s[key]
+                print(f"  {key}: IoU mean {e['iou_mean']:.4f} min {e['iou_min']:.4f}, "
+                      f"shadow kept background >= {e['shadow_background_min']:.3f}")
+                for k, v in e.items():
+                    if isinstance(v, dict):
+                        print(f"    {k}: " + ", ".join(f"{n}={x:.2f}" for n, x in v.items()))
+            print(f"  mog2: {s['mog2']}")
+        print("real uu_studio:", json.dumps(result["real_uu_studio"], indent=1))
+        print("distance accuracy:", result["distance_accuracy"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
