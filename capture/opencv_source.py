@@ -20,7 +20,10 @@ frames; ``buffer_size=1`` asks the driver to keep only the newest.
 Timestamps are software timestamps: the injected ``clock`` (nanoseconds)
 read right after each frame arrives.  Frame ids count frames from 0 per
 open, or come from ``frame_id_at(timestamp_ns)`` (e.g. a trigger box's
-``frame_id_at``); ids are kept strictly increasing either way.
+``frame_id_at``; pass a ``latency_ns`` there so frames fall mid-period).  A
+frame mapped to a pulse that already has a frame is skipped and counted in
+``skipped`` (a constant +1 offset would otherwise follow), so ids stay
+strictly increasing.
 
 A live device that stops delivering raises ``StreamLostError``; a video file
 that ends raises ``EndOfStream``.  No camera is attached on the CI machine:
@@ -88,6 +91,7 @@ class OpenCVSource(SourceBase):
         self._cap = None
         self._next_id = 0
         self._ended = False
+        self.skipped = 0
         self.is_file = isinstance(device, str) and not device.startswith("/dev/")
 
     def open(self) -> None:
@@ -136,17 +140,22 @@ class OpenCVSource(SourceBase):
             raise SourceError(f"camera {self.name!r}: read() on a source that is not open")
         if self._ended:
             raise EndOfStream(f"camera {self.name!r}: end of {self.device}")
-        ok, image = self._cap.read()
-        timestamp_ns = int(self._clock())
-        if not ok or image is None:
-            if self.is_file:
-                self._ended = True
-                raise EndOfStream(f"camera {self.name!r}: end of {self.device}")
-            raise StreamLostError(f"camera {self.name!r} ({self.device}): no frame from the device (unplugged or driver error)")
+        while True:
+            ok, image = self._cap.read()
+            timestamp_ns = int(self._clock())
+            if not ok or image is None:
+                if self.is_file:
+                    self._ended = True
+                    raise EndOfStream(f"camera {self.name!r}: end of {self.device}")
+                raise StreamLostError(f"camera {self.name!r} ({self.device}): no frame from the device (unplugged or driver error)")
+            fid = self._next_id
+            if self._frame_id_at is not None:
+                fid = int(self._frame_id_at(timestamp_ns))
+                if fid < self._next_id:  # its pulse already has a frame: timing ambiguous, skip it
+                    self.skipped += 1
+                    continue
+            break
         if image.ndim == 2:
             image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-        fid = self._next_id
-        if self._frame_id_at is not None:
-            fid = max(int(self._frame_id_at(timestamp_ns)), self._next_id)
         self._next_id = fid + 1
         return Frame(self.name, fid, timestamp_ns, image)
