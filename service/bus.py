@@ -150,16 +150,30 @@ def zenoh_config(s: ZenohSettings) -> zenoh.Config:
     return cfg
 
 
+def _open_retrying(s: ZenohSettings, clock: Callable[[], float]) -> zenoh.Session:
+    """``zenoh.open``; a client (which fails at once when no router answers) retries until the timeout."""
+    deadline = clock() + s.connect_timeout_s
+    while True:
+        try:
+            return zenoh.open(zenoh_config(s))
+        except Exception as exc:  # zenoh.ZError and config errors
+            if s.mode == "client" and s.connect and clock() < deadline:
+                time.sleep(0.1)
+                continue
+            hint = (f"no zenoh router reachable at {list(s.connect)} within {s.connect_timeout_s:g} s: check the "
+                    "address, that the router runs, TLS certificates and user/password"
+                    if s.connect and "connect" in str(exc).lower()
+                    else f"cannot open zenoh session (mode={s.mode}, listen={list(s.listen)})")
+            raise BusError(f"{hint} (zenoh: {str(exc).split(' at /')[0]})") from exc
+
+
 def open_session(s: ZenohSettings, *, clock: Callable[[], float] = time.monotonic) -> zenoh.Session:
     """Open a session; when ``connect`` endpoints are set, wait until a peer or router is reachable.
 
     Zenoh itself fails silently on a wrong address, certificate or password (it keeps retrying);
     this raises :class:`BusError` naming the endpoints instead.
     """
-    try:
-        session = zenoh.open(zenoh_config(s))
-    except Exception as exc:  # zenoh.ZError and config errors
-        raise BusError(f"cannot open zenoh session (mode={s.mode}, listen={list(s.listen)}): {exc}") from exc
+    session = _open_retrying(s, clock)
     if s.connect:
         deadline = clock() + s.connect_timeout_s
         while not (any(True for _ in session.info.peers_zid()) or any(True for _ in session.info.routers_zid())):

@@ -29,7 +29,11 @@
 
     [router]                          # optional: `contourcap run` on this host also runs the router
     host = "host-a"
-    listen = ["tcp/0.0.0.0:7447"]
+    listen = ["tls/0.0.0.0:7447"]
+    config_file = "zenoh/router-tls.json5"   # TLS, usrpwd and ACL (deploy/zenoh/)
+    tls_cert = "certs/router.pem"            # optional overrides of the file's paths
+    tls_key = "certs/router.key"
+    auth_dictionary = "secrets/zenoh-users.txt"
 
     [[camera]]
     name = "cam0"
@@ -87,7 +91,7 @@ class StudioConfig:
     set_timeout_ms: float
     window: int
     router_host: str | None
-    router_listen: tuple[str, ...]
+    router: ZenohSettings | None
     cameras: tuple[CameraConfig, ...]
 
     @property
@@ -212,8 +216,15 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     tr = r.get(data, "tracker", "", (dict,), {})
     r.unknown(tr, {"host", "set_timeout_ms", "window"}, "tracker")
     ro = r.get(data, "router", "", (dict,), None)
+    zen = _zenoh(r, r.get(data, "zenoh", "", (dict,), {}))
+    router = None
     if ro is not None:
-        r.unknown(ro, {"host", "listen"}, "router")
+        r.unknown(ro, {"host", "listen", "config_file", "tls_cert", "tls_key", "auth_dictionary"}, "router")
+        router = ZenohSettings(mode="router", listen=r.strings(ro, "listen", "router"),
+                               tls_root_ca=zen.tls_root_ca,
+                               tls_cert=r.path(ro, "tls_cert", "router"), tls_key=r.path(ro, "tls_key", "router"),
+                               auth_dictionary=r.path(ro, "auth_dictionary", "router"),
+                               config_file=r.path(ro, "config_file", "router"))
     window = r.get(tr, "window", "tracker", (int,), 8)
     timeout = float(r.get(tr, "set_timeout_ms", "tracker", (int, float), 80.0))
     quality = r.get(s, "jpeg_quality", "studio", (int,), 90)
@@ -225,10 +236,10 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
         delivery=r.get(s, "delivery", "studio", (str,), "live", choices=MODES),
         session=Path(session) if session else None,
         calibration=Path(c) if (c := r.path(s, "calibration", "studio")) else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
-        jpeg_quality=quality, zenoh=_zenoh(r, r.get(data, "zenoh", "", (dict,), {})), trigger=trigger,
+        jpeg_quality=quality, zenoh=zen, trigger=trigger,
         tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
         router_host=r.name(ro, "host", "router") if ro is not None else None,
-        router_listen=r.strings(ro, "listen", "router") if ro is not None else (),
+        router=router,
         cameras=tuple(cams))
 
 

@@ -25,6 +25,7 @@ def test_example_parses(tmp_path):
     assert [c.name for c in cfg.cameras_on("host-b")] == ["cam3", "cam4", "cam5"]
     assert cfg.zenoh.password == "s3cret" and cfg.zenoh.tls_root_ca == str(tmp_path / "certs" / "ca.pem")
     assert cfg.tracker_host == "host-b" and cfg.router_host == "host-a" and cfg.delivery == "live"
+    assert cfg.router.mode == "router" and cfg.router.config_file == str(tmp_path / "zenoh" / "router-tls.json5")
 
 
 @pytest.mark.parametrize("old, new, key", [
