@@ -31,6 +31,22 @@ def _replay(kind):
     return make, missing
 
 
+def _replay_segments():
+    from capture.recorder import Recorder
+
+    def make(tmp_path, rng, n):
+        images = make_images(rng, n)
+        with Recorder(tmp_path / "rec", name="seg", fps=25, cameras=["cam0"], codec="ffv1", segment_s=0.08) as rec:
+            for k, img in enumerate(images):
+                rec.write(Frame("cam0", 3 * k, 1000 * k, img))  # every third pulse stored
+        session = load_session(tmp_path / "rec", require_calibration=False)
+        assert len(session.camera("cam0").video_files) == -(-n // 2)  # 2-frame segments
+        return ReplaySource(session, "cam0"), [(3 * k, img) for k, img in enumerate(images)]
+
+    _, missing = _replay("video")
+    return make, missing
+
+
 def _opencv():
     from capture.opencv_source import OpenCVSource
 
@@ -50,6 +66,7 @@ def _opencv():
 BACKENDS = {
     "replay-video": lambda: _replay("video"),
     "replay-images": lambda: _replay("images"),
+    "replay-segments": _replay_segments,
     "opencv-file": _opencv,
 }
 
