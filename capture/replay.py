@@ -37,10 +37,30 @@ import numpy as np
 from capture.session import Session, image_frame_ids, image_path, read_timestamps
 from capture.sources import EndOfStream, Frame, OpenError, SourceBase, SourceError, SourceTimeout
 
-__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "PACINGS"]
+__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "PACINGS"]
 
 PACINGS = ("fast", "realtime", "step")
 _IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm"}
+
+
+def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | None:
+    """``"START:STOP"`` (STOP excluded; either may be empty) -> ``range``; ``None``/``""`` -> ``None``.
+
+    Raises ``ValueError`` naming ``option`` on anything else.
+    """
+    if not text:
+        return None
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        start = int(parts[0]) if parts[0].strip() else 0
+        stop = int(parts[1]) if parts[1].strip() else 2**62
+    except ValueError:
+        raise ValueError(f"{option}: expected START:STOP (frame ids, STOP excluded), got {text!r}") from None
+    if start < 0 or stop <= start:
+        raise ValueError(f"{option}: need 0 <= START < STOP, got {text!r}")
+    return range(start, stop)
 
 
 class _Reader:

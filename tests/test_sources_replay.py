@@ -7,7 +7,7 @@ import threading
 import numpy as np
 import pytest
 
-from capture.replay import ReplaySource, iter_frame_sets, read_frames
+from capture.replay import ReplaySource, iter_frame_sets, parse_frame_range, read_frames
 from capture.session import SessionError, load_session, write_session_toml
 from capture.sources import EndOfStream, OpenError, SourceTimeout
 from test_session_factory import make_images, make_session, write_video
@@ -173,3 +173,12 @@ def test_video_segments_read_back_to_back(tmp_path, rng):
     (tmp_path / "cam0" / "000004.avi").write_bytes(b"broken in the middle")
     with pytest.raises(OpenError, match="000004.avi"):
         list(read_frames(load_session(tmp_path, require_calibration=False), "cam0"))
+
+
+def test_parse_frame_range():
+    assert parse_frame_range(None) is None and parse_frame_range("") is None
+    assert parse_frame_range("3:9") == range(3, 9)
+    assert parse_frame_range(":4") == range(0, 4) and parse_frame_range("5:").start == 5
+    for bad in ("3", "a:b", "9:3", "-1:2", "1:2:3"):
+        with pytest.raises(ValueError, match="--frames"):
+            parse_frame_range(bad)

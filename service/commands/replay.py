@@ -16,28 +16,18 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", default=None, help="comma-separated camera names (default: all)")
     parser.add_argument("--pacing", choices=("fast", "realtime"), default="fast",
                         help="fast: decode throughput; realtime: at the session's fps")
-    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded)")
+    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded; either may be empty)")
     parser.add_argument("--background", action="store_true", help="replay the background media instead")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _range(text: str | None) -> range | None:
-    if not text:
-        return None
-    try:
-        start, stop = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise ValueError(f"--frames: expected START:STOP, got {text!r}") from None
-    return range(start, stop)
-
-
 def _replay_camera(session, name, args, out: dict) -> None:
-    from capture.replay import ReplaySource
+    from capture.replay import ReplaySource, parse_frame_range
     from capture.sources import EndOfStream, SourceError
 
     n, first, last, t0 = 0, None, None, time.perf_counter()
     try:
-        with ReplaySource(session, name, pacing=args.pacing, frames=_range(args.frames), background=args.background) as src:
+        with ReplaySource(session, name, pacing=args.pacing, frames=parse_frame_range(args.frames), background=args.background) as src:
             while True:
                 try:
                     frame = src.read()
@@ -58,6 +48,7 @@ def _replay_camera(session, name, args, out: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from capture.replay import parse_frame_range
     from capture.session import SessionError, load_session
 
     try:
@@ -67,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
             names = tuple(n.strip() for n in args.cameras.split(",") if n.strip())
             for n in names:
                 session.camera(n)
-        _range(args.frames)
+        parse_frame_range(args.frames)
     except (SessionError, ValueError) as exc:
         print(f"replay: error: {exc}", file=sys.stderr)
         return 2
