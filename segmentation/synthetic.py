@@ -68,13 +68,38 @@ def _person(w: int, h: int, cx: float, colours) -> np.ndarray:
     return lab
 
 
+def _shadow_like_fraction(colour, bg: np.ndarray) -> float:
+    """Fraction of background pixels of which ``colour`` (B, G, R) looks like a shadow / highlight:
+    ``colour ~ s * bg`` with ``s`` in [0.4, 1.1] within 30 levels (colour alone cannot tell them apart)."""
+    c = np.asarray(colour, np.float32)
+    b = bg.reshape(-1, 3)
+    s = (b @ c) / np.maximum(np.einsum("ij,ij->i", b, b), 1e-6)
+    resid = np.linalg.norm(c[None, :] - s[:, None] * b, axis=1)
+    return float(np.mean((s >= 0.4) & (s <= 1.1) & (resid < 30.0)))
+
+
+def _clothing_colour(rng, bg: np.ndarray, low: float, high: float, avoid: bool):
+    colour = tuple(rng.uniform(low, high, 3))
+    for _ in range(100):  # redraw colours that are a shadow of much of the background
+        if not avoid or _shadow_like_fraction(colour, bg[::8, ::8]) < 0.02:
+            break
+        colour = tuple(rng.uniform(low, high, 3))
+    return colour
+
+
 def synthetic_scene(rng: np.random.Generator, *, size: tuple[int, int] = (640, 480), n_background: int = 50,
-                    n_frames: int = 8, noise_sigma: float = 3.0) -> SyntheticScene:
-    """A seeded scene of ``size = (w, h)``; the person walks left to right over ``n_frames``."""
+                    n_frames: int = 8, noise_sigma: float = 3.0, avoid_shadow_like: bool = True) -> SyntheticScene:
+    """A seeded scene of ``size = (w, h)``; the person walks left to right over ``n_frames``.
+
+    ``avoid_shadow_like``: redraw clothing colours that equal a 40-110 % brightness copy of more
+    than 2 % of the background (there colour alone cannot separate a person from a shadow, so a
+    known-answer scene would not be solvable); ``False`` keeps any random colour (the benchmark
+    measures how often such scenes fail).
+    """
     w, h = size
     bg = _background(rng, w, h)
-    colours = {1: (120, 150, 205), 2: tuple(rng.uniform(20, 230, 3)), 3: tuple(rng.uniform(20, 120, 3)),
-               4: (30, 30, 35)}
+    colours = {1: (120, 150, 205), 2: _clothing_colour(rng, bg, 20, 230, avoid_shadow_like),
+               3: _clothing_colour(rng, bg, 20, 120, avoid_shadow_like), 4: (30, 30, 35)}
     noise = lambda img: np.clip(img + rng.normal(0, noise_sigma, img.shape), 0, 255).astype(np.uint8)  # noqa: E731
     bgs = np.stack([noise(bg) for _ in range(n_background)])
     frames, persons, shadows = [], [], []

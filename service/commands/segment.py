@@ -1,0 +1,255 @@
+"""``contourcap segment SESSION OUT``: segment every camera of a session for inspection.
+
+Per camera: a background model is learned from the camera's background media (up to
+``--background-frames`` frames) or, lacking those, from the temporal median of up to
+``--median-frames`` frames strided over the session; then every frame is segmented with
+:func:`segmentation.segment_frame` and, every ``--every`` frames, written as PNGs::
+
+    OUT/<camera>/silhouette_000123.png   0/255
+    OUT/<camera>/edges_000123.png        0/255
+    OUT/<camera>/dist_sil_000123.png     quantised distance to the silhouette, full image
+    OUT/<camera>/dist_edge_000123.png    quantised distance to the edges (value * resolution = px)
+    OUT/<camera>/background.npz          the model (with --save-models)
+    OUT/stats.json                       foreground fraction and ms per frame, per camera
+
+A progress bar with ETA goes to stderr; the statistics are printed at the end (``--json``: one object).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+HELP = "segment a session: silhouettes, edges and distance images (PNG) plus per-camera statistics"
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("session", help="session directory (with session.toml)")
+    parser.add_argument("out", help="output directory (created)")
+    parser.add_argument("--cameras", default=None, help="comma-separated camera names (default: all)")
+    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded)")
+    parser.add_argument("--every", type=int, default=1, help="write PNGs every N-th frame (0: none)")
+    parser.add_argument("--roi", default=None, help="process only x0,y0,x1,y1 (pixels) of every camera")
+    parser.add_argument("--background-frames", type=int, default=50,
+                        help="background media frames to learn from (default 50)")
+    parser.add_argument("--median-frames", type=int, default=25,
+                        help="session frames for a median background when there is no background media")
+    parser.add_argument("--covariance", choices=("diag", "full"), default="diag")
+    parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1, as a worker runs)")
+    parser.add_argument("--save-models", action="store_true", help="write OUT/<camera>/background.npz")
+    parser.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+
+def _range(text: str | None) -> range | None:
+    if not text:
+        return None
+    try:
+        start, stop = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ValueError(f"--frames: expected START:STOP, got {text!r}") from None
+    return range(start, stop)
+
+
+def _roi(text: str | None):
+    if not text:
+        return None
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--roi: expected x0,y0,x1,y1 (integers), got {text!r}") from None
+    if len(vals) != 4:
+        raise ValueError(f"--roi: expected x0,y0,x1,y1, got {text!r}")
+    return vals
+
+
+class Progress:
+    """A one-line progress bar with rate and ETA on a text stream; ``clock`` is injected."""
+
+    def __init__(self, total: int | None, *, stream=sys.stderr, clock=time.monotonic, enabled: bool = True,
+                 width: int = 30) -> None:
+        self.total, self.stream, self.clock, self.enabled, self.width = total, stream, clock, enabled, width
+        self.done = 0
+        self.start = clock()
+        self._last = -1.0
+
+    def advance(self, n: int = 1, *, label: str = "") -> None:
+        self.done += n
+        now = self.clock()
+        if not self.enabled or (now - self._last < 0.2 and self.done != self.total):
+            return
+        self._last = now
+        rate = self.done / max(now - self.start, 1e-9)
+        if self.total:
+            frac = min(self.done / self.total, 1.0)
+            bar = "#" * int(frac * self.width) + "." * (self.width - int(frac * self.width))
+            eta = max(self.total - self.done, 0) / rate if rate > 0 else float("inf")
+            eta_txt = time.strftime("%M:%S", time.gmtime(eta)) if np.isfinite(eta) else "--:--"
+            line = f"\r[{bar}] {self.done}/{self.total} frames {rate:5.1f} fps ETA {eta_txt} {label}"
+        else:
+            line = f"\r{self.done} frames {rate:5.1f} fps {label}"
+        self.stream.write(line.ljust(100)[:100])
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _frame_count(session, name: str, frames: range | None) -> int | None:
+    from capture.session import image_frame_ids
+
+    cam = session.camera(name)
+    if cam.images is not None:
+        ids = image_frame_ids(cam.images)
+        return int(sum(int(i) in frames for i in ids)) if frames is not None else int(ids.size)
+    total = 0
+    for path in cam.video_files:
+        cap = cv2.VideoCapture(str(path))
+        total += max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+        cap.release()
+    if frames is not None:
+        total = max(0, min(total, frames.stop) - max(frames.start, 0))
+    return total or None
+
+
+def learn_background(session, name: str, *, background_frames: int, median_frames: int,
+                     covariance: str, frames: range | None = None):
+    """``(BackgroundModel, how)`` for one camera: from background media, else a session median."""
+    from capture.replay import read_frames
+    from capture.session import SessionError
+    from segmentation import BackgroundModel, bgr_to_yuv
+
+    cam = session.camera(name)
+    if cam.background is not None:
+        images = []
+        for f in read_frames(session, name, background=True):
+            images.append(f.image)
+            if len(images) >= background_frames:
+                break
+        if len(images) == 1:  # a single background image: the variances are the model's floor
+            model = BackgroundModel(bgr_to_yuv(images[0]),
+                                    np.zeros(images[0].shape[:2] + (6,), np.float32), covariance=covariance)
+            return model, "background image"
+        if not images:
+            raise SessionError(f"{cam.background}: camera {name!r}: background media has no frames")
+        return BackgroundModel.from_frames(images, covariance=covariance), f"background media ({len(images)} frames)"
+    images, stride = [], 1
+    for i, f in enumerate(read_frames(session, name, frames=frames)):  # strided subset, bounded memory
+        if i % stride == 0:
+            images.append(f.image)
+        if len(images) >= 2 * median_frames:
+            images, stride = images[::2], stride * 2
+    if len(images) < 3:
+        raise SessionError(f"{session.root}: camera {name!r} has no background media and only "
+                           f"{len(images)} frame(s), too few for a median background")
+    pick = np.unique(np.linspace(0, len(images) - 1, min(median_frames, len(images))).round().astype(int))
+    return BackgroundModel.from_median([images[i] for i in pick]), f"median of {len(pick)} session frames"
+
+
+def _full_distance_png(chamfer, which: np.ndarray) -> np.ndarray:
+    """The quantised distance image pasted into the full image (truncation code outside the crop)."""
+    w, h = chamfer.image_size
+    full = np.full((h, w), chamfer.max_code, which.dtype)
+    x0, y0 = chamfer.offset_xy
+    full[y0:y0 + which.shape[0], x0:x0 + which.shape[1]] = which
+    return full
+
+
+def segment_session(session, out: Path, *, cameras=None, frames: range | None = None, every: int = 1,
+                    roi=None, background_frames: int = 50, median_frames: int = 25, covariance: str = "diag",
+                    save_models: bool = False, progress: Progress | None = None,
+                    clock=time.perf_counter) -> dict:
+    """Segment the cameras of ``session`` into ``out``; returns the statistics dict (also in stats.json)."""
+    from capture.replay import read_frames
+    from capture.session import SessionError
+    from segmentation import segment_frame
+
+    names = list(session.camera_names if cameras is None else cameras)
+    unknown = [n for n in names if n not in session.camera_names]
+    if unknown:
+        raise SessionError(f"{session.root}: no camera(s) {unknown} (have {list(session.camera_names)})")
+    out.mkdir(parents=True, exist_ok=True)
+    stats: dict = {"session": str(session.root), "cameras": {}}
+    for name in names:
+        cam_dir = out / name
+        cam_dir.mkdir(parents=True, exist_ok=True)
+        t0 = clock()
+        model, how = learn_background(session, name, background_frames=background_frames,
+                                      median_frames=median_frames, covariance=covariance, frames=frames)
+        learn_s = clock() - t0
+        if save_models:
+            model.save(cam_dir / "background.npz")
+        fractions, ms = [], []
+        chamfer = None
+        for k, frame in enumerate(read_frames(session, name, frames=frames)):
+            t = clock()
+            seg = segment_frame(model, frame.image, roi=roi)
+            ms.append((clock() - t) * 1e3)
+            fractions.append(seg.foreground_fraction)
+            chamfer = seg.chamfer
+            if every > 0 and k % every == 0:
+                fid = f"{frame.frame_id:06d}"
+                cv2.imwrite(str(cam_dir / f"silhouette_{fid}.png"), seg.silhouette)
+                cv2.imwrite(str(cam_dir / f"edges_{fid}.png"), seg.edges)
+                cv2.imwrite(str(cam_dir / f"dist_sil_{fid}.png"), _full_distance_png(chamfer, chamfer.silhouette_q))
+                cv2.imwrite(str(cam_dir / f"dist_edge_{fid}.png"), _full_distance_png(chamfer, chamfer.edges_q))
+            if progress is not None:
+                progress.advance(label=name)
+        if not ms:
+            raise SessionError(f"{session.root}: camera {name!r}: no frames to segment")
+        fr = np.array(fractions)
+        stats["cameras"][name] = {
+            "background": how, "learn_s": round(learn_s, 3), "frames": len(ms),
+            "foreground_fraction_mean": float(fr.mean()), "foreground_fraction_min": float(fr.min()),
+            "foreground_fraction_max": float(fr.max()),
+            "ms_per_frame_median": float(np.median(ms)), "ms_per_frame_mean": float(np.mean(ms)),
+            "distance_resolution_px": chamfer.resolution_px, "distance_max_px": chamfer.max_distance_px,
+        }
+    (out / "stats.json").write_text(json.dumps(stats, indent=1))
+    return stats
+
+
+def run(args) -> int:
+    from capture.session import SessionError, load_session
+    from capture.sources import SourceError
+
+    try:
+        frames, roi = _range(args.frames), _roi(args.roi)
+        if args.every < 0:
+            raise ValueError(f"--every: expected >= 0, got {args.every}")
+        cv2.setNumThreads(max(int(args.threads), 1))
+        session = load_session(args.session, require_calibration=False)
+        names = None if not args.cameras else [c.strip() for c in args.cameras.split(",") if c.strip()]
+        selected = names or list(session.camera_names)
+        counts = [_frame_count(session, n, frames) for n in selected if n in session.camera_names]
+        total = sum(counts) if counts and all(c is not None for c in counts) else None
+        progress = Progress(total, enabled=not args.no_progress)
+        try:
+            stats = segment_session(session, Path(args.out), cameras=names, frames=frames, every=args.every,
+                                    roi=roi, background_frames=args.background_frames,
+                                    median_frames=args.median_frames, covariance=args.covariance,
+                                    save_models=args.save_models, progress=progress)
+        finally:
+            progress.close()
+    except (SessionError, SourceError, ValueError, OSError) as exc:
+        print(f"contourcap segment: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(stats, indent=1))
+    else:
+        print(f"{'camera':12s} {'frames':>6s} {'fg mean %':>9s} {'fg min %':>8s} {'fg max %':>8s} "
+              f"{'ms/frame':>8s}  background")
+        for name, s in stats["cameras"].items():
+            print(f"{name:12s} {s['frames']:6d} {100 * s['foreground_fraction_mean']:9.2f} "
+                  f"{100 * s['foreground_fraction_min']:8.2f} {100 * s['foreground_fraction_max']:8.2f} "
+                  f"{s['ms_per_frame_median']:8.2f}  {s['background']}")
+        print(f"written to {args.out}")
+    return 0
