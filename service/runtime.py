@@ -121,3 +121,29 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
 
         session = replace(session, calibration=tuple(load_calibration(cfg.calibration)))
     return TrackerFitter.from_session(session, model=cfg.model)
+
+
+def add_connection_args(parser) -> None:
+    """``--config`` / ``--connect`` / ``--studio``: how a client (echo, view, ...) reaches a studio."""
+    parser.add_argument("--config", default=None, help="studio TOML (its [zenoh] settings and studio name)")
+    parser.add_argument("--connect", action="append", default=None,
+                        help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    parser.add_argument("--studio", default=None, help="studio name (default: the config's, else 'default')")
+    parser.add_argument("--timeout-s", type=float, default=5.0, help="how long to wait for a peer/router")
+
+
+def client_settings(args) -> tuple[ZenohSettings, str]:
+    """Zenoh settings and studio name of a client from :func:`add_connection_args` arguments."""
+    from service.config import load_config
+
+    studio = "default"
+    if args.config:
+        cfg = load_config(args.config)
+        studio = cfg.studio
+        settings = worker_settings(cfg, hub_endpoint(cfg) if cfg.zenoh.mode == "peer" else None)
+    else:
+        settings = ZenohSettings(connect=(DEFAULT_HUB,), listen=("tcp/127.0.0.1:0",))
+    if args.connect:
+        settings = replace(settings, connect=tuple(args.connect))
+    settings = replace(settings, connect_timeout_s=float(args.timeout_s))
+    return settings, args.studio or studio
