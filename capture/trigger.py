@@ -32,9 +32,11 @@ answered with a STALL (pyusb: ``USBError`` errno ``EPIPE``).
 
 Frame-id mapping: after ``read_counter()``, the last pulse has frame id
 ``count - 1``; ``sync_clock()`` measures host - device clock offset (TIME at
-the midpoint of the round trip), after which ``frame_id_at(host_ns)`` maps a
-host timestamp (e.g. a software-timestamped camera frame, minus its transfer
-latency ``latency_ns``) to the id of the latest pulse at or before it.
+the midpoint of the round trip).  ``refresh()`` does both and anchors
+``frame_id_at(host_ns)``, which maps a host timestamp (e.g. a
+software-timestamped camera frame, minus its transfer latency
+``latency_ns``) to the id of the latest pulse at or before it.  Refresh
+every few seconds in a live capture (clock drift).
 
 ``SoftwareTrigger`` has the same methods on an injected clock, for cameras
 without a trigger input: its "pulses" are a time grid that ``frame_id_at``
@@ -150,6 +152,7 @@ class Trigger(Protocol):
     def arm(self, n_pulses: int) -> None: ...
     def read_counter(self) -> PulseCounter: ...
     def frame_id_at(self, timestamp_ns: int, *, latency_ns: int = 0) -> int: ...
+    def refresh(self) -> tuple[int, int]: ...
     def close(self) -> None: ...
 
 
@@ -182,7 +185,7 @@ class TriggerBox:
         self.timeout_ms = int(timeout_ms)
         self.period_us: int | None = None
         self._offset_ns: int | None = None  # host_ns - device_us * 1000
-        self._last: PulseCounter | None = None
+        self._anchor: tuple[int, int] | None = None  # (frame id, host ns) of the last pulse at refresh()
         self.info = self._identify()
 
     @classmethod
@@ -300,8 +303,7 @@ class TriggerBox:
 
     def read_counter(self) -> PulseCounter:
         count, flags, last_us = self._in(Request.COUNTER, COUNTER_FMT, "COUNTER")
-        self._last = PulseCounter(count, bool(flags & FLAG_RUNNING), bool(flags & FLAG_ARMED), last_us)
-        return self._last
+        return PulseCounter(count, bool(flags & FLAG_RUNNING), bool(flags & FLAG_ARMED), last_us)
 
     def device_time_us(self) -> int:
         return self._in(Request.TIME, TIME_FMT, "TIME")[0]
@@ -314,16 +316,31 @@ class TriggerBox:
         self._offset_ns = (before + after) // 2 - device_us * 1000
         return self._offset_ns
 
+    def refresh(self) -> tuple[int, int]:
+        """``read_counter`` + ``sync_clock`` and re-anchor ``frame_id_at``; returns ``(frame_id, host_ns)`` of the last pulse.
+
+        Call every few seconds during a live capture (e.g. from a timer thread):
+        crystal drift (~50 ppm) moves the extrapolation ~1 ms per 20 s otherwise.
+        """
+        counter = self.read_counter()
+        offset = self.sync_clock()
+        if counter.count == 0:
+            raise TriggerError("trigger box: no pulse yet (set_rate() and start() first)")
+        self._anchor = (counter.last_frame_id, offset + counter.last_pulse_us * 1000)
+        return self._anchor
+
     def frame_id_at(self, timestamp_ns: int, *, latency_ns: int = 0) -> int:
         """Frame id of the latest pulse at or before host time ``timestamp_ns - latency_ns``.
 
-        Needs ``set_rate``, ``sync_clock`` and a ``read_counter`` with at least one pulse.
+        Extrapolates from the anchor of the last ``refresh()`` at the set rate
+        (safe to call from camera threads while another thread refreshes).
         """
-        if self.period_us is None or self._offset_ns is None or self._last is None or self._last.count == 0:
-            raise TriggerError("trigger box: frame_id_at needs set_rate(), sync_clock() and a read_counter() after a pulse")
-        last_host_ns = self._offset_ns + self._last.last_pulse_us * 1000
+        anchor = self._anchor
+        if self.period_us is None or anchor is None:
+            raise TriggerError("trigger box: frame_id_at needs set_rate(), start() and refresh()")
+        last_id, last_host_ns = anchor
         k = math.floor((timestamp_ns - latency_ns - last_host_ns) / (self.period_us * 1000))
-        return max(self._last.last_frame_id + k, 0)
+        return max(last_id + k, 0)
 
 
 class SoftwareTrigger:
@@ -373,6 +390,15 @@ class SoftwareTrigger:
         running = self._t0 is not None and self._stopped_count is None and (self._limit is None or count < self._limit)
         last_us = (self._t0 + (count - 1) * self.period_us * 1000) // 1000 if count else 0
         return PulseCounter(count, running, self._limit is not None and running, last_us)
+
+    def refresh(self) -> tuple[int, int]:
+        """Same shape as ``TriggerBox.refresh``: ``(frame_id, host_ns)`` of the last pulse (nothing to re-sync)."""
+        if self._t0 is None:
+            raise TriggerError("software trigger: refresh before start()")
+        c = self.read_counter()
+        if c.count == 0:
+            raise TriggerError("software trigger: no pulse yet")
+        return c.last_frame_id, self._t0 + c.last_frame_id * self.period_us * 1000
 
     def frame_id_at(self, timestamp_ns: int, *, latency_ns: int = 0) -> int:
         if self._t0 is None:

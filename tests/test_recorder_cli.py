@@ -10,6 +10,7 @@ from capture.replay import read_frames
 from capture.session import load_session
 from service.cli import main
 from test_session_factory import make_session
+from test_trigger import FakeBox, FakeTriggerBackend
 
 
 def write_config(path, session_dir, cams=("cam0", "cam1")):
@@ -49,3 +50,19 @@ def test_replay_cli_reports_fps(tmp_path, rng, capsys):
     assert report["cameras"]["cam0"]["fps"] > 0
     assert main(["replay", str(src.root), "--cameras", "cam9"]) == 2
     assert "cam9" in capsys.readouterr().err
+
+
+def test_record_trigger_resync_thread_stops_on_unplug():
+    import errno
+    import threading
+
+    from service.commands.record import _start_trigger
+
+    box = FakeBox()
+    stop, errors = threading.Event(), []
+    tb = _start_trigger(50.0, stop, 0.01, errors, backend=FakeTriggerBackend(box))
+    last_id, last_host_ns = tb.refresh()
+    assert tb.frame_id_at(last_host_ns) == last_id
+    box.unplugged_errno = errno.ENODEV
+    assert stop.wait(5.0)  # the resync thread saw the unplug and stopped the recording
+    assert errors and "disconnected" in errors[0]

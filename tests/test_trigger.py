@@ -11,6 +11,7 @@ import errno
 import struct
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import usb.backend
 import usb.backend.libusb0
@@ -190,6 +191,9 @@ def test_counter_and_frame_ids(rig):
     assert backend.log == [(0xC0, 0x06, 0, 0, 16)]
     assert (c.count, c.last_frame_id, c.running, c.armed, c.last_pulse_us) == (5, 4, True, False, t0_us + 80_000)
     assert tb.sync_clock() == HOST_OFFSET_NS
+    with pytest.raises(TriggerError, match="refresh"):
+        tb.frame_id_at(0)
+    assert tb.refresh() == (4, (t0_us + 80_000) * 1000 + HOST_OFFSET_NS)
     host_t0 = t0_us * 1000 + HOST_OFFSET_NS
     ms = 1_000_000
     assert tb.frame_id_at(host_t0 + 80 * ms) == 4
@@ -198,6 +202,30 @@ def test_counter_and_frame_ids(rig):
     assert tb.frame_id_at(host_t0 + 45 * ms) == 2
     assert tb.frame_id_at(host_t0 + 45 * ms, latency_ns=10 * ms) == 1
     assert tb.frame_id_at(host_t0 - 500 * ms) == 0
+
+
+def test_refresh_follows_clock_drift(rig):
+    """The device crystal runs 100 ppm fast: without re-anchoring, ids drift; refresh() fixes them."""
+    box, _, tb = rig
+    host_ns = [box.now_us * 1000 + HOST_OFFSET_NS]
+    tb._clock = lambda: host_ns[0]
+    tb.set_rate(50)
+    tb.start()
+    t0_host = host_ns[0]
+
+    def advance_host(seconds):
+        host_ns[0] += int(seconds * 1e9)
+        box.now_us = box.now_us + int(seconds * 1e6 * (1 + 100e-6))  # device clock fast by 100 ppm
+
+    advance_host(0.005)
+    tb.refresh()
+    advance_host(300.0)  # 5 minutes: the box is now 30 ms = 1.5 periods ahead of the nominal grid
+    probe = host_ns[0] - 5_000_000  # a frame stamped 5 ms ago (host time)
+    truth = int(np.floor((probe - t0_host) * (1 + 100e-6) / 20e6))  # the box's pulse at or before it
+    assert truth == 15001
+    assert tb.frame_id_at(probe) == truth - 1  # stale anchor: wrong id
+    tb.refresh()
+    assert tb.frame_id_at(probe) == truth
 
 
 def test_arm_stops_after_n_pulses(rig):
@@ -249,8 +277,9 @@ def test_protocol_errors():
     box.stall.add(0x03)
     with pytest.raises(TriggerProtocolError, match="refused START"):
         tb.start()
-    with pytest.raises(TriggerError, match="frame_id_at needs"):
-        tb.frame_id_at(0)
+    box.short_reply.clear()
+    with pytest.raises(TriggerError, match="no pulse yet"):
+        tb.refresh()
     tb.close()
     with pytest.raises(TriggerError, match="closed"):
         tb.start()
@@ -277,12 +306,15 @@ def test_software_trigger_same_interface():
     assert trig.read_counter().count == 0
     with pytest.raises(TriggerError, match="before start"):
         trig.frame_id_at(now[0])
+    with pytest.raises(TriggerError, match="before start"):
+        trig.refresh()
     trig.start()
     t0 = now[0]
     now[0] += 95_000_000
     c = trig.read_counter()
     assert (c.count, c.last_frame_id, c.running, c.last_pulse_us) == (5, 4, True, (t0 + 80_000_000) // 1000)
     assert trig.frame_id_at(t0 + 99_000_000) == 4 and trig.frame_id_at(t0 + 100_000_000) == 5
+    assert trig.refresh() == (4, t0 + 80_000_000)
     trig.stop()
     now[0] += 1_000_000_000
     assert trig.read_counter().count == 5 and not trig.read_counter().running

@@ -23,6 +23,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment-s", type=float, default=1.0, help="video segment length: most footage a crash can lose")
     parser.add_argument("--min-free-mb", type=float, default=64.0, help="stop with an error below this much free disk")
     parser.add_argument("--pacing", choices=("realtime", "fast"), default="realtime", help="replay cameras: pacing")
+    parser.add_argument("--resync-s", type=float, default=2.0, help="trigger box: re-anchor its clock this often")
 
 
 def _select(cfg, args):
@@ -40,18 +41,31 @@ def _select(cfg, args):
     return specs
 
 
-def _start_trigger(fps: float):
-    """Open, start and clock-sync the USB trigger box; returns it (its frame_id_at maps timestamps)."""
+def _start_trigger(fps: float, stop: threading.Event, resync_s: float, errors: list, *, backend=None):
+    """Open and start the USB trigger box; a daemon thread re-anchors its clock every ``resync_s``.
+
+    A trigger failure (e.g. unplugged) stops the recording and is appended to ``errors``.
+    """
     import time
 
-    from capture.trigger import TriggerBox
+    from capture.trigger import TriggerBox, TriggerError
 
-    box = TriggerBox.find()
+    box = TriggerBox.find(backend=backend)
     box.set_rate(fps)
     box.start()
     time.sleep(2.0 / fps)
-    box.read_counter()
-    box.sync_clock()
+    box.refresh()
+
+    def resync() -> None:
+        while not stop.wait(resync_s):
+            try:
+                box.refresh()
+            except TriggerError as exc:
+                errors.append(str(exc))
+                stop.set()
+                return
+
+    threading.Thread(target=resync, name="trigger-resync", daemon=True).start()
     return box
 
 
@@ -64,16 +78,17 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = load_capture_config(args.config)
         specs = _select(cfg, args)
+        stop = threading.Event()
+        trigger_errors: list[str] = []
         frame_id_at = None
         if cfg.trigger == "usb" and any(s.backend == "opencv" for s in specs):
-            box = _start_trigger(cfg.fps)
+            box = _start_trigger(cfg.fps, stop, args.resync_s, trigger_errors)
             frame_id_at = box.frame_id_at
         sources = [open_source(s, session=cfg.session, frame_id_at=frame_id_at, pacing=args.pacing) for s in specs]
         rec = Recorder(
             args.out, name=args.name or cfg.name, fps=cfg.fps, cameras=[s.name for s in specs], codec=args.codec,
             calibration=cfg.calibration, segment_s=args.segment_s, min_free_bytes=int(args.min_free_mb * 2**20),
         )
-        stop = threading.Event()
         timer = threading.Timer(args.duration_s, stop.set) if args.duration_s else None
         old = {}
         if threading.current_thread() is threading.main_thread():
@@ -93,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     finally:
         if box is not None:
+            stop.set()
             try:
                 box.stop()
             except TriggerError as exc:
@@ -105,5 +121,8 @@ def run(args: argparse.Namespace) -> int:
             failed = True
             line += f"; stopped: {cam.error}"
         print(line)
+    for err in trigger_errors:
+        failed = True
+        print(f"trigger box stopped the recording: {err}")
     print(f"session written to {summary.root}")
     return 1 if failed else 0
