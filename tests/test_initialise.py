@@ -1,0 +1,92 @@
+"""Automatic initialisation: synthetic T- and A-poses anywhere in the volume, facing anywhere."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from segmentation.distance import chamfer_images
+from tracker.hull import visual_hull
+from tracker.initialise import (InitResult, ScoreViews, estimate_height, initialise, model_top_m,
+                                pose_candidates)
+from tracker.kinematics import forward, joint_centre_array
+from tracker.model import load_model
+from tracker.render import internal_edges, render_label_images
+from tracker.scene import ring_cameras
+
+
+def _reference(model, rng, arms_deg):
+    """A T (0°) or A (-45°) pose at a random place and heading, standing on the floor."""
+    p = model.zero()
+    p[:2] = rng.uniform(-1.0, 1.0, 2)
+    p[5] = rng.uniform(-np.pi, np.pi)
+    p[[model.param_index("left_upper_arm.abduction"), model.param_index("right_upper_arm.abduction")]] = np.radians(arms_deg)
+    return p
+
+
+def _views(model, params, cams):
+    labels = render_label_images(model, forward(model, params), cams)
+    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cams, labels)}
+    chamfer = {c.name: chamfer_images(sils[c.name], internal_edges(lab), max_distance_px=48.0, resolution_px=0.25)
+               for c, lab in zip(cams, labels)}
+    return sils, chamfer
+
+
+def _rotation_error_deg(Ra, Rb):
+    return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+@pytest.mark.parametrize("arms_deg, seed, with_edges", [(0.0, 7, False), (-45.0, 8, True)])
+def test_initialise_recovers_reference_pose(arms_deg, seed, with_edges):
+    model = load_model("knossow40")
+    cams = ring_cameras(6)
+    truth = _reference(model, np.random.default_rng(seed), arms_deg)
+    sils, chamfer = _views(model, truth, cams)
+    res = initialise(model, cams, sils, chamfer if with_edges else None)
+    assert isinstance(res, InitResult)
+    assert np.array_equal(np.asarray(res), res.params) and model.within_limits(res.params)
+    P0, P1 = forward(model, truth), forward(model, res.params)
+    assert np.linalg.norm(P1.translation[0] - P0.translation[0]) < 0.05  # pelvis position
+    assert _rotation_error_deg(P0.rotation[0], P1.rotation[0]) < 10.0  # pelvis orientation
+    err = np.linalg.norm(joint_centre_array(model, P1) - joint_centre_array(model, P0), axis=1)
+    assert err.mean() < 0.030, dict(zip(model.joint_names, np.round(1e3 * err)))
+    assert res.score > 0.9 and res.rms_px < 4.0 and res.inside_fraction > 0.8
+    assert abs(res.height_m - model.height_m) < 0.06
+
+
+def test_candidates_stand_on_the_hull_and_include_the_span_axis():
+    model = load_model("knossow40")
+    cams = ring_cameras(6)
+    truth = _reference(model, np.random.default_rng(3), 0.0)
+    sils, _ = _views(model, truth, cams)
+    hull = visual_hull(cams, list(sils.values()), min_voxel_m=0.03)
+    cands = pose_candidates(model, hull, n_headings=8)
+    assert len(cands) == 2 * (8 + 2)
+    headings = np.array([psi for _, psi, _ in cands])
+    # a T-pose's arm span is the hull's major floor axis: one candidate heading is within 8° of the truth
+    d = np.abs((headings - truth[5] + np.pi) % (2 * np.pi) - np.pi)
+    assert d.min() < np.radians(8)
+    for _, _, p in cands:
+        pose = forward(model, p)
+        assert np.linalg.norm(pose.translation[0, :2] - truth[:2]) < 0.1
+    # scoring: the truth scores best, a 90° turn clearly worse
+    views = ScoreViews(model, cams, list(sils.values()))
+    turned = truth.copy()
+    turned[5] += np.pi / 2
+    assert views.score(truth) > 0.9 > views.score(turned) + 0.1
+    assert abs(estimate_height(hull, model) - model.height_m) < 0.06
+    assert model_top_m(model) == pytest.approx(model.height_m, abs=0.01)
+
+
+def test_bad_input_names_the_camera():
+    model = load_model("knossow40")
+    cams = ring_cameras(3)
+    empty = {c.name: np.zeros((c.height, c.width), np.uint8) for c in cams}
+    with pytest.raises(ValueError, match="cam2"):
+        initialise(model, cams, {k: v for k, v in empty.items() if k != "cam2"})
+    with pytest.raises(ValueError, match="cam0"):
+        initialise(model, cams, {**empty, "cam0": np.zeros((5, 5), np.uint8)})
+    with pytest.raises(ValueError, match="chamfer.*cam1"):
+        initialise(model, cams, empty, {"cam0": None, "cam2": None})
+    with pytest.raises(ValueError, match="empty visual hull"):
+        initialise(model, cams, empty)

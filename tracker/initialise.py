@@ -1,0 +1,296 @@
+"""Automatic initialisation from silhouettes: visual hull → pose search → staged LM refinement.
+
+The subject stands in a T-pose or an A-pose anywhere in the capture volume, facing any
+direction (BMVC'04 §4: a reference pose placed from the voxels' moments; IJCV'08 §6: root first,
+then the limbs).
+
+1. **Hull** (``tracker.hull``) at a coarse resolution: position (volume centroid, floor = the
+   hull's lowest point), height, and the principal axes of its horizontal spread.
+2. **Search** over heading × arm pose: ``n_headings`` evenly spaced headings plus the two
+   headings that put the arms' span along the hull's major floor axis, each with every arm
+   abduction of ``arm_abduction_deg`` (0° = T, -45° = A).  Candidates are scored by the mean
+   silhouette IoU of the rendered model (``tracker.render``) on down-scaled views, a symmetric
+   score: a limb missing from the model costs as much as a limb the images lack.
+3. **Refinement** of the best ``keep`` candidates with bounded robust LM on the chamfer cost
+   (``tracker.cost`` / ``tracker.solver``): root only, then the joints, then everything.  The
+   refined candidate with the best IoU wins (the chamfer cost is model→image only, so it cannot
+   tell a model whose limb hides inside the body from the right one).
+
+``hint`` (e.g. the last good pose) adds its joint angles as a further arm/leg hypothesis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from capture.camera import Camera
+from tracker.hull import VoxelHull, visual_hull
+from tracker.kinematics import forward
+from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
+from tracker.render import body_points, cone_points
+
+__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
+           "model_top_m", "estimate_height"]
+
+#: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
+ARM_POSES_DEG = (0.0, -45.0)
+
+
+@dataclass(frozen=True, eq=False)
+class InitResult:
+    """Outcome of an initialisation.
+
+    params : (n_params,) the pose; score : mean silhouette IoU of that pose (1 = perfect);
+    rms_px : RMS chamfer residual at ``params`` (NaN if no refinement ran);
+    inside_fraction : fraction of contour points on the silhouettes; heading_rad : the search
+    heading it came from; label : which hypothesis won (``"T"``, ``"A"``, ``"hint"``, ...);
+    height_m : the subject height the hull suggests; candidates : poses scored;
+    hull : the visual hull used.  ``np.asarray(result)`` gives ``params``.
+    """
+
+    params: np.ndarray
+    score: float
+    rms_px: float
+    inside_fraction: float
+    heading_rad: float
+    label: str
+    height_m: float
+    candidates: int
+    hull: VoxelHull | None = field(default=None, repr=False)
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self.params, dtype=dtype)
+
+
+# ----------------------------------------------------------------------------- scoring
+class ScoreViews:
+    """Silhouettes and cameras down-scaled by ``scale`` for fast overlap scoring.
+
+    Parameters
+    ----------
+    cameras : sequence of Camera; silhouettes : sequence of (h, w) masks (non-zero = body)
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray], *,
+                 scale: float = 0.5) -> None:
+        self.model = model
+        self.cameras, self.masks = [], []
+        for cam, sil in zip(cameras, silhouettes):
+            w, h = max(1, int(round(cam.width * scale))), max(1, int(round(cam.height * scale)))
+            sx, sy = w / cam.width, h / cam.height
+            # pixel centres at integers: u' = sx (u + 0.5) - 0.5
+            S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+            self.cameras.append(Camera(cam.name, S @ cam.matrix, cam.distortion, cam.rotation, cam.translation, (w, h)))
+            small = cv2.resize((np.asarray(sil) > 0).astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+            self.masks.append(small >= 0.5)
+        self._local = cone_points(model, n_theta=12, n_z=2)  # (n_parts, 24, 3) part frames
+        self.n_scored = 0
+
+    def render(self, params: np.ndarray) -> list[np.ndarray]:
+        """The model's silhouette in each scoring view, (h', w') bool: the union of the parts'
+        projected convex hulls (a coarse, fast stand-in for ``tracker.render``)."""
+        pose = forward(self.model, params)
+        pts = np.einsum("pij,pmj->pmi", pose.rotation, self._local) + pose.translation[:, None, :]
+        out = []
+        for cam in self.cameras:
+            img = np.zeros((cam.height, cam.width), np.uint8)
+            ok = cam.depth(pts) > 0.05
+            uv = np.nan_to_num(np.clip(cam.project(pts), -1e5, 1e5)) * 16.0  # 4 fractional bits
+            for p in range(len(pts)):
+                if ok[p].sum() >= 3:
+                    cv2.fillConvexPoly(img, cv2.convexHull(uv[p][ok[p]].astype(np.int32)), 1, shift=4)
+            out.append(img.astype(bool))
+        return out
+
+    def ious(self, params: np.ndarray) -> np.ndarray:
+        """Per-camera IoU of the model's silhouette with the observed one, shape (n_cams,)."""
+        self.n_scored += 1
+        out = []
+        for mask, r in zip(self.masks, self.render(params)):
+            union = np.count_nonzero(r | mask)
+            out.append(np.count_nonzero(r & mask) / union if union else 1.0)
+        return np.array(out)
+
+    def score(self, params: np.ndarray) -> float:
+        """Mean IoU over the cameras (higher is better)."""
+        return float(self.ious(params).mean())
+
+
+def chamfer_from_silhouette(silhouette: np.ndarray, *, max_distance_px: float = 48.0):
+    """``ChamferImages`` of a bare silhouette (its outline doubles as the edge map)."""
+    from segmentation.distance import chamfer_images
+    from segmentation.edges import silhouette_boundary
+
+    sil = (np.asarray(silhouette) > 0).astype(np.uint8) * 255
+    return chamfer_images(sil, silhouette_boundary(sil), max_distance_px=max_distance_px, resolution_px=0.25)
+
+
+# ----------------------------------------------------------------------------- hypotheses
+def model_top_m(model: BodyModel, params: np.ndarray | None = None) -> float:
+    """Highest point of the model's surface at ``params`` (default the reference pose), metres."""
+    pose = forward(model, model.zero() if params is None else params)
+    return float(body_points(model, pose, n_theta=12, n_z=2)[..., 2].max())
+
+
+def estimate_height(hull: VoxelHull, model: BodyModel) -> float:
+    """Subject height from an upright hull: ``model.height_m`` × hull height / the model's reference height."""
+    return float(model.height_m * hull.height() / model_top_m(model))
+
+
+def _index(model: BodyModel, names: Sequence[str]) -> np.ndarray:
+    return np.array([model.param_names.index(n) for n in names if n in model.param_names], dtype=int)
+
+
+def pose_candidates(model: BodyModel, hull: VoxelHull, *, n_headings: int = 12,
+                    arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, hint: np.ndarray | None = None):
+    """Start poses ``[(label, heading_rad, params (n_params,)), ...]`` placed on the hull."""
+    centroid = hull.centroid()
+    floor = hull.extent()[0, 2]
+    root_t = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    root_r = np.flatnonzero(model.param_kind == ROOT_ROTATION)
+    rest = body_points(model, forward(model, model.zero()), n_theta=12, n_z=2)
+    sole = float(rest[..., 2].min())  # the model's lowest point at the reference pose (≈ 0)
+    _, axes = hull.floor_axes()
+    span = np.arctan2(axes[1, 0], axes[0, 0])  # major floor axis: the arms in a T-pose (model +y)
+    headings = list(2 * np.pi * np.arange(n_headings) / max(n_headings, 1))
+    headings += [span - np.pi / 2, span + np.pi / 2]
+    abd = _index(model, ["left_upper_arm.abduction", "right_upper_arm.abduction"])
+    arms = [(("T" if a == 0 else "A" if a == -45 else f"arms{a:+.0f}"), np.radians(a)) for a in arm_abduction_deg]
+    shapes = []
+    for label, a in arms:
+        p = model.zero()
+        p[abd] = a
+        shapes.append((label, p))
+    if hint is not None:
+        h = model.clamp(np.asarray(hint, dtype=float))
+        p = model.zero()
+        joints = model.param_kind == JOINT_ROTATION
+        p[joints] = h[joints]
+        shapes.append(("hint", p))
+    out = []
+    for label, shape in shapes:
+        for psi in headings:
+            p = shape.copy()
+            p[root_t] = [centroid[0], centroid[1], floor - sole]
+            p[root_r] = [0.0, 0.0, (psi + np.pi) % (2 * np.pi) - np.pi]
+            out.append((label, float(p[root_r][2]), p))
+    return out
+
+
+# ----------------------------------------------------------------------------- refinement
+def _subset_fun(fun, x_full: np.ndarray, idx: np.ndarray):
+    """Restrict ``fun(x, jacobian) -> (r, J)`` to the parameters ``idx``."""
+
+    def f(xs, jacobian):
+        x = x_full.copy()
+        x[idx] = xs
+        r, J = fun(x, jacobian)
+        return r, (None if J is None else J[:, idx])
+
+    return f
+
+
+def _stages(model: BodyModel) -> list[np.ndarray]:
+    root = np.flatnonzero(model.param_kind != JOINT_ROTATION)
+    joints = np.flatnonzero(model.param_kind == JOINT_ROTATION)
+    return [root, joints, np.arange(model.n_params)]
+
+
+def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, params: np.ndarray, *,
+           stages: Sequence[np.ndarray] | None = None, max_iterations: int = 15, n_samples: int = 8,
+           f_scale: float = 5.0, truncate_px: float = 30.0, prior_rad: float = 500.0):
+    """Staged bounded LM on the chamfer cost from ``params``; default stages: root, joints, all.
+
+    ``prior_rad`` (px² per rad²) holds the joint angles weakly towards ``params``: a straight
+    T-pose arm cannot tell clavicle from shoulder rotation, and the hypothesis is the better guess.
+
+    Returns ``(params (n_params,), CostTerms at params)``.
+    """
+    from tracker.cost import ChamferCost
+    from tracker.solver import levenberg_marquardt
+
+    cost = ChamferCost(model, cameras, chamfer, n_samples=n_samples, truncate_px=truncate_px)
+    fun = cost.residual_fn(compact=True)
+    x = model.clamp(np.asarray(params, dtype=float))
+    x0 = x.copy()
+    weight = np.where(model.param_kind == JOINT_ROTATION, float(prior_rad), 0.0)
+    for idx in _stages(model) if stages is None else stages:
+        idx = np.asarray(idx, dtype=int)
+        res = levenberg_marquardt(_subset_fun(fun, x, idx), x[idx], lower=model.lower[idx], upper=model.upper[idx],
+                                  prior=x0[idx], prior_weight=weight[idx], loss="huber", f_scale=f_scale, max_iterations=max_iterations, ftol=1e-3)
+        x = x.copy()
+        x[idx] = res.params
+    return x, cost.evaluate(x)
+
+
+# ----------------------------------------------------------------------------- entry point
+def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping, chamfer: Mapping | None):
+    """Validate the views: ``(cameras list, silhouettes list, chamfer list)`` in camera order;
+    chamfer images are built from the silhouettes where ``chamfer`` is None."""
+    cameras = list(cameras)
+    if not cameras:
+        raise ValueError("cameras: need at least one camera")
+    if not isinstance(silhouettes, Mapping):
+        raise TypeError("silhouettes: expected a dict camera name -> (h, w) mask")
+    sils = []
+    for cam in cameras:
+        if cam.name not in silhouettes:
+            raise ValueError(f"silhouettes: no mask for camera {cam.name!r}")
+        s = np.asarray(silhouettes[cam.name])
+        if s.shape != (cam.height, cam.width):
+            raise ValueError(f"silhouettes[{cam.name!r}]: shape {s.shape} != (h, w) = {(cam.height, cam.width)}")
+        sils.append(s)
+    if chamfer is None:
+        chs = [chamfer_from_silhouette(s) for s in sils]
+    else:
+        missing = [c.name for c in cameras if c.name not in chamfer]
+        if missing:
+            raise ValueError(f"chamfer: no chamfer images for camera(s) {missing}")
+        chs = [chamfer[c.name] for c in cameras]
+    return cameras, sils, chs
+
+
+def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+               chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
+               arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
+               score_scale: float = 0.5, max_iterations: int = 15) -> InitResult:
+    """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
+
+    Parameters
+    ----------
+    model : BodyModel (sized; see ``estimate_height`` / ``InitResult.height_m`` to size it)
+    cameras : sequence of Camera
+    silhouettes : dict camera name -> (h, w) mask, non-zero = body
+    chamfer : dict camera name -> ``ChamferImages`` (or any object with ``sample``); default:
+        built from the silhouettes (outline as edges)
+    hint : (n_params,) optional pose whose joint angles are tried as a further hypothesis
+    n_headings : evenly spaced headings searched (plus the two from the hull's floor axes)
+    arm_abduction_deg : arm poses searched (0 = T, -45 = A)
+    keep : candidates refined with LM
+    min_voxel_m : hull resolution
+    score_scale : image scale of the IoU scoring views
+    """
+    cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
+    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m)
+    if hull.empty:
+        raise ValueError("initialise: the silhouettes share no volume (empty visual hull)")
+    views = ScoreViews(model, cameras, sils, scale=score_scale)
+    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg,
+                            hint=None if hint is None else np.asarray(hint, dtype=float))
+    scores = np.array([views.score(p) for _, _, p in cands])
+    order = np.argsort(-scores, kind="stable")
+    best = None
+    for i in order[: max(1, int(keep))]:
+        label, psi, p0 = cands[i]
+        p, terms = refine(model, cameras, chs, p0, max_iterations=max_iterations)
+        s = views.score(p)
+        if best is None or s > best[0]:
+            best = (s, p, terms, label, psi)
+    s, p, terms, label, psi = best
+    return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
+                      heading_rad=psi, label=label, height_m=estimate_height(hull, model),
+                      candidates=views.n_scored, hull=hull)
