@@ -226,3 +226,23 @@ def test_capture_config(tmp_path, rng):
     cfg_path.write_text('[studio]\nname = "x"\n[[camera]]\nname = "c"\nbackend = "replay"\n')
     with pytest.raises(RecorderError, match="studio.session"):
         load_capture_config(cfg_path)
+
+
+def test_real_footage_round_trip_png(shared_data, tmp_path):
+    video = shared_data / "uu_studio" / "cam2" / "video.avi"
+    if not video.is_file():
+        pytest.skip(f"{video} absent")
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "session.toml").write_text(
+        f'[session]\nname = "uu"\nfps = 50.0\n\n[[camera]]\nname = "cam2"\nvideo = "{video}"\n'
+    )
+    src = load_session(tmp_path / "src", require_calibration=False)
+    rec = Recorder(tmp_path / "out", name="uu", fps=50.0, cameras=["cam2"], codec="png")
+    summary = record([ReplaySource(src, "cam2", frames=range(10, 14))], rec)
+    assert summary.cameras[0].frames == 4 and summary.cameras[0].first_frame_id == 10
+    a = list(read_frames(src, "cam2", frames=range(10, 14)))
+    b = list(read_frames(load_session(tmp_path / "out", require_calibration=False), "cam2"))
+    assert [(f.frame_id, f.timestamp_ns) for f in a] == [(f.frame_id, f.timestamp_ns) for f in b] == [
+        (k, k * 20_000_000) for k in range(10, 14)
+    ]
+    assert all(np.array_equal(x.image, y.image) for x, y in zip(a, b))
