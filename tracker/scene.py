@@ -22,7 +22,7 @@ import numpy as np
 
 from capture.camera import Camera
 
-__all__ = ["ring_cameras", "RoomTexture", "make_room_texture", "render_background", "pixel_rays"]
+__all__ = ["ring_cameras", "fit_ring_cameras", "RoomTexture", "make_room_texture", "render_background", "pixel_rays"]
 
 
 def ring_cameras(
@@ -57,6 +57,59 @@ def ring_cameras(
         az = np.radians(start_deg + 360.0 * i / n)
         eye = np.array([target[0] + radius_m * np.cos(az), target[1] + radius_m * np.sin(az), height_m])
         cams.append(Camera.look_at(f"cam{i}", eye, target, size=size, fov_deg=fov_deg, distortion=distortion))
+    return cams
+
+
+def fit_ring_cameras(
+    points: np.ndarray,
+    n: int,
+    *,
+    size: tuple[int, int] = (800, 600),
+    radius_m: float = 4.0,
+    height_m: float = 1.5,
+    clearance_m: float = 2.0,
+    margin: float = 0.05,
+    fov_range_deg: tuple[float, float] = (40.0, 110.0),
+) -> list[Camera]:
+    """A ring (``ring_cameras``) that keeps every given point in every image.
+
+    Parameters
+    ----------
+    points : ndarray, shape (..., 3)
+        World points that must be seen (e.g. the body's surface over a clip).
+    radius_m : float
+        Minimum ring radius; it grows to keep ``clearance_m`` between each
+        camera and the farthest horizontal excursion of the points.
+    margin : float
+        Fraction of the image width/height left free on each side.
+
+    The target is the centre of the points' bounding box; the horizontal
+    field of view is the smallest (1° steps in ``fov_range_deg``) that fits;
+    the widest is returned if none does.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if pts.size == 0 or not np.all(np.isfinite(pts)):
+        raise ValueError("fit_ring_cameras: points must be a non-empty finite (..., 3) array")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])])
+    reach = np.hypot(pts[:, 0] - target[0], pts[:, 1] - target[1]).max()
+    radius = max(radius_m, reach + clearance_m)
+    w, h = size
+    cams = None
+    for fov in np.arange(fov_range_deg[0], fov_range_deg[1] + 0.5, 1.0):
+        cams = ring_cameras(n, size=size, radius_m=radius, height_m=height_m, target=target, fov_deg=float(fov))
+        ok = True
+        for cam in cams:
+            uv = cam.project(pts)
+            if not (
+                np.all(cam.depth(pts) > 0.1)
+                and np.all((uv[:, 0] >= margin * w) & (uv[:, 0] <= (1 - margin) * w))
+                and np.all((uv[:, 1] >= margin * h) & (uv[:, 1] <= (1 - margin) * h))
+            ):
+                ok = False
+                break
+        if ok:
+            break
     return cams
 
 
@@ -138,11 +191,12 @@ def pixel_rays(camera: Camera) -> np.ndarray:
     return d.reshape(h, w, 3)
 
 
-def render_background(camera: Camera, texture: RoomTexture) -> np.ndarray:
+def render_background(camera: Camera, texture: RoomTexture, *, with_floor_mask: bool = False):
     """The empty room seen by ``camera``, BGR uint8, shape (h, w, 3).
 
     Every pixel's ray hits the floor (z = 0) or the cylindrical wall; rays
-    that hit neither (above the wall) see a plain ceiling grey.
+    that hit neither (above the wall) see a plain ceiling grey.  With
+    ``with_floor_mask`` also returns a (h, w) bool mask of floor pixels.
     """
     rays = pixel_rays(camera)
     c = camera.center
@@ -174,6 +228,8 @@ def render_background(camera: Camera, texture: RoomTexture) -> np.ndarray:
     colour = _lookup(texture.wall, wx, wy)
     colour[~below] = 170
     out[wall] = colour
+    if with_floor_mask:
+        return out.reshape(h, w, 3), hit_floor.reshape(h, w)
     return out.reshape(h, w, 3)
 
 
