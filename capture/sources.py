@@ -4,7 +4,8 @@ A source is a context manager; ``read()`` returns the next ``Frame`` or
 raises one of the errors below.  Backends: ``capture.replay.ReplaySource``
 (session files), ``capture.opencv_source.OpenCVSource`` (UVC / V4L2 through
 ``cv2.VideoCapture``).  ``tests/test_sources_contract.py`` runs one contract
-suite against all of them.
+suite against all of them.  ``SourceSpec`` / ``parse_source_specs`` read a
+studio config's ``[[camera]]`` tables and ``open_source`` builds the backend.
 
 Errors (after pupil's ``InitialisationError`` / ``StreamError`` /
 ``EndofVideoError``)::
