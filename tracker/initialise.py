@@ -16,7 +16,7 @@ then the limbs).
    refined candidate with the best IoU wins (the chamfer cost is model→image only, so it cannot
    tell a model whose limb hides inside the body from the right one).
 
-``hint`` (e.g. the last good pose) adds its joint angles as a further arm/leg hypothesis.
+With a ``hint`` (a previous pose) the any-pose search of ``tracker.recovery.recover`` runs instead.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from tracker.kinematics import forward
 from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 from tracker.render import body_points, cone_points
 
-__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
+__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "refine_best", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
            "model_top_m", "estimate_height"]
 
 #: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
@@ -227,6 +227,28 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
     return x, cost.evaluate(x)
 
 
+def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, views: ScoreViews, hull: VoxelHull,
+                candidates: Sequence, *, keep: int = 3, max_iterations: int = 15, prepare=None,
+                prior_rad: float = 500.0) -> InitResult:
+    """Score ``candidates`` ``[(label, heading, params)]`` by IoU, refine the best ``keep`` with
+    ``refine`` (after ``prepare(params, score) -> (params, score)`` if given) and return the
+    refined one with the best IoU."""
+    scores = np.array([views.score(p) for _, _, p in candidates])
+    best = None
+    for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
+        label, psi, p0 = candidates[i]
+        if prepare is not None:
+            p0, _ = prepare(p0, scores[i])
+        p, terms = refine(model, cameras, chamfer, p0, max_iterations=max_iterations, prior_rad=prior_rad)
+        s = views.score(p)
+        if best is None or s > best[0]:
+            best = (s, p, terms, label, psi)
+    s, p, terms, label, psi = best
+    return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
+                      heading_rad=psi, label=label, height_m=estimate_height(hull, model),
+                      candidates=views.n_scored, hull=hull)
+
+
 # ----------------------------------------------------------------------------- entry point
 def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping, chamfer: Mapping | None):
     """Validate the views: ``(cameras list, silhouettes list, chamfer list)`` in camera order;
@@ -267,30 +289,24 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
     silhouettes : dict camera name -> (h, w) mask, non-zero = body
     chamfer : dict camera name -> ``ChamferImages`` (or any object with ``sample``); default:
         built from the silhouettes (outline as edges)
-    hint : (n_params,) optional pose whose joint angles are tried as a further hypothesis
+    hint : (n_params,) optional previous pose (e.g. the last good one): the search is then
+        ``tracker.recovery.recover`` (the hint moved onto the hull at every heading, its joint
+        angles, limb search) together with the T/A hypotheses
     n_headings : evenly spaced headings searched (plus the two from the hull's floor axes)
     arm_abduction_deg : arm poses searched (0 = T, -45 = A)
     keep : candidates refined with LM
     min_voxel_m : hull resolution
     score_scale : image scale of the IoU scoring views
     """
+    if hint is not None:  # a previous pose: the any-pose search of tracker.recovery
+        from tracker.recovery import recover
+
+        return recover(model, cameras, silhouettes, chamfer, hint, n_headings=n_headings, keep=keep,
+                       min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations)
     cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
     hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m)
     if hull.empty:
         raise ValueError("initialise: the silhouettes share no volume (empty visual hull)")
     views = ScoreViews(model, cameras, sils, scale=score_scale)
-    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg,
-                            hint=None if hint is None else np.asarray(hint, dtype=float))
-    scores = np.array([views.score(p) for _, _, p in cands])
-    order = np.argsort(-scores, kind="stable")
-    best = None
-    for i in order[: max(1, int(keep))]:
-        label, psi, p0 = cands[i]
-        p, terms = refine(model, cameras, chs, p0, max_iterations=max_iterations)
-        s = views.score(p)
-        if best is None or s > best[0]:
-            best = (s, p, terms, label, psi)
-    s, p, terms, label, psi = best
-    return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
-                      heading_rad=psi, label=label, height_m=estimate_height(hull, model),
-                      candidates=views.n_scored, hull=hull)
+    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg)
+    return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations)

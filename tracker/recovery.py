@@ -1,0 +1,207 @@
+"""Loss detection and recovery: flag frames the fit lost, re-initialise from the visual hull.
+
+**Detection** (``LossMonitor``): a frame is *bad* when its RMS chamfer residual exceeds
+``max_rms_px`` or the fraction of predicted contour points on the silhouettes falls below
+``min_inside_fraction`` (a drifted model sticks out of the silhouettes).  ``patience``
+consecutive bad frames make the track *lost*; one good frame makes it ``ok`` again.
+
+**Recovery** (``recover``): the subject may be in any pose, so instead of the T/A reference
+poses of ``tracker.initialise`` the search starts from the last good pose:
+
+1. the last good pose is moved onto the hull (its volume centroid onto the hull's, horizontally)
+   and turned about the vertical through it to ``n_headings`` headings; the best by silhouette
+   IoU is kept together with the reference-pose hypotheses of ``pose_candidates``;
+2. a greedy limb search: for each chain (arms, legs, trunk) a few alternative angle sets (the
+   last good ones, the reference pose, the mirror of the other side, half-way) are scored by
+   IoU with the rest fixed;
+3. the best ``keep`` hypotheses are refined by the staged LM of ``tracker.initialise.refine``
+   and the best IoU wins.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera, matrix_to_rodrigues
+from tracker.hull import visual_hull
+from tracker.initialise import InitResult, ScoreViews, pose_candidates, prepare_inputs, refine_best
+from tracker.kinematics import forward, so3_exp
+from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
+from tracker.render import body_points
+
+__all__ = ["LossMonitor", "LossState", "recover", "limb_chains", "turn_about_vertical"]
+
+OK, SUSPECT, LOST = "ok", "suspect", "lost"
+
+
+@dataclass(frozen=True)
+class LossState:
+    """What the monitor concluded for a frame.
+
+    state : ``"ok"``, ``"suspect"`` (bad, fewer than ``patience`` in a row) or ``"lost"``;
+    bad_frames : consecutive bad frames so far; reason : why the frame is bad ("" when good).
+    """
+
+    state: str
+    bad_frames: int
+    reason: str = ""
+
+    @property
+    def lost(self) -> bool:
+        return self.state == LOST
+
+
+def _quality(quality, name: str) -> float:
+    """``rms_px`` / ``inside_fraction`` from a pose record (mapping), a ``CostTerms`` or any object."""
+    if isinstance(quality, Mapping):
+        v = quality.get(name)
+    else:
+        v = getattr(quality, name, None)
+        v = v() if callable(v) else v
+    return float("nan") if v is None else float(v)
+
+
+class LossMonitor:
+    """Flags lost tracking from per-frame quality.
+
+    Parameters
+    ----------
+    max_rms_px : RMS chamfer residual above which a frame is bad (pixels)
+    min_inside_fraction : fraction of contour points on the silhouettes below which a frame is bad
+    patience : consecutive bad frames before the track is lost (>= 1)
+    """
+
+    def __init__(self, *, max_rms_px: float = 6.0, min_inside_fraction: float = 0.6, patience: int = 3) -> None:
+        if not max_rms_px > 0:
+            raise ValueError(f"max_rms_px: expected > 0, got {max_rms_px}")
+        if not 0.0 <= min_inside_fraction <= 1.0:
+            raise ValueError(f"min_inside_fraction: expected in [0, 1], got {min_inside_fraction}")
+        if int(patience) < 1:
+            raise ValueError(f"patience: expected >= 1, got {patience}")
+        self.max_rms_px = float(max_rms_px)
+        self.min_inside_fraction = float(min_inside_fraction)
+        self.patience = int(patience)
+        self.bad_frames = 0
+
+    def reset(self) -> None:
+        self.bad_frames = 0
+
+    def update(self, quality) -> LossState:
+        """Take one frame's quality: a pose record (``rms_px``, ``inside_fraction``, optional
+        ``ok``), a ``tracker.cost.CostTerms``, or an object with those attributes."""
+        rms = _quality(quality, "rms_px")
+        inside = _quality(quality, "inside_fraction")
+        reasons = []
+        if isinstance(quality, Mapping) and quality.get("ok") is False and "reason" in quality \
+                and not str(quality["reason"]).startswith("lost"):
+            reasons.append(str(quality["reason"]))
+        if not np.isfinite(rms) or rms > self.max_rms_px:
+            reasons.append(f"rms {rms:.2f} px > {self.max_rms_px:g}")
+        if not np.isfinite(inside) or inside < self.min_inside_fraction:
+            reasons.append(f"{100 * inside:.0f}% of contour inside < {100 * self.min_inside_fraction:.0f}%")
+        if not reasons:
+            self.bad_frames = 0
+            return LossState(OK, 0)
+        self.bad_frames += 1
+        state = LOST if self.bad_frames >= self.patience else SUSPECT
+        return LossState(state, self.bad_frames, "; ".join(reasons))
+
+
+# ----------------------------------------------------------------------------- hypotheses
+def limb_chains(model: BodyModel) -> dict[str, np.ndarray]:
+    """Joint-parameter indices per chain: ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``, ``trunk``."""
+    groups = {"left_arm": ("left_clavicle", "left_upper_arm", "left_forearm", "left_hand"),
+              "right_arm": ("right_clavicle", "right_upper_arm", "right_forearm", "right_hand"),
+              "left_leg": ("left_thigh", "left_shank", "left_foot"),
+              "right_leg": ("right_thigh", "right_shank", "right_foot")}
+    out = {}
+    joint = model.param_kind == JOINT_ROTATION
+    taken = np.zeros(model.n_params, bool)
+    for chain, parts in groups.items():
+        pidx = [model.part_names.index(p) for p in parts if p in model.part_names]
+        sel = joint & np.isin(model.param_part, pidx)
+        out[chain] = np.flatnonzero(sel)
+        taken |= sel
+    out["trunk"] = np.flatnonzero(joint & ~taken)
+    return out
+
+
+def _mirror_pairs(model: BodyModel) -> dict[int, int]:
+    """Parameter index -> the same DOF on the other side (``left_*`` <-> ``right_*``)."""
+    out = {}
+    for i, n in enumerate(model.param_names):
+        for a, b in (("left_", "right_"), ("right_", "left_")):
+            if n.startswith(a) and n.replace(a, b, 1) in model.param_names:
+                out[i] = model.param_names.index(n.replace(a, b, 1))
+    return out
+
+
+def turn_about_vertical(model: BodyModel, params: np.ndarray, angle_rad: float, pivot: np.ndarray) -> np.ndarray:
+    """The pose ``params`` turned by ``angle_rad`` about the vertical line through ``pivot`` (3,)."""
+    p = np.array(params, dtype=float)
+    t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    r_idx = np.flatnonzero(model.param_kind == ROOT_ROTATION)
+    Rz = so3_exp(np.array([0.0, 0.0, angle_rad]))
+    R = Rz @ so3_exp(p[r_idx])
+    p[t_idx] = pivot + Rz @ (p[t_idx] - pivot)
+    p[r_idx] = matrix_to_rodrigues(R)
+    return p
+
+
+def _centroid(model: BodyModel, params: np.ndarray) -> np.ndarray:
+    return body_points(model, forward(model, params), n_theta=8, n_z=2).reshape(-1, 3).mean(0)
+
+
+def _limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: float) -> tuple[np.ndarray, float]:
+    """Greedy per-chain search over a few angle sets, scored by IoU; returns (params, score)."""
+    mirror = _mirror_pairs(model)
+    x = params.copy()
+    for chain, idx in limb_chains(model).items():
+        if idx.size == 0:
+            continue
+        options = [np.zeros(idx.size), 0.5 * x[idx]]
+        if all(i in mirror for i in idx):
+            options.append(x[[mirror[i] for i in idx]])
+        for vals in options:
+            y = x.copy()
+            y[idx] = vals
+            y = model.clamp(y)
+            s = views.score(y)
+            if s > score:
+                x, score = y, s
+    return x, score
+
+
+def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+            chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 3,
+            min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 15,
+            prior_rad: float = 50.0) -> InitResult:
+    """Re-initialise a lost track from the hull, seeded from ``last_good_params`` (n_params,).
+
+    Parameters as in ``tracker.initialise.initialise``; the subject may be in any pose.
+    """
+    cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
+    last = np.asarray(last_good_params, dtype=float)
+    if last.shape != (model.n_params,) or not np.all(np.isfinite(last)):
+        raise ValueError(f"last_good_params: expected a finite array of shape ({model.n_params},)")
+    last = model.clamp(last)
+    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m)
+    if hull.empty:
+        raise ValueError("recover: the silhouettes share no volume (empty visual hull)")
+    views = ScoreViews(model, cameras, sils, scale=score_scale)
+    t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    # 1. the last good pose moved onto the hull, at every heading
+    moved = last.copy()
+    shift = hull.centroid() - _centroid(model, last)
+    shift[2] = 0.0
+    moved[t_idx] += shift
+    pivot = _centroid(model, moved)
+    cands = [("last", float(a), turn_about_vertical(model, moved, a, pivot))
+             for a in 2 * np.pi * np.arange(n_headings) / n_headings]
+    cands += pose_candidates(model, hull, n_headings=n_headings, hint=last)
+    # 2. greedy limb search on the best hypotheses, 3. staged LM (weaker prior: any pose)
+    return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations,
+                       prepare=lambda p, s: _limb_search(model, views, p, s), prior_rad=prior_rad)
