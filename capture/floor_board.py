@@ -82,18 +82,31 @@ def read_board_frames(path, *, n_frames: int = 5) -> tuple[list[np.ndarray], lis
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened():
         raise ValueError(f"{path}: unreadable video")
-    frames = []
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    wanted = set(np.linspace(0, max(count - 1, 0), max(1, n_frames)).round().astype(int).tolist()) if count > 0 else None
+    grey, ids, k, last = [], [], 0, None
+
+    def keep(index, image):
+        grey.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image)
+        ids.append(index)
+
     while True:
         ok, frame = cap.read()
         if not ok:
             break
-        frames.append(frame)
+        if wanted is None or k in wanted:
+            keep(k, frame)
+        last = (k, frame)
+        k += 1
     cap.release()
-    if not frames:
+    if last is None:
         raise ValueError(f"{path}: video has no readable frames")
-    idx = np.unique(np.linspace(0, len(frames) - 1, min(n_frames, len(frames))).round().astype(int))
-    grey = [cv2.cvtColor(frames[i], cv2.COLOR_BGR2GRAY) if frames[i].ndim == 3 else frames[i] for i in idx]
-    return grey, [int(i) for i in idx]
+    if wanted is not None and len(ids) < len(wanted) and ids[-1:] != [last[0]]:
+        keep(*last)  # the container over-stated its frame count: use the last frame that decoded
+    if wanted is None and len(grey) > n_frames:  # frame count unknown: thin out afterwards
+        keep = np.unique(np.linspace(0, len(grey) - 1, n_frames).round().astype(int))
+        grey, ids = [grey[i] for i in keep], [ids[i] for i in keep]
+    return grey, ids
 
 
 def floor_view(
@@ -109,7 +122,9 @@ def floor_view(
     """Board corners in one camera from a few frames of a static board (see module doc)."""
     hint = origin_hint if origin_hint is not None else (None if outline is None else np.asarray(outline)[0])
     found, used = [], []
-    for f, k in zip(frames, frame_ids):
+    for n, (f, k) in enumerate(zip(frames, frame_ids)):
+        if n >= 2 and not found:
+            break  # the board is static: frames that look alike will not suddenly show it
         c = detect_checkerboard(f, board)
         if c is not None:
             ref = hint if hint is not None else (found[0][0] if found else c[0])
@@ -120,7 +135,7 @@ def floor_view(
         return FloorView(name, np.median(np.stack(found), axis=0), "detected", tuple(used), note)
     if outline is None:
         return FloorView(name, None, reason=(
-            f"board not found in {len(frames)} frames by findChessboardCornersSB or findChessboardCorners; "
+            f"board not found in {min(2, len(frames))} frames by findChessboardCornersSB or findChessboardCorners; "
             "give its four outer corners (--corners)"))
     mean = np.mean(np.stack([f.astype(np.float32) for f in frames]), axis=0)
     try:

@@ -1,0 +1,238 @@
+"""``contourcap calibrate``: camera intrinsics from board videos, extrinsics from a board on the floor.
+
+    contourcap calibrate intrinsics --board 9x6 --square 0.025 --video cam0=cam0_board.mp4 --out intrinsics.toml
+    contourcap calibrate intrinsics --charuco 7x5 --square 0.04 --marker 0.03 --video cam0=... --out intrinsics.toml
+    contourcap calibrate extrinsics --intrinsics intrinsics.toml --board-file checkerboard.xml \\
+        --video cam1=cam1/checkerboard.avi ... --corners "cam1=356.8,298;445.5,321;390,348.5;300,317.7" \\
+        --out calibration.toml
+
+Extrinsics: the board lies on the floor, static; each camera's video is
+sampled (``--frames``).  Where no detector finds the board, give its four
+outer pattern corners (``--corners``, or a ``--corners-file``; see
+``capture.floor_board``), origin first, then along the long side.  The
+report names every camera: used (detected/manual, frames, RMS px) or why not.
+Exit status 0 when every camera was calibrated, 1 when some were not (the
+file then holds the others), 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+HELP = "calibrate cameras: intrinsics from board videos, extrinsics from a board lying on the floor"
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="calib_step", metavar="STEP", required=True)
+    for name, help_ in (("intrinsics", "K and distortion per camera from board views (checkerboard or ChArUco)"),
+                        ("extrinsics", "camera poses from a board lying on the floor (world Z up, board corner = origin)")):
+        p = sub.add_parser(name, help=help_, description=help_)
+        p.add_argument("--video", action="append", default=[], metavar="CAM=PATH", required=True,
+                       help="board video or image of a camera (repeat per camera)")
+        p.add_argument("--board", metavar="COLSxROWS", help="checkerboard inner corners, e.g. 8x6")
+        p.add_argument("--square", type=float, metavar="M", help="square size in metres")
+        p.add_argument("--board-file", type=Path, metavar="XML",
+                       help="OpenCV XML with CheckerBoardWidth/Height/SquareSize (mm), instead of --board/--square")
+        p.add_argument("--out", type=Path, required=True, help="calibration TOML to write")
+        p.add_argument("--report", type=Path, help="also write the report as JSON here")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        if name == "intrinsics":
+            p.add_argument("--charuco", metavar="SXxSY", help="ChArUco squares, e.g. 7x5 (instead of --board)")
+            p.add_argument("--marker", type=float, metavar="M", help="ChArUco marker size in metres")
+            p.add_argument("--dictionary", default="DICT_4X4_50", help="ArUco dictionary (default DICT_4X4_50)")
+            p.add_argument("--max-views", type=int, default=40, help="most board views per camera (default 40)")
+            p.add_argument("--every", type=int, default=5, help="use every N-th video frame (default 5)")
+        else:
+            p.add_argument("--intrinsics", type=Path, required=True,
+                           help="file or folder with the cameras' intrinsics (any format read_any_calibration reads)")
+            p.add_argument("--corners", action="append", default=[], metavar="CAM=X,Y;X,Y;X,Y;X,Y",
+                           help="the board's four outer corners in a camera: origin, long side, opposite, short side")
+            p.add_argument("--corners-file", type=Path, help="TOML with [cam] corners = [[x, y] * 4] and/or origin = [x, y]")
+            p.add_argument("--origin", action="append", default=[], metavar="CAM=X,Y",
+                           help="pixel near the board corner that is the world origin, in a camera")
+            p.add_argument("--frames", type=int, default=5, help="frames sampled per video (default 5)")
+
+
+class _Bar:
+    """A one-line progress bar on stderr; ``close()`` ends the line."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled and sys.stderr is not None
+        self.open = False
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if not self.enabled:
+            return
+        n = 30
+        fill = int(n * min(done, total) / max(total, 1))
+        sys.stderr.write(f"\r[{'#' * fill}{'.' * (n - fill)}] {done}/{total} {what[:40]:<40}")
+        sys.stderr.flush()
+        self.open = True
+
+    def close(self) -> None:
+        if self.open:
+            sys.stderr.write("\n")
+            self.open = False
+
+
+def _pairs(items, option: str) -> dict[str, str]:
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"{option} {item!r}: expected CAM=VALUE")
+        cam, value = item.split("=", 1)
+        out[cam.strip()] = value.strip()
+    return out
+
+
+def _points(text: str, option: str, n: int) -> np.ndarray:
+    try:
+        pts = np.array([[float(v) for v in p.split(",")] for p in text.split(";") if p.strip()])
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: expected numbers as X,Y;X,Y...") from None
+    if pts.shape != (n, 2):
+        raise ValueError(f"{option} {text!r}: expected {n} X,Y pairs separated by ';'")
+    return pts
+
+
+def _board(args):
+    from capture.board import CharucoBoard, Checkerboard
+
+    if getattr(args, "charuco", None):
+        sx, sy = (int(v) for v in args.charuco.lower().split("x"))
+        if args.square is None or args.marker is None:
+            raise ValueError("--charuco needs --square and --marker (metres)")
+        return CharucoBoard(sx, sy, args.square, args.marker, args.dictionary)
+    if args.board_file:
+        return Checkerboard.from_opencv_xml(args.board_file)
+    if not args.board or args.square is None:
+        raise ValueError("give --board COLSxROWS and --square METRES (or --board-file)")
+    c, r = (int(v) for v in args.board.lower().split("x"))
+    return Checkerboard(max(c, r), min(c, r), args.square)
+
+
+def _video_size(path: Path) -> tuple[int, int]:
+    cap = cv2.VideoCapture(str(path))
+    ok, frame = cap.read()
+    cap.release()
+    if not ok:
+        img = cv2.imread(str(path))
+        if img is None:
+            raise ValueError(f"{path}: unreadable video/image")
+        frame = img
+    return int(frame.shape[1]), int(frame.shape[0])
+
+
+def _read_frames(path: Path, every: int) -> list[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    frames, k = [], 0
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        if k % every == 0:
+            frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+        k += 1
+    cap.release()
+    if not frames:
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise ValueError(f"{path}: unreadable video/image")
+        frames = [img]
+    return frames
+
+
+def _run_intrinsics(args, videos, bar) -> tuple[list, dict]:
+    from capture.calibrate import intrinsics_from_frames
+    from capture.camera import Camera
+
+    board = _board(args)
+    cams, report = [], {}
+    for name, path in videos.items():
+        try:
+            res = intrinsics_from_frames(name, _read_frames(path, max(1, args.every)), board,
+                                         max_views=args.max_views, progress=bar)
+        except ValueError as exc:
+            report[name] = {"used": False, "reason": str(exc)}
+            continue
+        i = res.intrinsics
+        cams.append(Camera(name, i.matrix, i.distortion, np.eye(3), np.zeros(3), i.size))
+        report[name] = {"used": True, "views": res.n_views, "rms_px": res.rms_px}
+    return cams, report
+
+
+def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
+    from capture.calib_formats import read_any_calibration
+    from capture.calibrate import Intrinsics
+    from capture.floor_board import calibrate_floor, load_corner_file
+
+    board = _board(args)
+    first = next(iter(videos.values()))
+    known = {c.name: c for c in read_any_calibration(args.intrinsics, size=_video_size(first))}
+    missing = [n for n in videos if n not in known]
+    if missing:
+        raise ValueError(f"{args.intrinsics}: no intrinsics for camera(s) {missing}; it holds {sorted(known)}")
+    intr = [Intrinsics.from_camera(known[n]) for n in videos]
+    outlines, hints = load_corner_file(args.corners_file) if args.corners_file else ({}, {})
+    for cam, text in _pairs(args.corners, "--corners").items():
+        outlines[cam] = _points(text, "--corners", 4)
+    for cam, text in _pairs(args.origin, "--origin").items():
+        hints[cam] = _points(text, "--origin", 1)[0]
+    result = calibrate_floor(intr, videos, board, outlines=outlines, origin_hints=hints,
+                             n_frames=args.frames, progress=bar)
+    ext = result.extrinsics
+    notes = {v.camera: v.note for v in result.views}
+    report = {}
+    for r in ext.reports:
+        if r.used:
+            cam = next(c for c in ext.cameras if c.name == r.name)
+            report[r.name] = {"used": True, "method": r.method, "frames": list(r.frames), "points": r.n_points,
+                              "rms_px": r.rms_px, "note": notes.get(r.name, ""), "height_m": float(cam.center[2])}
+        else:
+            report[r.name] = {"used": False, "reason": r.reason}
+    report["_overall"] = {"rms_px": ext.rms_px, "board_axes_swapped": result.swap_axes, "solver": ext.message}
+    return list(ext.cameras), report
+
+
+def run(args) -> int:
+    from capture.calibration import save_calibration
+
+    bar = _Bar(not args.quiet)
+    try:
+        videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
+        for cam, p in videos.items():
+            if not p.is_file():
+                raise ValueError(f"--video {cam}={p}: file not found")
+        step = _run_intrinsics if args.calib_step == "intrinsics" else _run_extrinsics
+        cams, report = step(args, videos, bar)
+    except (ValueError, FileNotFoundError) as exc:
+        bar.close()
+        print(f"contourcap calibrate: error: {exc}", file=sys.stderr)
+        return 2
+    bar.close()
+    for name, r in report.items():
+        if name.startswith("_"):
+            continue
+        if r["used"]:
+            extra = " ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items() if k != "used")
+            print(f"{name}: ok {extra}")
+        else:
+            print(f"{name}: NOT CALIBRATED: {r['reason']}")
+    if "_overall" in report and np.isfinite(report["_overall"]["rms_px"]):
+        print(f"overall RMS reprojection error: {report['_overall']['rms_px']:.3f} px")
+    if args.report:
+        args.report.write_text(json.dumps(report, indent=2))
+    if cams:
+        save_calibration(args.out, cams)
+        print(f"wrote {args.out} ({len(cams)} camera(s))")
+    failed = [n for n, r in report.items() if not n.startswith("_") and not r["used"]]
+    if failed:
+        print(f"left out: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
