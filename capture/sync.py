@@ -40,13 +40,16 @@ class FrameSet:
 
     ``frames`` maps camera name -> Frame (only cameras present, in the
     synchroniser's camera order); ``missing`` names the absent cameras;
-    ``reason`` is ``"complete"``, ``"skipped"`` or ``"timeout"``.
+    ``reason`` is ``"complete"``, ``"skipped"`` or ``"timeout"``; ``wait_ns``
+    is how long the set was held (emitting poll time - first frame's arrival;
+    0 from ``flush``).
     """
 
     frame_id: int
     frames: Mapping[str, Frame]
     missing: tuple[str, ...]
     reason: str
+    wait_ns: int = 0
 
     @property
     def complete(self) -> bool:
@@ -68,6 +71,7 @@ class SyncStats:
     overflow: int = 0
     discarded_frames: int = 0
     pending: int = 0
+    max_wait_ns: int = 0
     missing_by_camera: dict[str, int] = field(default_factory=dict)
     stopped: tuple[str, ...] = ()
 
@@ -125,6 +129,7 @@ class FrameSynchronizer:
         )
         self._missing = dict.fromkeys(cameras, 0)
         self._stopped: set[str] = set()
+        self._max_wait_ns = 0
 
     @property
     def pending(self) -> int:
@@ -140,6 +145,7 @@ class FrameSynchronizer:
         return SyncStats(
             **self._counts,
             pending=len(self._pending),
+            max_wait_ns=self._max_wait_ns,
             missing_by_camera=dict(self._missing),
             stopped=tuple(c for c in self.cameras if c in self._stopped),
         )
@@ -206,7 +212,7 @@ class FrameSynchronizer:
             else:
                 break
             del self._pending[fid]
-            out.append(self._emit(entry, tuple(missing), reason))
+            out.append(self._emit(entry, tuple(missing), reason, now_ns - entry.first_ns))
         return out
 
     def flush(self) -> list[FrameSet]:
@@ -218,8 +224,9 @@ class FrameSynchronizer:
             out.append(self._emit(entry, missing, "timeout" if missing else "complete"))
         return out
 
-    def _emit(self, entry: _Pending, missing: tuple[str, ...], reason: str) -> FrameSet:
+    def _emit(self, entry: _Pending, missing: tuple[str, ...], reason: str, wait_ns: int = 0) -> FrameSet:
         self._last_emitted = entry.frame_id
+        self._max_wait_ns = max(self._max_wait_ns, wait_ns)
         self._counts["emitted"] += 1
         self._counts["complete" if not missing else "incomplete"] += 1
         if reason == "timeout":
@@ -227,4 +234,4 @@ class FrameSynchronizer:
         for c in missing:
             self._missing[c] += 1
         frames = {c: entry.frames[c] for c in self.cameras if c in entry.frames}
-        return FrameSet(entry.frame_id, frames, missing, reason)
+        return FrameSet(entry.frame_id, frames, missing, reason, wait_ns)

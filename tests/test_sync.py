@@ -43,6 +43,7 @@ def test_timeout_names_missing_camera():
     assert sync.poll(99 * MS) == []
     (s,) = sync.poll(100 * MS)
     assert s.frame_id == 3 and s.missing == ("b",) and s.reason == "timeout" and not s.complete
+    assert s.wait_ns == 100 * MS and sync.stats.max_wait_ns == 100 * MS
     assert sorted(s.frames) == ["a", "c"]
     assert sync.stats.timeouts == 1 and sync.stats.missing_by_camera == {"a": 0, "b": 1, "c": 0}
     sync.push(fr("b", 3), 101 * MS)  # after its set left: late, dropped
@@ -184,6 +185,7 @@ def test_property_never_mixed_ordered_bounded_conserved(case):
     used = sum(len(s.frames) for s in emitted)
     assert pushed == used + stats.duplicates + stats.late + stats.unknown + stats.discarded_frames
     assert stats.emitted == len(emitted) == stats.complete + stats.incomplete
+    assert all(0 <= s.wait_ns <= stats.max_wait_ns for s in emitted)
 
 
 @given(st.integers(1, 5), st.integers(1, 30), st.randoms(use_true_random=False))
