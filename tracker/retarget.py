@@ -92,9 +92,12 @@ class Retargeted:
         The sized model the parameters drive.
     params : ndarray, shape (n_frames, n_params)
     targets : ndarray, shape (n_frames, n_joints, 3)
-        BVH joint targets in the world frame (metres, Z up), ``model.joint_names`` order.
+        BVH joint targets in the world frame (metres, Z up), ``joint_names`` order.
     residual_m : ndarray, shape (n_frames, n_joints)
         Distance between the model's joint centres and the targets after IK.
+    joint_names : tuple of str, length n_joints
+        The model joints with a BVH correspondence (``JOINT_MAP``), in model order:
+        the columns of ``targets`` and ``residual_m``.
     times_s : ndarray, shape (n_frames,)
         Time of each frame in the BVH clip.
     fps : float
@@ -111,6 +114,7 @@ class Retargeted:
     fps: float
     height_m: float
     segment_lengths: dict
+    joint_names: tuple
 
     @property
     def n_frames(self) -> int:
@@ -142,11 +146,11 @@ def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool
     unit = load_model(model_name, height_m=1.0)
     rest = Bvh(bvh.names, bvh.parent, bvh.offset, bvh.channels, bvh.channel_start,
                np.zeros((1, bvh.motion.shape[1])), bvh.frame_time_s, bvh.source)  # fmt: skip
-    T = bvh_joint_targets(rest, unit.joint_names)[0]
-    M = joint_centre_array(unit, forward(unit, unit.zero()))
-    ji = {n: i for i, n in enumerate(unit.joint_names)}
-    L = np.array([np.linalg.norm(T[ji[a]] - T[ji[b]]) for _, a, b in _SEGMENTS])
-    r = np.array([np.linalg.norm(M[ji[a]] - M[ji[b]]) for _, a, b in _SEGMENTS])
+    names = sorted({j for _, a, b in _SEGMENTS for j in (a, b)})
+    T = dict(zip(names, bvh_joint_targets(rest, names)[0]))
+    M = dict(zip(unit.joint_names, joint_centre_array(unit, forward(unit, unit.zero()))))
+    L = np.array([np.linalg.norm(T[a] - T[b]) for _, a, b in _SEGMENTS])
+    r = np.array([np.linalg.norm(M[a] - M[b]) for _, a, b in _SEGMENTS])
     height = float(np.sum(L * r) / np.sum(r * r))
     lengths: dict = {}
     if fit_segments:
@@ -155,20 +159,24 @@ def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool
     return height, lengths
 
 
-def _initial_root(model: BodyModel, targets: np.ndarray) -> np.ndarray:
-    """Root translation and heading from one frame's targets (n_joints, 3)."""
-    ji = {n: i for i, n in enumerate(model.joint_names)}
+def _initial_root(model: BodyModel, targets: np.ndarray, names) -> np.ndarray:
+    """Root translation and heading from one frame's targets (n_joints, 3) named ``names``."""
+    ji = {n: i for i, n in enumerate(names)}
+    mi = {n: i for i, n in enumerate(model.joint_names)}
     p = model.zero()
     left = targets[ji["left_hip"]] - targets[ji["right_hip"]]
     yaw = np.arctan2(left[1], left[0]) - np.pi / 2  # the model's left is +Y at Φ = 0
     p[model.param_kind == ROOT_ROTATION] = [0.0, 0.0, yaw]
     pose = forward(model, p)
-    pelvis_model = joint_centre_array(model, pose)[ji["pelvis"]]
+    pelvis_model = joint_centre_array(model, pose)[mi["pelvis"]]
     p[model.param_kind == ROOT_TRANSLATION] = targets[ji["pelvis"]] - pelvis_model
     return p
 
 
-def _solve_frame(model, target, start, prev, mu, mu_t):
+def _solve_frame(model, target, start, prev, mu, mu_t, joints=None):
+    """One frame of IK: ``target`` (n, 3) for the model joints ``joints`` (indices, default all)."""
+    jidx = np.arange(len(model.joint_names)) if joints is None else np.asarray(joints)
+    jpart, jpoint = model.joint_part[jidx], model.joint_point[jidx]
     joint_dof = model.param_kind == JOINT_ROTATION
     lo = np.where(np.isfinite(model.lower), model.lower, -np.inf)
     hi = np.where(np.isfinite(model.upper), model.upper, np.inf)
@@ -181,7 +189,7 @@ def _solve_frame(model, target, start, prev, mu, mu_t):
         if key not in cache:
             cache.clear()
             pose = forward(model, p)
-            cache[key] = (pose, joint_centre_array(model, pose))
+            cache[key] = (pose, pose.to_world(jpart, jpoint))
         return cache[key]
 
     def fun(p):
@@ -190,7 +198,7 @@ def _solve_frame(model, target, start, prev, mu, mu_t):
 
     def jac(p):
         pose, X = posed(p)
-        J = point_jacobian(model, pose, model.joint_part, X).reshape(-1, n)
+        J = point_jacobian(model, pose, jpart, X).reshape(-1, n)
         D = np.eye(n)[joint_dof] * mu
         return np.concatenate([J, D, mu_t * np.eye(n)])
 
@@ -244,27 +252,29 @@ def retarget_bvh(
     i1 = np.minimum(i0 + 1, bvh.n_frames - 1)
     w = (src - i0)[:, None, None]
     needed = np.unique(np.concatenate([i0, i1]))
-    T_all = bvh_joint_targets(bvh, mdl.joint_names, frames=needed)
+    names = tuple(n for n in mdl.joint_names if n in JOINT_MAP)
+    jidx = np.array([mdl.joint_names.index(n) for n in names])
+    T_all = bvh_joint_targets(bvh, names, frames=needed)
     pos = {f: k for k, f in enumerate(needed)}
     T = (1 - w) * T_all[[pos[f] for f in i0]] + w * T_all[[pos[f] for f in i1]]
-    ji = {n: i for i, n in enumerate(mdl.joint_names)}
+    ji = {n: i for i, n in enumerate(names)}
     if center:
         pel = T[:, ji["pelvis"], :2]
         T[:, :, :2] -= 0.5 * (pel.min(axis=0) + pel.max(axis=0))
     params = np.empty((n_out, mdl.n_params))
-    p = _initial_root(mdl, T[0])
+    p = _initial_root(mdl, T[0], names)
     prev = p.copy()
     for k in range(n_out):
         # the first frame has no predecessor to stay close to
-        p = _solve_frame(mdl, T[k], p, prev, damping, smoothing if k else 0.0)
+        p = _solve_frame(mdl, T[k], p, prev, damping, smoothing if k else 0.0, jidx)
         params[k] = prev = p
     # floor: the lowest foot-surface point of the clip on z = 0
     feet = [mdl.part_index(n) for n in mdl.part_names if n.endswith("foot") or n.endswith("shank")]
     lowest = min(body_points(mdl, forward(mdl, q))[feet, :, 2].min() for q in params)
     params[:, mdl.param_kind == ROOT_TRANSLATION] -= [0.0, 0.0, lowest]
     T[:, :, 2] -= lowest
-    joints = np.stack([joint_centre_array(mdl, forward(mdl, q)) for q in params])
+    joints = np.stack([joint_centre_array(mdl, forward(mdl, q))[jidx] for q in params])
     return Retargeted(
         model=mdl, params=params, targets=T, residual_m=np.linalg.norm(joints - T, axis=-1),
-        times_s=times, fps=float(fps), height_m=H, segment_lengths=dict(lengths),
+        times_s=times, fps=float(fps), height_m=H, segment_lengths=dict(lengths), joint_names=names,
     )  # fmt: skip

@@ -133,9 +133,16 @@ class RoomTexture:
     wall_height_m: float
 
 
-def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int]) -> np.ndarray:
-    """Smooth noise in [0, 1], shape ``shape``: a random ``cells`` grid, bicubically upsampled."""
+def _value_noise(
+    rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int], *, wrap_columns: bool = False
+) -> np.ndarray:
+    """Smooth noise in [0, 1], shape ``shape``: a random ``cells`` grid, bicubically upsampled.
+
+    ``wrap_columns`` makes the last column equal the first (no seam where a
+    wall texture closes on itself)."""
     coarse = rng.random((cells[0] + 1, cells[1] + 1)).astype(np.float32)
+    if wrap_columns:
+        coarse[:, -1] = coarse[:, 0]
     return np.clip(cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC), 0.0, 1.0)
 
 
@@ -158,7 +165,7 @@ def make_room_texture(
     m = int(wall_height_m * resolution_px_per_m)
     n_az = int(2 * np.pi * wall_radius_m * resolution_px_per_m / 2)
     base_wall = rng.uniform(120, 200, 3)
-    wnoise = _value_noise(rng, (m, n_az), (12, 64))
+    wnoise = _value_noise(rng, (m, n_az), (12, 64), wrap_columns=True)
     stripes = np.sin(np.linspace(0, 2 * np.pi * 40, n_az, endpoint=False))[None, :]
     wall = base_wall[None, None, :] * (0.7 + 0.4 * wnoise[..., None]) + 10.0 * stripes[..., None]
     return RoomTexture(
