@@ -29,6 +29,7 @@ contour points (at fixed z samples per part) are matched across poses.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -88,6 +89,14 @@ class Contours:
     def shaped(self, values: np.ndarray) -> np.ndarray:
         """View per-row ``values`` (N, ...) as (n_cams, n_parts, 2, n_samples, ...)."""
         return values.reshape(self.n_cams, self.n_parts, 2, self.n_samples, *values.shape[1:])
+
+
+@lru_cache(maxsize=16)
+def _row_indices(shape: tuple) -> np.ndarray:
+    """(cam, part, side, sample) of every row, shape (4, N), read-only (cached per layout)."""
+    idx = np.indices(shape).reshape(4, -1)
+    idx.setflags(write=False)
+    return idx
 
 
 def sample_heights(model: BodyModel, n_samples: int) -> np.ndarray:
@@ -181,27 +190,32 @@ def extremal_contours(
     zs = sample_heights(model, n_samples)  # (n_parts, n_samples)
     a, b, k = model.cones[:, 0], model.cones[:, 1], model.cones[:, 2]
     scale = 1.0 + k[:, None] * zs  # (n_parts, n_samples)
-    cos, sin = np.cos(theta), np.sin(theta)  # (n_cams, n_parts, 2)
+    # world point = (1 + k z) (a cos θ R e1 + b sin θ R e2) + (z R e3 + t): a ruling direction per
+    # (camera, part, side) times a scale per (part, sample), plus an axis point per (part, sample)
+    ruling = (a[None, :, None, None] * np.cos(theta)[..., None]) * R[None, :, None, :, 0] + (
+        b[None, :, None, None] * np.sin(theta)[..., None]
+    ) * R[None, :, None, :, 1]  # (n_cams, n_parts, 2, 3)
+    axis = zs[:, :, None] * R[:, None, :, 2] + t[:, None, :]  # (n_parts, n_samples, 3)
+    world = ruling[:, :, :, None, :] * scale[None, :, None, :, None] + axis[None, :, None, :, :]
     shape = (n_cams, n_parts, 2, n_samples)
-    local = np.empty(shape + (3,))
-    local[..., 0] = (a[None, :, None] * cos)[..., None] * scale[None, :, None, :]
-    local[..., 1] = (b[None, :, None] * sin)[..., None] * scale[None, :, None, :]
-    local[..., 2] = zs[None, :, None, :]
-    world = np.einsum("pij,cpsnj->cpsni", R, local) + t[None, :, None, None, :]
     points = world.reshape(-1, 3)
     n_per_cam = n_parts * 2 * n_samples
-    uv = np.empty((points.shape[0], 2))
-    in_front = np.empty(points.shape[0], dtype=bool)
+    cam_R = np.stack([cam.rotation for cam in cameras])  # world2cam (n_cams, 3, 3)
+    cam_t = np.stack([cam.translation for cam in cameras])
+    depth = world.reshape(n_cams, n_per_cam, 3) @ cam_R[:, 2, :, None] + cam_t[:, None, 2:3]  # (n_cams, n, 1)
+    uv = np.empty((n_cams, n_per_cam, 2))
     with np.errstate(all="ignore"):  # points behind a camera project to junk; flagged invalid below
         for c, cam in enumerate(cameras):
-            sl = slice(c * n_per_cam, (c + 1) * n_per_cam)
-            in_front[sl] = cam.depth(points[sl]) > 1e-6
-            uv[sl] = cam.project(points[sl])
-            in_front[sl] &= cam.in_image(uv[sl])
-    finite = np.isfinite(uv).all(axis=1)
-    uv = np.where(finite[:, None], uv, 0.0)
-    valid = np.broadcast_to(real[:, :, None, None], shape).reshape(-1) & in_front & finite
-    idx = np.indices(shape).reshape(4, -1)
+            uv[c] = cam.project(world[c].reshape(-1, 3))
+    size = np.array([cam.size for cam in cameras], dtype=float) - 1.0  # (n_cams, 2)
+    with np.errstate(invalid="ignore"):  # Camera.in_image, False for NaN
+        inside = (uv[..., 0] >= 0.0) & (uv[..., 1] >= 0.0)
+        inside &= (uv[..., 0] <= size[:, 0, None]) & (uv[..., 1] <= size[:, 1, None])
+    uv = uv.reshape(-1, 2)
+    valid = inside.reshape(-1) & (depth.reshape(-1) > 1e-6)
+    valid &= np.broadcast_to(real[:, :, None, None], shape).reshape(-1)
+    uv[~valid] = 0.0  # finite junk where the point is not seen
+    idx = _row_indices(shape)
     visible = valid
     if visibility:
         visible = valid & ~hidden_points(model, pose, cameras, idx[0], idx[1], points, only=valid)

@@ -61,24 +61,31 @@ def _check(model: BodyModel, cameras: Sequence[Camera], contours: Contours) -> N
         raise ValueError(f"cameras: {len(cameras)} given, contours were computed for {contours.n_cams}")
 
 
-def _terms(model, pose, centres, contours, r, sliding):
-    """Per-point pieces: Y (n,3) and, for the sliding term, e = R X_θ / (-f_θ), nw = R n, C×nw."""
-    part, th, z = contours.part[r], contours.theta[r], contours.z[r]
-    Y = contours.points[r]
-    if not sliding:
-        return Y, None, None, None
+def _sliding_terms(model, pose, centres, contours, r):
+    """Per-point pieces of the sliding term B = e ⊗ w, shapes (n, 3) and (n, 6).
+
+    ``e = R X_θ / (-f_θ)`` and ``w = (C × R n, R n)``.  θ, f_θ, R n and C are constant along
+    a ruling, so everything but the (1 + k z) factor of X_θ is computed once per (camera,
+    part, side) and gathered with one index."""
+    ns = contours.n_samples
+    cam, part = contours.cam[::ns], contours.part[::ns]  # per ruling (n_cams * n_parts * 2,)
+    th = contours.theta[::ns]
     a, b, k = model.cones[part, 0], model.cones[part, 1], model.cones[part, 2]
     R, t = pose.rotation[part], pose.translation[part]
-    C = centres[contours.cam[r]]
+    C = centres[cam]
     cos, sin = np.cos(th), np.sin(th)
     m = np.einsum("nji,nj->ni", R, C - t)  # camera centre in the part frame
     f_theta = b * m[:, 0] * sin - a * m[:, 1] * cos
     # f_θ = 0 only where the two rulings merge (grazing view): no contour there
     f_theta = np.where(np.abs(f_theta) > 1e-300, f_theta, 1e-300)
-    s = (1.0 + k * z) / -f_theta
-    e = np.einsum("nij,nj->ni", R[:, :, :2], np.stack([-a * sin * s, b * cos * s], axis=1))
-    nw = np.einsum("nij,nj->ni", R, np.stack([b * cos, a * sin, -a * b * k], axis=1))
-    return Y, e, nw, np.cross(C, nw)
+    per_ruling = np.empty((cam.size, 9))  # e / (1 + k z), C × nw, nw
+    per_ruling[:, 0:3] = R[:, :, 0] * (a * sin / f_theta)[:, None] - R[:, :, 1] * (b * cos / f_theta)[:, None]
+    nw = R[:, :, 0] * (b * cos)[:, None] + R[:, :, 1] * (a * sin)[:, None] - R[:, :, 2] * (a * b * k)[:, None]
+    per_ruling[:, 3:6] = np.cross(C, nw)
+    per_ruling[:, 6:9] = nw
+    g = per_ruling[r // ns]
+    scale = 1.0 + model.cones[contours.part[r], 2] * contours.z[r]
+    return g[:, 0:3] * scale[:, None], g[:, 3:9]
 
 
 def contour_motion(
@@ -99,7 +106,7 @@ def contour_motion(
     """
     _check(model, cameras, contours)
     r = _select(contours, rows)
-    Y, e, nw, cxn = _terms(model, pose, camera_centres(cameras), contours, r, sliding)
+    Y = contours.points[r]
     out = np.zeros((r.size, 3, 6))
     # A = [-[Y]x  I]
     out[:, 0, 1], out[:, 0, 2] = Y[:, 2], -Y[:, 1]
@@ -107,8 +114,14 @@ def contour_motion(
     out[:, 2, 0], out[:, 2, 1] = Y[:, 1], -Y[:, 0]
     out[:, 0, 3] = out[:, 1, 4] = out[:, 2, 5] = 1.0
     if sliding:
-        out += e[:, :, None] * np.concatenate([cxn, nw], axis=1)[:, None, :]
+        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
+        out += e[:, :, None] * w[:, None, :]
     return out
+
+
+def _affects_float(model: BodyModel) -> np.ndarray:
+    """``model.affects`` as 0.0 / 1.0, shape (n_parts, n_params) (cheaper to multiply by)."""
+    return model.affects.astype(float)
 
 
 def _screws(model: BodyModel, pose: Pose) -> np.ndarray:
@@ -160,20 +173,32 @@ def contour_jacobian(
     """
     _check(model, cameras, contours)
     r = _select(contours, rows)
-    Y, e, nw, cxn = _terms(model, pose, camera_centres(cameras), contours, r, sliding)
-    JI = np.empty((r.size, 2, 3))
+    Y = contours.points[r]
     cam = contours.cam[r]
+    JI = np.empty((r.size, 2, 3))
     with np.errstate(all="ignore"):  # invalid rows (behind a camera) give junk, as their uv does
-        for c, camera in enumerate(cameras):
-            sel = cam == c
-            if sel.any():
+        if r.size and np.all(cam[1:] >= cam[:-1]):  # rows grouped by camera: slices
+            bounds = np.searchsorted(cam, np.arange(len(cameras) + 1))
+            for c, camera in enumerate(cameras):
+                if bounds[c + 1] > bounds[c]:
+                    sl = slice(bounds[c], bounds[c + 1])
+                    JI[sl] = camera.project_with_jacobian(Y[sl])[1]
+        else:
+            for c, camera in enumerate(cameras):
+                sel = cam == c
                 JI[sel] = camera.project_with_jacobian(Y[sel])[1]
     # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
     M = np.empty((r.size, 2, 6))
-    M[:, :, :3] = np.cross(Y[:, None, :], JI)
+    j0, j1, j2 = JI[:, :, 0], JI[:, :, 1], JI[:, :, 2]
+    y0, y1, y2 = Y[:, 0, None], Y[:, 1, None], Y[:, 2, None]
+    M[:, :, 0] = y1 * j2 - y2 * j1
+    M[:, :, 1] = y2 * j0 - y0 * j2
+    M[:, :, 2] = y0 * j1 - y1 * j0
     M[:, :, 3:] = JI
     if sliding:
-        JIe = np.einsum("nij,nj->ni", JI, e)
-        M += JIe[:, :, None] * np.concatenate([cxn, nw], axis=1)[:, None, :]
+        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
+        JIe = j0 * e[:, 0, None] + j1 * e[:, 1, None] + j2 * e[:, 2, None]  # (n, 2)
+        M += JIe[:, :, None] * w[:, None, :]
     J = (M.reshape(-1, 6) @ _screws(model, pose)).reshape(r.size, 2, model.n_params)
-    return J * model.affects[contours.part[r]][:, None, :]
+    J *= _affects_float(model)[contours.part[r]][:, None, :]
+    return J

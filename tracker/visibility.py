@@ -80,12 +80,15 @@ def hidden_points(
     i, q = _candidate_pairs(model, pose, cam_R, cam_t, c, own, P)
     if i.size == 0:
         return hidden
-    cones = model.cones[q]
-    a, b, k, z1, z2 = (cones[:, j] for j in range(5))
-    Rq, tq = pose.rotation[q], pose.translation[q]
-    Cw = centres[c[i]]
-    m = np.einsum("nji,nj->ni", Rq, Cw - tq)  # camera centre in the occluder's frame (pairs, 3)
-    d = np.einsum("nji,nj->ni", Rq, P[i] - Cw)  # segment direction in the occluder's frame
+    n_parts = model.n_parts
+    R, t = pose.rotation, pose.translation
+    # camera centres in every part frame (n_cams, n_parts, 3); segment directions in the candidate
+    # occluders' frames from one product (r, 3) @ (3, 3 n_parts), then gathered per pair
+    m_all = np.einsum("pji,cpj->cpi", R, centres[:, None, :] - t[None, :, :])
+    m = m_all[c[i], q]
+    D = P - centres[c]
+    d = (D @ R.transpose(1, 0, 2).reshape(3, 3 * n_parts)).reshape(-1, n_parts, 3)[i, q]
+    a, b, k, z1, z2 = (model.cones[q, j] for j in range(5))
     g1, g2, g3 = m[:, 0] / a, m[:, 1] / b, 1.0 + k * m[:, 2]
     h1, h2, h3 = d[:, 0] / a, d[:, 1] / b, k * d[:, 2]
     qa = h1 * h1 + h2 * h2 - h3 * h3
@@ -109,7 +112,7 @@ def hidden_points(
 
     qmin = np.minimum(np.minimum(q_at(lo), q_at(hi)), q_at(vertex))
     blocked = ok & (qmin < -_Q_TOL)
-    hidden[rows[np.unique(i[blocked])]] = True
+    hidden[rows[i[blocked]]] = True
     return hidden
 
 
@@ -130,7 +133,8 @@ def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
     xn, yn = Xc[..., 0] / zc, Xc[..., 1] / zc
     inf = np.where(front, 0.0, np.inf)
     box = np.stack([xn.min(-1) - inf, xn.max(-1) + inf, yn.min(-1) - inf, yn.max(-1) + inf], axis=1)
-    Pc = np.einsum("nij,nj->ni", cam_R[c], P) + cam_t[c]
+    n_cams = cam_R.shape[0]
+    Pc = (P @ cam_R.reshape(3 * n_cams, 3).T).reshape(-1, n_cams, 3)[np.arange(c.size), c] + cam_t[c]
     ahead = Pc[:, 2] > 1e-9
     zp = np.where(ahead, Pc[:, 2], 1.0)
     xp, yp = (Pc[:, 0] / zp)[:, None], (Pc[:, 1] / zp)[:, None]
