@@ -52,6 +52,7 @@ BACKGROUND = -1
 _SHIFT = 4  # fractional bits for cv2.fillConvexPoly
 _LIMIT_PX = 1.0e6  # clamp projected coordinates (int32 with _SHIFT bits)
 _INSET_PX = 0.5  # see _shrink
+_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 
 
 def cone_points(model: BodyModel, *, n_theta: int = 32, n_z: int = 4) -> np.ndarray:
@@ -195,10 +196,7 @@ def internal_edges(labels: np.ndarray) -> np.ndarray:
     lab = np.asarray(labels)
     if lab.ndim != 2:
         raise ValueError(f"internal_edges: labels must be 2-D (h, w), got shape {lab.shape}")
-    padded = np.pad(lab.astype(np.int32), 1, constant_values=BACKGROUND)
-    centre = padded[1:-1, 1:-1]
-    edge = np.zeros(lab.shape, bool)
-    for nb in (padded[:-2, 1:-1], padded[2:, 1:-1], padded[1:-1, :-2], padded[1:-1, 2:]):
-        edge |= nb < centre
-    edge &= centre >= 0
-    return np.where(edge, 255, 0).astype(np.uint8)
+    lab16 = lab.astype(np.int16, copy=False)
+    # the smallest label among each pixel and its 4-neighbours (background outside the image)
+    smallest = cv2.erode(lab16, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=BACKGROUND)
+    return np.where((smallest < lab16) & (lab16 >= 0), 255, 0).astype(np.uint8)
