@@ -69,7 +69,7 @@ class FloorCalibration:
     swap_axes: bool
 
 
-def read_board_frames(path, *, n_frames: int = 5) -> tuple[list[np.ndarray], list[int]]:
+def read_board_frames(path, *, n_frames: int = 3) -> tuple[list[np.ndarray], list[int]]:
     """Up to ``n_frames`` grey frames (h, w) uint8 spread evenly over a video (or one image file), and their indices."""
     path = Path(path)
     if not path.is_file():
@@ -123,8 +123,8 @@ def floor_view(
     hint = origin_hint if origin_hint is not None else (None if outline is None else np.asarray(outline)[0])
     found, used = [], []
     for n, (f, k) in enumerate(zip(frames, frame_ids)):
-        if n >= 2 and not found:
-            break  # the board is static: frames that look alike will not suddenly show it
+        if n >= 1 and not found:
+            break  # the board is static: if the first frame does not show it, its near-copies will not either
         c = detect_checkerboard(f, board)
         if c is not None:
             ref = hint if hint is not None else (found[0][0] if found else c[0])
@@ -135,7 +135,7 @@ def floor_view(
         return FloorView(name, np.median(np.stack(found), axis=0), "detected", tuple(used), note)
     if outline is None:
         return FloorView(name, None, reason=(
-            f"board not found in {min(2, len(frames))} frames by findChessboardCornersSB or findChessboardCorners; "
+            "board not found by findChessboardCornersSB or findChessboardCorners (static board: one frame tried); "
             "give its four outer corners (--corners)"))
     mean = np.mean(np.stack([f.astype(np.float32) for f in frames]), axis=0)
     try:
@@ -189,7 +189,7 @@ def calibrate_floor(
     *,
     outlines: Mapping[str, np.ndarray] | None = None,
     origin_hints: Mapping[str, np.ndarray] | None = None,
-    n_frames: int = 5,
+    n_frames: int = 3,
     progress: Progress | None = None,
 ) -> FloorCalibration:
     """Extrinsics of every camera from its video of the board lying on the floor (see module doc)."""

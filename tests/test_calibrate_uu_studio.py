@@ -64,7 +64,7 @@ def test_camera_without_board_or_corners_is_named(shared_data, tmp_path, capsys)
     rc = main(_args(d, ["cam1", "cam2"], out, "--frames", "2"))
     captured = capsys.readouterr()
     assert rc == 1
-    assert "cam1: NOT CALIBRATED: board not found in 2 frames" in captured.out  # static board: gives up after 2
+    assert "cam1: NOT CALIBRATED: board not found" in captured.out
     assert "--corners" in captured.out
     assert [c.name for c in load_calibration(out)] == ["cam2"]
 

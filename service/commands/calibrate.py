@@ -56,10 +56,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
             p.add_argument("--corners-file", type=Path, help="TOML with [cam] corners = [[x, y] * 4] and/or origin = [x, y]")
             p.add_argument("--origin", action="append", default=[], metavar="CAM=X,Y",
                            help="pixel near the board corner that is the world origin, in a camera")
-            p.add_argument("--frames", type=int, default=5, help="frames sampled per video (default 5)")
+            p.add_argument("--frames", type=int, default=3, help="frames sampled per video (default 3; the board is static)")
 
 
-class _Bar:
+class ProgressBar:
     """A one-line progress bar on stderr; ``close()`` ends the line."""
 
     def __init__(self, enabled: bool):
@@ -203,7 +203,7 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
 def run(args) -> int:
     from capture.calibration import save_calibration
 
-    bar = _Bar(not args.quiet)
+    bar = ProgressBar(not args.quiet)
     try:
         videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
         for cam, p in videos.items():
