@@ -116,15 +116,21 @@ def hidden_points(
     return hidden
 
 
+_CHUNK = 10  # consecutive points (same camera) culled together first
+
+
 def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
-    """(point, occluder) pairs whose pinhole images overlap: indices (pairs,), (pairs,)."""
+    """(point, occluder) pairs whose pinhole images overlap: indices (pairs,), (pairs,).
+
+    Two levels: the image boxes of chunks of ``_CHUNK`` consecutive points of one camera
+    (contour samples along a ruling are neighbours) against the parts' boxes, then the
+    points of the overlapping chunks one by one.  Points behind the camera are never culled."""
     a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
     s_max = np.maximum(1.0 + k * z1, 1.0 + k * z2)
     corners = np.empty((model.n_parts, 8, 3))  # part-frame bounding box of each solid
-    sx, sy, sz = np.array(np.meshgrid([-1, 1], [-1, 1], [0, 1], indexing="ij")).reshape(3, 8)
-    corners[..., 0] = (a * s_max)[:, None] * sx
-    corners[..., 1] = (b * s_max)[:, None] * sy
-    corners[..., 2] = np.where(sz[None, :] > 0, z2[:, None], z1[:, None])
+    corners[..., 0] = (a * s_max)[:, None] * _CORNERS[:, 0]
+    corners[..., 1] = (b * s_max)[:, None] * _CORNERS[:, 1]
+    corners[..., 2] = np.where(_CORNERS[:, 2] > 0, z2[:, None], z1[:, None])
     world = np.einsum("pij,pkj->pki", pose.rotation, corners) + pose.translation[:, None, :]
     Xc = np.einsum("cij,pkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
     depth = Xc[..., 2]
@@ -133,13 +139,49 @@ def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
     xn, yn = Xc[..., 0] / zc, Xc[..., 1] / zc
     inf = np.where(front, 0.0, np.inf)
     box = np.stack([xn.min(-1) - inf, xn.max(-1) + inf, yn.min(-1) - inf, yn.max(-1) + inf], axis=1)
-    n_cams = cam_R.shape[0]
-    Pc = (P @ cam_R.reshape(3 * n_cams, 3).T).reshape(-1, n_cams, 3)[np.arange(c.size), c] + cam_t[c]
+    n = c.size
+    Pc = _to_cameras(cam_R, cam_t, c, P)
     ahead = Pc[:, 2] > 1e-9
     zp = np.where(ahead, Pc[:, 2], 1.0)
-    xp, yp = (Pc[:, 0] / zp)[:, None], (Pc[:, 1] / zp)[:, None]
-    bb = box[c]  # (r, 4, n_parts)
-    cand = (xp >= bb[:, 0]) & (xp <= bb[:, 1]) & (yp >= bb[:, 2]) & (yp <= bb[:, 3])
-    cand |= ~ahead[:, None]
-    cand[np.arange(own.size), own] = False  # a part does not hide its own contour
-    return np.nonzero(cand)
+    xp = np.where(ahead, Pc[:, 0] / zp, 0.0)
+    yp = np.where(ahead, Pc[:, 1] / zp, 0.0)
+    # chunk level: each chunk's box (an unbounded one when a point is behind the camera)
+    start = np.ones(n, dtype=bool)
+    start[1:] = (c[1:] != c[:-1]) | (np.arange(1, n) % _CHUNK == 0)
+    starts = np.flatnonzero(start)
+    lens = np.diff(np.append(starts, n))
+    behind = np.logical_or.reduceat(~ahead, starts)
+    grow = np.where(behind, np.inf, 0.0)[:, None]
+    bb = box[c[starts]]  # (n_chunks, 4, n_parts)
+    over = np.minimum.reduceat(xp, starts)[:, None] - grow <= bb[:, 1]
+    over &= np.maximum.reduceat(xp, starts)[:, None] + grow >= bb[:, 0]
+    over &= np.minimum.reduceat(yp, starts)[:, None] - grow <= bb[:, 3]
+    over &= np.maximum.reduceat(yp, starts)[:, None] + grow >= bb[:, 2]
+    ch, q = np.nonzero(over)
+    # point level, within the overlapping chunks
+    cnt = lens[ch]
+    first = np.cumsum(cnt) - cnt
+    rep = np.repeat(np.arange(ch.size), cnt)
+    i = starts[ch][rep] + (np.arange(rep.size) - first[rep])
+    q = q[rep]
+    pb = box.transpose(0, 2, 1)[c[i], q]  # (pairs, 4)
+    keep = (xp[i] >= pb[:, 0]) & (xp[i] <= pb[:, 1]) & (yp[i] >= pb[:, 2]) & (yp[i] <= pb[:, 3])
+    keep |= ~ahead[i]
+    keep &= own[i] != q  # a part does not hide its own contour
+    return i[keep], q[keep]
+
+
+def _to_cameras(cam_R, cam_t, c, P):
+    """World points P (n, 3) into the frames of their cameras c (n,): (n, 3)."""
+    n_cams = cam_R.shape[0]
+    if c.size and np.all(c[1:] >= c[:-1]):  # grouped by camera (contour rows are): one product each
+        out = np.empty_like(P)
+        bounds = np.searchsorted(c, np.arange(n_cams + 1))
+        for j in range(n_cams):
+            sl = slice(bounds[j], bounds[j + 1])
+            out[sl] = P[sl] @ cam_R[j].T + cam_t[j]
+        return out
+    return np.einsum("nij,nj->ni", cam_R[c], P) + cam_t[c]
+
+
+_CORNERS = np.array(np.meshgrid([-1, 1], [-1, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
