@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -204,3 +205,35 @@ def test_edges_of_rendered_body(model):
     boundary = sil & ~inner
     assert np.array_equal(e & boundary, boundary)  # every silhouette boundary pixel is an edge
     assert (e & inner).sum() > 50  # and there are internal part boundaries too
+
+
+def test_points_behind_the_camera_are_not_drawn(model):
+    """A camera in front of the body looking away sees nothing (without clipping, the body would
+    project mirrored through the centre into the image)."""
+    pose = forward(model, model.zero())
+    away = Camera.look_at("away", [0.6, 0.0, 1.0], [3.0, 0.0, 1.0], size=(160, 120))
+    assert np.all(render_labels(model, pose, away) == -1)
+    facing = Camera.look_at("facing", [0.6, 0.0, 1.0], [-3.0, 0.0, 1.0], size=(160, 120), fov_deg=120)
+    assert np.sum(render_labels(model, pose, facing) >= 0) > 1000
+
+
+def test_shrink_moves_every_edge_inward_by_the_inset(rng):
+    from tracker.render import _shrink
+
+    for _ in range(50):
+        pts = rng.uniform(0, 100, (12, 2)).astype(np.float32)
+        hull = cv2.convexHull(pts)[:, 0, :].astype(float)
+        out = _shrink(hull, 0.5)
+        a, b = hull, np.roll(hull, -1, axis=0)
+        e = b - a
+        n = np.stack([e[:, 1], -e[:, 0]], 1) / np.linalg.norm(e, axis=1)[:, None]
+        centroid = hull.mean(axis=0)
+        n *= np.sign(np.sum((a - centroid) * n, axis=1))[:, None]  # outward
+        # signed distance of each new vertex to each original edge line (negative = inside)
+        dist = np.einsum("ek,vk->ve", n, out) - np.sum(n * a, axis=1)[None]
+        assert dist.max() <= -0.5 + 1e-9
+        # each new vertex sits exactly 0.5 inside the two edges that met at the old vertex
+        own = np.stack([dist[np.arange(len(out)), np.arange(len(out))],
+                        dist[np.arange(len(out)), np.arange(len(out)) - 1]], 1)  # fmt: skip
+        sharp = np.sum(n * np.roll(n, 1, axis=0), axis=1) < -0.8  # miter capped there
+        assert np.allclose(own[~sharp], -0.5)
