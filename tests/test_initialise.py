@@ -90,3 +90,18 @@ def test_bad_input_names_the_camera():
         initialise(model, cams, empty, {"cam0": None, "cam2": None})
     with pytest.raises(ValueError, match="empty visual hull"):
         initialise(model, cams, empty)
+
+
+def test_tracker_initialises_its_first_frame_with_knossow54():
+    """The Tracker's first frame without ``initial_params`` goes through ``initialise``."""
+    from tracker.tracking import Tracker
+
+    model = load_model("knossow54")
+    cams = ring_cameras(6)
+    truth = _reference(model, np.random.default_rng(5), -45.0)
+    sils, chamfer = _views(model, truth, cams)
+    rec = Tracker(model, cams).step(0, 0, chamfer, sils)
+    assert rec["ok"], rec.get("reason")
+    joints = np.array([rec["joints"][n] for n in model.joint_names])
+    err = np.linalg.norm(joints - joint_centre_array(model, forward(model, truth)), axis=1)
+    assert err.mean() < 0.030

@@ -8,10 +8,12 @@ conservative); with an integral image of the mask the box's foreground count is 
 
 - count == 0 in any view (or the box is off the image / behind the camera): **empty**;
 - count == box area in every view: **full** (kept at its size, not split);
-- otherwise: split into 8 (at the finest level: kept iff its centre projects on the
-  silhouette in every view).
+- otherwise: split into 8.
 
-Everything is vectorised per level over all voxels and cameras.  The result is a list of cubes
+The finest level is decided by the centre alone (kept iff it projects on the silhouette in
+every view): the standard sampled visual hull, at 1/8 of the cost of box tests.  Everything is
+vectorised per level over all voxels, camera by camera (a cube found empty is dropped from the
+remaining views).  The result is a list of cubes
 of mixed sizes (``VoxelHull``) with volume-weighted moments for initialisation (centroid,
 principal axes, height) and a point cloud for clients.  ``render_hull`` rasterises a hull back
 into a camera (ray/box slab test per pixel of each voxel's footprint), for consistency checks.
@@ -199,16 +201,31 @@ def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _classify(lower: np.ndarray, size: float, cameras, integrals) -> tuple[np.ndarray, np.ndarray]:
-    """Classify cubes ``lower`` (n, 3) of edge ``size``: returns (empty (n,), full (n,)) bool."""
+    """Classify cubes ``lower`` (n, 3) of edge ``size``: returns (empty (n,), full (n,)) bool.
+
+    Cameras are taken in turn and a cube found empty is dropped from the later ones.
+    """
     n = len(lower)
-    corners = (lower[:, None, :] + size * _CORNERS[None]).reshape(-1, 3)  # (n*8, 3)
     empty = np.zeros(n, bool)
     full = np.ones(n, bool)
+    active = np.arange(n)
     for cam, ii in zip(cameras, integrals):
+        if active.size == 0:
+            break
         h, w = cam.height, cam.width
-        uv, z = _project(cam, corners)
-        front = (z > 1e-6).reshape(n, 8)
-        u, v = uv[:, 0].reshape(n, 8), uv[:, 1].reshape(n, 8)
+        m = len(active)
+        if np.any(cam.distortion != 0):
+            corners = (lower[active][:, None, :] + size * _CORNERS[None]).reshape(-1, 3)
+            uv, z = _project(cam, corners)
+            u, v, z = uv[:, 0].reshape(m, 8), uv[:, 1].reshape(m, 8), z.reshape(m, 8)
+        else:  # homogeneous image points are affine in the corner: project once, add 8 offsets
+            P = cam.projection_matrix
+            xh = (lower[active] @ P[:, :3].T + P[:, 3])[:, None, :] + size * (_CORNERS @ P[:, :3].T)[None]
+            z = xh[..., 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = 1.0 / z
+            u, v = xh[..., 0] * inv, xh[..., 1] * inv
+        front = z > 1e-6
         all_front, any_front = front.all(1), front.any(1)
         if not all_front.all():
             u, v = np.where(front, u, np.nan), np.where(front, v, np.nan)
@@ -229,9 +246,27 @@ def _classify(lower: np.ndarray, size: float, cameras, integrals) -> tuple[np.nd
         count = ii[r1, c1] - ii[r0, c1] - ii[r1, c0] + ii[r0, c0]
         area = (c1 - c0) * (r1 - r0)
         # wholly behind the camera or off the image: empty; partly behind: undecided
-        empty |= ~any_front | (area <= 0) | (all_front & (count == 0))
-        full &= inside_img & (count == area)
+        gone = ~any_front | (area <= 0) | (all_front & (count == 0))
+        full[active] &= inside_img & (count == area)
+        empty[active[gone]] = True
+        active = active[~gone]
     return empty, full & ~empty
+
+
+def _centres_inside(centres: np.ndarray, cameras, masks) -> np.ndarray:
+    """Whether points (n, 3) project onto the silhouette in every view, (n,) bool."""
+    on = np.ones(len(centres), bool)
+    for cam, m in zip(cameras, masks):
+        idx = np.flatnonzero(on)
+        if idx.size == 0:
+            break
+        uv, z = _project(cam, centres[idx])
+        uv = np.rint(np.nan_to_num(uv, nan=-1.0, posinf=-1.0, neginf=-1.0)).astype(np.int64)
+        inside = (z > 1e-6) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
+        hit = np.zeros(idx.size, bool)
+        hit[inside] = m[uv[inside, 1], uv[inside, 0]] > 0
+        on[idx] = hit
+    return on
 
 
 def visual_hull(
@@ -278,25 +313,18 @@ def visual_hull(
     for level in range(levels + 1):
         if len(lower) == 0:
             break
+        if level == levels:  # finest level: a cube is kept when its centre is on every silhouette
+            centre = lower + 0.5 * size
+            on = _centres_inside(centre, cameras, masks)
+            kept_c.append(centre[on])
+            kept_s.append(np.full(int(on.sum()), size))
+            kept_f.append(np.zeros(int(on.sum()), bool))
+            break
         empty, full = _classify(lower, size, cameras, integrals)
         kept_c.append(lower[full] + 0.5 * size)
         kept_s.append(np.full(int(full.sum()), size))
         kept_f.append(np.ones(int(full.sum()), bool))
         todo = lower[~empty & ~full]
-        if level == levels:
-            centre = todo + 0.5 * size
-            on = np.ones(len(centre), bool)
-            for cam, m in zip(cameras, masks):
-                ok = cam.depth(centre) > 1e-6
-                uv = np.rint(cam.project(centre)).astype(np.int64, copy=False) if len(centre) else np.zeros((0, 2), int)
-                inside = ok & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
-                hit = np.zeros(len(centre), bool)
-                hit[inside] = m[uv[inside, 1], uv[inside, 0]] > 0
-                on &= hit
-            kept_c.append(centre[on])
-            kept_s.append(np.full(int(on.sum()), size))
-            kept_f.append(np.zeros(int(on.sum()), bool))
-            break
         size *= 0.5
         lower = (todo[:, None, :] + size * _CHILDREN[None]).reshape(-1, 3)
     centres = np.concatenate(kept_c) if kept_c else np.zeros((0, 3))

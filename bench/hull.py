@@ -1,0 +1,101 @@
+"""Benchmark: visual hull, initialisation and recovery timings (prints figures; --json for JSON).
+
+    python bench/hull.py [--repeat 5] [--json] [--no-init]
+
+Synthetic: 6 ring cameras at 800x600, a random knossow40 pose rendered by ``tracker.render``.
+Real: ``../shared/data/dancer_8view`` (8 x 780x582) when present.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from tracker.hull import common_view_bounds, visual_hull  # noqa: E402
+from tracker.kinematics import forward  # noqa: E402
+from tracker.model import load_model  # noqa: E402
+from tracker.render import render_silhouettes  # noqa: E402
+from tracker.scene import ring_cameras  # noqa: E402
+
+
+def _time(fn, repeat: int) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times)), out
+
+
+def bench_hull(cams, sils, label: str, repeat: int, sizes=(0.03, 0.02, 0.015)) -> list[dict]:
+    box = common_view_bounds(cams)
+    rows = []
+    for s in sizes:
+        ms, hull = _time(lambda: visual_hull(cams, sils, min_voxel_m=s, bounds=box), repeat)
+        rows.append({"scene": label, "min_voxel_m": s, "hull_ms": round(ms, 1), "voxels": hull.n_voxels,
+                     "height_m": round(hull.height(), 3)})
+    ms, _ = _time(lambda: common_view_bounds(cams), repeat)
+    rows.append({"scene": label, "common_view_bounds_ms": round(ms, 1)})
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-init", action="store_true", help="skip the initialise/recover timings")
+    args = ap.parse_args(argv)
+    model = load_model("knossow40")
+    rng = np.random.default_rng(0)
+    truth = model.random_params(rng, fraction=0.3)
+    cams = ring_cameras(6, size=(800, 600))
+    sils = render_silhouettes(model, forward(model, truth), cams)
+    rows = bench_hull(cams, sils, "synthetic 6x800x600", args.repeat)
+    data = ROOT.parent / "shared" / "data" / "dancer_8view"
+    if data.is_dir():
+        import cv2
+
+        from capture.calib_formats import read_projection_matrix
+
+        masks = [cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in sorted(data.glob("silh_cam*.pbm"))]
+        dcams = [read_projection_matrix(data / "calibration" / f"cam{i:02d}.xml", size=(780, 582)) for i in range(8)]
+        rows += bench_hull(dcams, masks, "dancer_8view 8x780x582", args.repeat)
+    if not args.no_init:
+        from tracker.initialise import initialise
+        from tracker.kinematics import joint_centre_array
+        from tracker.recovery import recover, turn_about_vertical
+
+        views = {c.name: s for c, s in zip(cams, sils)}
+        ref = model.zero()
+        ref[:2], ref[5] = [0.4, -0.3], 2.0
+        ref_views = {c.name: s for c, s in zip(cams, render_silhouettes(model, forward(model, ref), cams))}
+        ms, res = _time(lambda: initialise(model, cams, ref_views), 1)
+        err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
+                             - joint_centre_array(model, forward(model, ref)), axis=1).mean()
+        rows.append({"scene": "initialise T-pose, 6 views", "ms": round(ms), "candidates": res.candidates,
+                     "joint_error_mm": round(1e3 * err, 1)})
+        last = turn_about_vertical(model, truth, -np.pi / 2, forward(model, truth).translation[0])
+        last[:2] -= [0.4, 0.0]
+        ms, res = _time(lambda: recover(model, cams, views, None, last), 1)
+        err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
+                             - joint_centre_array(model, forward(model, truth)), axis=1).mean()
+        rows.append({"scene": "recover after 90 deg / 40 cm, 6 views", "ms": round(ms), "candidates": res.candidates,
+                     "joint_error_mm": round(1e3 * err, 1)})
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        for r in rows:
+            print("  ".join(f"{k}={v}" for k, v in r.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
