@@ -37,6 +37,7 @@ __all__ = [
     "intrinsics_from_frames",
     "calibrate_extrinsics",
     "rodrigues_batch",
+    "solve_board_pose",
 ]
 
 Progress = Callable[[int, int, str], None]
@@ -214,8 +215,8 @@ def _project(K: np.ndarray, dist: np.ndarray, Xc: np.ndarray) -> np.ndarray:
     return np.stack([K[:, 0, 0] * xd + K[:, 0, 1] * yd + K[:, 0, 2], K[:, 1, 1] * yd + K[:, 1, 2]], axis=-1)
 
 
-def _pnp(obs: BoardObservation, intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
-    """board2cam (rvec, tvec) from one observation (IPPE, then iterative refinement)."""
+def solve_board_pose(obs: BoardObservation, intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """board2cam pose (rvec (3,), tvec (3,) metres) from one observation: planar IPPE, then iterative refinement."""
     obj = np.asarray(obs.object_points, dtype=np.float64)
     img = np.asarray(obs.image_points, dtype=np.float64)
     ok, rv, tv = cv2.solvePnP(obj, img, intr.matrix, intr.distortion, flags=cv2.SOLVEPNP_IPPE)
@@ -234,7 +235,7 @@ def _to_T(rv, tv) -> np.ndarray:
 
 def _initial_poses(intr: Mapping[str, Intrinsics], obs: Sequence[BoardObservation]):
     """world2cam per camera and board2world per placement by chaining PnP poses outwards from placement 0."""
-    board2cam = {(o.camera, o.placement): _to_T(*_pnp(o, intr[o.camera])) for o in obs}
+    board2cam = {(o.camera, o.placement): _to_T(*solve_board_pose(o, intr[o.camera])) for o in obs}
     cams: dict[str, np.ndarray] = {c: T for (c, p), T in board2cam.items() if p == 0}
     places: dict[int, np.ndarray] = {0: np.eye(4)}
     changed = True

@@ -37,7 +37,7 @@ from capture.calibrate import (
     ExtrinsicsResult,
     Intrinsics,
     Progress,
-    _pnp,
+    solve_board_pose,
     calibrate_extrinsics,
 )
 from capture.camera import rodrigues_to_matrix
@@ -178,7 +178,7 @@ def load_corner_file(path) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]
 
 
 def _camera_height(obs: BoardObservation, intr: Intrinsics) -> float:
-    rv, tv = _pnp(obs, intr)
+    rv, tv = solve_board_pose(obs, intr)
     return float((-rodrigues_to_matrix(rv).T @ tv)[2])
 
 

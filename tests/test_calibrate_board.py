@@ -195,36 +195,76 @@ def _view_poses(rng, n):
             for _ in range(n)]
 
 
-@pytest.mark.parametrize("kind", ["checkerboard", "charuco"])
-def test_intrinsics_from_rendered_views(rng, kind):
-    truth = Camera.look_at("c", [0, 0, 0.3], [0, 1, 0.3], size=(644, 486), fov_deg=70, distortion=[-0.25, 0.08, 0, 0, 0])
-    if kind == "checkerboard":
-        board = Checkerboard(8, 6, 0.115)
-        frames = [_checker_view(truth, T, supersample=2) for T in _view_poses(rng, 7)]
-    else:
-        board = CharucoBoard(7, 5, 0.16, 0.12)
-        px = 0.16 / 60.0
-        tex = board.cv_board().generateImage((7 * 60, 5 * 60), marginSize=0).astype(np.float32)
-        tex = cv2.copyMakeBorder(tex, 30, 30, 30, 30, cv2.BORDER_CONSTANT, value=255)
-        # generateImage puts board y down the image; our board frame has y along rows too
-        frames = [_render(truth, tex, px, (29.5, 29.5), T, supersample=2) for T in _view_poses(rng, 7)]
-    res = intrinsics_from_frames("c", frames, board)
-    K = res.intrinsics.matrix
-    assert res.n_views >= 5
-    assert res.rms_px < 0.3
+def _assert_intrinsics_close(K, dist, truth):
     assert abs(K[0, 0] / truth.matrix[0, 0] - 1) < 0.01
     assert abs(K[1, 1] / truth.matrix[1, 1] - 1) < 0.01
     assert np.abs(K[:2, 2] - truth.matrix[:2, 2]).max() < 3.0
-    # the lens model reproduces the true distortion where the boards were seen (no extrapolation to the corners)
-    uv = np.stack(np.meshgrid(np.linspace(150, 500, 8), np.linspace(100, 400, 6)), -1).reshape(-1, 2)
+    # the lens model reproduces the true distortion where the boards were seen (no extrapolation to the corners):
     # distortion field (raw pixel - ideal pinhole pixel) of each model, in pixels
+    uv = np.stack(np.meshgrid(np.linspace(150, 500, 8), np.linspace(100, 400, 6)), -1).reshape(-1, 2)
     field_true = uv - cv2.undistortPoints(uv.reshape(-1, 1, 2), truth.matrix, truth.distortion, P=truth.matrix).reshape(-1, 2)
-    field_est = uv - cv2.undistortPoints(uv.reshape(-1, 1, 2), K, res.intrinsics.distortion, P=K).reshape(-1, 2)
+    field_est = uv - cv2.undistortPoints(uv.reshape(-1, 1, 2), K, dist, P=K).reshape(-1, 2)
     assert np.abs(field_true).max() > 10  # the lens really distorts here
     assert np.abs(field_true - field_est).max() < 1.0
+
+
+def test_intrinsics_from_rendered_checkerboard_views(rng):
+    truth = Camera.look_at("c", [0, 0, 0.3], [0, 1, 0.3], size=(644, 486), fov_deg=70, distortion=[-0.25, 0.08, 0, 0, 0])
+    frames = [_checker_view(truth, T, supersample=2) for T in _view_poses(rng, 7)]
+    res = intrinsics_from_frames("c", frames, BOARD)
+    assert res.n_views >= 5
+    assert res.rms_px < 0.3
+    _assert_intrinsics_close(res.intrinsics.matrix, res.intrinsics.distortion, truth)
 
 
 def test_intrinsics_needs_three_views():
     blank = [np.full((100, 120), 255, np.uint8)] * 4
     with pytest.raises(ValueError, match=r"camera 'c': board found in 0 of 4 frames"):
         intrinsics_from_frames("c", blank, BOARD)
+
+
+def test_cli_intrinsics_from_charuco_image_sequence(rng, tmp_path, capsys):
+    from capture.calibration import load_calibration
+    from service.cli import main
+
+    truth = Camera.look_at("c", [0, 0, 0.3], [0, 1, 0.3], size=(644, 486), fov_deg=70, distortion=[-0.25, 0.08, 0, 0, 0])
+    board = CharucoBoard(7, 5, 0.16, 0.12)
+    tex = board.cv_board().generateImage((7 * 60, 5 * 60), marginSize=0).astype(np.float32)
+    tex = cv2.copyMakeBorder(tex, 30, 30, 30, 30, cv2.BORDER_CONSTANT, value=255)
+    (tmp_path / "cam0").mkdir()
+    for k, T in enumerate(_view_poses(rng, 6)):
+        cv2.imwrite(str(tmp_path / "cam0" / f"{k:02d}.png"), _render(truth, tex, 0.16 / 60.0, (29.5, 29.5), T, supersample=2))
+    out = tmp_path / "intrinsics.toml"
+    rc = main(["calibrate", "intrinsics", "--charuco", "7x5", "--square", "0.16", "--marker", "0.12", "--every", "1",
+               "--video", f"cam0={tmp_path / 'cam0' / '%02d.png'}", "--out", str(out), "--quiet"])
+    assert rc == 0, capsys.readouterr()
+    (cam,) = load_calibration(out)
+    assert cam.name == "cam0" and cam.size == (644, 486)
+    _assert_intrinsics_close(cam.matrix, cam.distortion, truth)
+    assert "cam0: ok views=6" in capsys.readouterr().out
+    # a camera whose frames never show the board is named, with the reason, and exit status 1
+    cv2.imwrite(str(tmp_path / "blank.png"), np.full((486, 644), 128, np.uint8))
+    rc = main(["calibrate", "intrinsics", "--charuco", "7x5", "--square", "0.16", "--marker", "0.12",
+               "--video", f"cam0={tmp_path / 'cam0' / '%02d.png'}", "--video", f"cam1={tmp_path / 'blank.png'}",
+               "--every", "1", "--out", str(out), "--quiet"])
+    assert rc == 1
+    assert "cam1: NOT CALIBRATED: camera 'cam1': board found in 0 of 1 frames" in capsys.readouterr().out
+
+
+def test_corner_file_errors_name_file_camera_key(tmp_path):
+    from capture.floor_board import load_corner_file
+
+    p = tmp_path / "c.toml"
+    p.write_text("[cam1]\ncorners = [[1, 2], [3, 4], [5, 6]]\n")
+    with pytest.raises(ValueError, match=r"c.toml \[cam1\] key 'corners': expected 4"):
+        load_corner_file(p)
+    p.write_text("[cam2]\norigin = [1, 2, 3]\n")
+    with pytest.raises(ValueError, match=r"c.toml \[cam2\] key 'origin'"):
+        load_corner_file(p)
+    p.write_text("[cam3]\nfoo = 1\n")
+    with pytest.raises(ValueError, match=r"c.toml \[cam3\]: needs key 'corners'"):
+        load_corner_file(p)
+    p.write_text('[cam1]\ncorners = [[1, 2], [3, 4], [5, 6], [7, 8]]\n[cam2]\norigin = [9.5, 10]\n')
+    outlines, hints = load_corner_file(p)
+    np.testing.assert_array_equal(outlines["cam1"][3], [7, 8])
+    np.testing.assert_array_equal(hints["cam2"], [9.5, 10])

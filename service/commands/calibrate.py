@@ -34,7 +34,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         ("extrinsics", "camera poses from a board lying on the floor (world Z up, board corner = origin)")):
         p = sub.add_parser(name, help=help_, description=help_)
         p.add_argument("--video", action="append", default=[], metavar="CAM=PATH", required=True,
-                       help="board video or image of a camera (repeat per camera)")
+                       help="board video, image, or image sequence (cam0/%%04d.png) of a camera (repeat per camera)")
         p.add_argument("--board", metavar="COLSxROWS", help="checkerboard inner corners, e.g. 8x6")
         p.add_argument("--square", type=float, metavar="M", help="square size in metres")
         p.add_argument("--board-file", type=Path, metavar="XML",
@@ -207,7 +207,7 @@ def run(args) -> int:
     try:
         videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
         for cam, p in videos.items():
-            if not p.is_file():
+            if not p.is_file() and "%" not in p.name:  # a printf pattern names an image sequence
                 raise ValueError(f"--video {cam}={p}: file not found")
         step = _run_intrinsics if args.calib_step == "intrinsics" else _run_extrinsics
         cams, report = step(args, videos, bar)
