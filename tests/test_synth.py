@@ -168,3 +168,29 @@ def test_bad_arguments(tmp_path):
         make_synthetic_session(bundled_motion(), tmp_path / "x", noise=-1)
     with pytest.raises(FileNotFoundError, match="available"):
         bundled_motion("nope")
+
+
+def test_replay_reads_the_session(session):
+    """The session is what capture.replay reads: frame ids 0..K-1 at k / fps, and the backgrounds."""
+    from capture.replay import read_frames
+
+    s = load_session(session)
+    frames = list(read_frames(s, "cam1"))
+    assert [f.frame_id for f in frames] == list(range(N_FRAMES))
+    assert [f.timestamp_ns for f in frames] == [round(k * 1e9 / 30) for k in range(N_FRAMES)]
+    assert np.array_equal(frames[3].image, read_video(session / "cam1.avi")[3])
+    assert len(list(read_frames(s, "cam1", background=True))) == N_BG
+
+
+def test_fitted_segments_reach_session_toml(tmp_path):
+    out = make_synthetic_session(bundled_motion(), tmp_path / "seg", cameras=1, size=(64, 48), frames=1,
+                                 n_background=1, fit_segments=True, noise=0.0)  # fmt: skip
+    s = load_session(out)
+    assert set(s.segment_lengths) == {"thigh", "shank", "upper_arm", "forearm"}
+    rec = json.loads((out / "ground_truth.jsonl").read_text())
+    model = load_model("knossow40", height_m=s.height_m, segment_lengths=s.segment_lengths)
+    joints = forward(model, np.array(rec["params"]))
+    from tracker.kinematics import joint_centres
+
+    for name, xyz in joint_centres(model, joints).items():
+        assert np.allclose(rec["joints"][name], xyz)  # the session alone rebuilds the ground-truth model
