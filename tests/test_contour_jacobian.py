@@ -145,3 +145,28 @@ def test_rows_select_points(case):
         contour_jacobian(model, pose, CAMERAS, ct, rows=ct.valid[:-1])
     with pytest.raises(ValueError, match="cameras"):
         contour_jacobian(model, pose, CAMERAS[:3], ct)
+
+
+def test_camera_inside_a_cone_gives_finite_jacobians_without_warnings():
+    """Rows without a real contour generator (camera inside the cone) get finite values, no warnings."""
+    import warnings
+
+    model = load_model("knossow40", height_m=1.75)
+    pose = forward(model, model.random_params(np.random.default_rng(5), fraction=0.3))
+    torso = model.part_index("torso")
+    inside = pose.to_world(np.array([torso]), np.array([[0.0, 0.0, 0.05]]))[0]
+    cams = [Camera.look_at("inside", inside, inside + [1.0, 0.0, -1.0], distortion=DISTORTION), *CAMERAS[:2]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ct = extremal_contours(model, pose, cams, n_samples=4)
+        assert not ct.valid[(ct.cam == 0) & (ct.part == torso)].any()
+        for sliding in (True, False):
+            J = contour_jacobian(model, pose, cams, ct, sliding=sliding)
+            assert np.isfinite(J).all()
+            assert np.isfinite(contour_point_jacobian(model, pose, cams, ct, sliding=sliding)).all()
+        # no ruling, no sliding: those rows get the rigid term only
+        rows = (ct.cam == 0) & (ct.part == torso)
+        np.testing.assert_array_equal(
+            contour_point_jacobian(model, pose, cams, ct, rows=rows),
+            contour_point_jacobian(model, pose, cams, ct, rows=rows, sliding=False),
+        )

@@ -16,7 +16,8 @@ for the camera centre C (world).  When the part moves with the spatial screw
 
       B = -(1 / f_θ) (R X_θ) [(C × R n)^T  (R n)^T]          (3×6, rank 1)
 
-  (``(R n)^T [-[C]×  I] = [(C × R n)^T  (R n)^T]``).  ``X_θ`` lies in the tangent
+  (``(R n)^T [-[C]×  I] = [(C × R n)^T  (R n)^T]``); B = 0 on rows without a real
+  ruling (``contours.valid`` False there anyway).  ``X_θ`` lies in the tangent
   plane, which contains the line of sight, so ``J_I B`` runs along the image
   contour: it moves the matched sample along its ruling's image, never across it.
 
@@ -76,8 +77,11 @@ def _sliding_terms(model, pose, centres, contours, r):
     cos, sin = np.cos(th), np.sin(th)
     m = np.einsum("nji,nj->ni", R, C - t)  # camera centre in the part frame
     f_theta = b * m[:, 0] * sin - a * m[:, 1] * cos
-    # f_θ = 0 only where the two rulings merge (grazing view): no contour there
-    f_theta = np.where(np.abs(f_theta) > 1e-300, f_theta, 1e-300)
+    # f_θ² = F² + G² - H² = D at a root: where contours.py finds no real ruling (D below its
+    # threshold, the camera inside or on the cone) there is no sliding; those rows are not valid
+    F, G, H = -b * m[:, 0], -a * m[:, 1], a * b * (1.0 + k * m[:, 2])
+    degenerate = f_theta * f_theta <= 1e-12 * (F * F + G * G + H * H)
+    f_theta = np.where(degenerate, np.inf, f_theta)
     per_ruling = np.empty((cam.size, 9))  # e / (1 + k z), C × nw, nw
     per_ruling[:, 0:3] = R[:, :, 0] * (a * sin / f_theta)[:, None] - R[:, :, 1] * (b * cos / f_theta)[:, None]
     nw = R[:, :, 0] * (b * cos)[:, None] + R[:, :, 1] * (a * sin)[:, None] - R[:, :, 2] * (a * b * k)[:, None]
