@@ -5,7 +5,7 @@
   1 / ``resolution_px``, ``truncation_px`` = ``max_distance_px``); exact round trip.
 - :class:`BackgroundSegmenter`: the segment worker's per-camera callable.  It learns its background
   model from ``learn_frames`` frames it is given (an empty studio at start-up) unless a model is
-  supplied (e.g. from the session's background media, :func:`background_from_session`).
+  supplied (e.g. ``tracker.offline.background_models`` of a replayed session).
 """
 
 from __future__ import annotations
@@ -35,22 +35,6 @@ def message_to_chamfer(msg: ChamferMessage):
         return ChamferImages(sil, edges, msg.roi_xy, 1.0 / msg.scale, msg.truncation_px, msg.image_size)
     except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
         raise MessageError(f"camera {msg.camera}: not segmentation chamfer images: {exc}") from None
-
-
-def background_from_session(session, camera: str, *, max_frames: int = 50):
-    """A ``BackgroundModel`` from the camera's background media, else the median of its footage."""
-    from capture.replay import read_frames
-    from segmentation.background import BackgroundModel
-
-    bg = session.camera(camera).background is not None
-    frames = []
-    for frame in read_frames(session, camera, background=bg):
-        frames.append(frame.image)
-        if len(frames) >= max_frames:
-            break
-    if not frames:
-        raise MessageError(f"camera {camera}: no frames to learn a background from")
-    return BackgroundModel.from_frames(frames) if bg else BackgroundModel.from_median(frames)
 
 
 class BackgroundSegmenter:

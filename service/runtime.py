@@ -94,18 +94,21 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
 
 def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str | None = None) -> dict:
     """One segmenter per camera: a plug-in factory ``f(camera) -> Segmenter``, else
-    :class:`~service.components.BackgroundSegmenter` with the session's background (replay) or learnt
-    from the first frames (live cameras: the studio must be empty at start-up)."""
+    :class:`~service.components.BackgroundSegmenter` with the session's background model as
+    ``tracker.offline`` builds it (replay) or learnt from the first frames (live cameras: the studio
+    must be empty at start-up)."""
     if plugin:
         factory = load_plugin(plugin)
         return {c: factory(c) for c in cameras}
-    from service.components import BackgroundSegmenter, background_from_session
+    from service.components import BackgroundSegmenter
 
-    out = {}
-    for c in cameras:
-        model = background_from_session(_session(cfg), c) if cfg.camera(c).backend == "replay" else None
-        out[c] = BackgroundSegmenter(model=model)
-    return out
+    replayed = [c for c in cameras if cfg.camera(c).backend == "replay"]
+    models = {}
+    if replayed:  # exactly the offline pipeline's models, so lossless replay gives the offline poses
+        from tracker.offline import background_models
+
+        models, _ = background_models(_session(cfg), replayed)
+    return {c: BackgroundSegmenter(model=models.get(c)) for c in cameras}
 
 
 def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:

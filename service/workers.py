@@ -123,10 +123,10 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                        idle_exit_s: float | None = None) -> dict:
     """One thread per camera: newest frame (live) or every frame in order (lossless) -> chamfer.
 
-    ``idle_exit_s``: return after that long without any frame (tests, replay); None = run until stop.
+    ``idle_exit_s``: return after that long without any frame once frames came (replays); None = until stop.
     """
     lock = threading.Lock()
-    last_frame = [time.monotonic()]
+    last_frame: list = [None]  # idle time counts from the first frame
     wires = {name: (Inbox(session, keys.frame(name), FrameMessage.from_bytes, mode=mode,
                           depth=1 if mode == "live" else 4096),
                     declare_publisher(session, keys.chamfer(name), mode=mode)) for name in segmenters}
@@ -167,7 +167,7 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
         t.start()
     try:
         while not stop.is_set() and all(t.is_alive() for t in threads):
-            if idle_exit_s is not None and time.monotonic() - last_frame[0] > idle_exit_s:
+            if idle_exit_s is not None and last_frame[0] is not None and time.monotonic() - last_frame[0] > idle_exit_s:
                 break
             with lock:
                 status.tick()
@@ -188,7 +188,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
                      on_pose: Callable[[PoseRecord], None] | None = None) -> dict:
     """Assemble chamfer sets, fit, publish one pose record per released set (``ok: false`` + reason
     when fitting fails — never silently dropped).  Lossless mode acknowledges each frame id.
-    Returns after ``max_frames`` poses, ``idle_exit_s`` without input, or ``stop``."""
+    Returns after ``max_frames`` poses, ``idle_exit_s`` without input once input came, or ``stop``."""
     lossless = mode == "lossless"
     inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
                   depth=16 * len(cameras) if lossless else 2 * len(cameras))
@@ -199,10 +199,11 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     status = StatusReporter(session, keys, component, clock=clock)
     sent: dict[int, int] = {}
     done = 0
-    last_input = clock()
+    last_input = None  # idle time counts from the first input
     try:
         while not stop.is_set() and (max_frames is None or done < max_frames):
-            if idle_exit_s is not None and clock() - last_input > idle_exit_s and not len(asm):
+            if (idle_exit_s is not None and last_input is not None and clock() - last_input > idle_exit_s
+                    and not len(asm)):
                 break
             deadline = asm.next_deadline()
             wait = 0.05 if deadline is None else min(0.05, max(0.0, deadline - clock()))
