@@ -25,7 +25,9 @@ class SegmentationParams:
     max_hole_fraction : holes below this fraction of their component's area are filled.
     open_px, close_px : radii of the morphological opening / closing.
     canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
-    max_distance_px, resolution_px, precise : chamfer images (see :func:`chamfer_images`).
+    max_distance_px, resolution_px, precise, precise_edges : chamfer images (see
+        :func:`chamfer_images`); by default the silhouette distance is exact L2 and the edge distance
+        uses the 5x5 chamfer mask (error <= 0.9 px at 48 px, 2.5x cheaper; edges are noisy anyway).
     """
 
     low: float = 16.0
@@ -42,6 +44,7 @@ class SegmentationParams:
     max_distance_px: float = 48.0
     resolution_px: float = 0.25
     precise: bool = True
+    precise_edges: bool = False
 
     def min_area_px(self, image_size: tuple[int, int]) -> float:
         """Smallest component kept, in pixels, for an image of ``(w, h)``."""
@@ -83,6 +86,7 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
                                  blur_sigma=params.blur_sigma)
     chamfer = chamfer_images(sil_roi, edges_roi, max_distance_px=params.max_distance_px,
                              resolution_px=params.resolution_px, precise=params.precise,
+                             precise_edges=params.precise_edges,
                              offset_xy=(x0, y0), image_size=(w, h))
     silhouette = np.zeros((h, w), np.uint8)
     edges = np.zeros((h, w), np.uint8)
