@@ -41,8 +41,10 @@ def case(request):
         for k in range(model.n_params):
             dp = np.zeros(model.n_params)
             dp[k] = H
-            plus = extremal_contours(model, forward(model, params + dp), CAMERAS, n_samples=N_SAMPLES, visibility=False)
-            minus = extremal_contours(model, forward(model, params - dp), CAMERAS, n_samples=N_SAMPLES, visibility=False)
+            plus, minus = (
+                extremal_contours(model, forward(model, p), CAMERAS, n_samples=N_SAMPLES, visibility=False)
+                for p in (params + dp, params - dp)
+            )
             fd_xyz[:, :, k] = (plus.points - minus.points) / (2 * H)
             fd_uv[:, :, k] = (plus.uv - minus.uv) / (2 * H)
         out.append((pose, ct, fd_xyz, fd_uv))
@@ -119,7 +121,8 @@ def test_sliding_moves_points_along_the_image_contour(case):
     part = ct.part[rows]
     a, b, k = (model.cones[part, j] for j in range(3))
     th = ct.theta[rows]
-    Xz = np.einsum("nij,nj->ni", pose.rotation[part], np.stack([a * k * np.cos(th), b * k * np.sin(th), np.ones_like(th)], 1))
+    Xz_local = np.stack([a * k * np.cos(th), b * k * np.sin(th), np.ones_like(th)], axis=1)
+    Xz = np.einsum("nij,nj->ni", pose.rotation[part], Xz_local)
     pts, cam = ct.points[rows], ct.cam[rows]
     tangent = np.empty((rows.sum(), 2))
     for c in range(6):
@@ -137,7 +140,8 @@ def test_rows_select_points(case):
     full = contour_jacobian(model, pose, CAMERAS, ct)
     idx = np.array([5, 0, ct.n_points - 1, 17])
     np.testing.assert_allclose(contour_jacobian(model, pose, CAMERAS, ct, rows=idx), full[idx], rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(contour_jacobian(model, pose, CAMERAS, ct, rows=ct.valid), full[ct.valid], rtol=1e-12, atol=1e-12)
+    by_mask = contour_jacobian(model, pose, CAMERAS, ct, rows=ct.valid)
+    np.testing.assert_allclose(by_mask, full[ct.valid], rtol=1e-12, atol=1e-12)
     assert contour_jacobian(model, pose, CAMERAS, ct, rows=np.array([], dtype=int)).shape == (0, 2, model.n_params)
     with pytest.raises(ValueError, match="rows"):
         contour_jacobian(model, pose, CAMERAS, ct, rows=np.array([ct.n_points]))

@@ -60,10 +60,8 @@ def test_line_of_sight_is_tangent_at_every_contour_point(model, rng):
 def test_closed_form_roots_match_a_brute_force_scan(rng):
     """The two tan(θ/2) roots are exactly the sign changes of f(θ) found by scanning θ."""
     n = 200
-    cones = np.stack(
-        [rng.uniform(0.02, 0.2, n), rng.uniform(0.02, 0.2, n), rng.uniform(-2, 2, n), -0.1 * np.ones(n), 0.2 * np.ones(n)],
-        axis=1,
-    )
+    ab = rng.uniform(0.02, 0.2, (n, 2))
+    cones = np.c_[ab, rng.uniform(-2, 2, n), np.full(n, -0.1), np.full(n, 0.2)]
     m = rng.normal(0, 0.12, (n, 3))
     theta, real = contour_generator_angles(cones, m)
     a, b, k = cones[:, 0:1], cones[:, 1:2], cones[:, 2:3]

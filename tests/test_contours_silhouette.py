@@ -70,7 +70,8 @@ def test_contour_points_lie_on_the_rendered_silhouette_boundary(tmp_path, rng, s
             assert np.abs(d).max() < 1.0, np.abs(d).max()
             assert np.abs(d).mean() < 0.35
             # the check can fail: the part's axis projects well inside the silhouette
-            axis = cams[c].project(pose.to_world(np.zeros(5, int), np.c_[np.zeros((5, 2)), np.linspace(0.3, 0.7, 5) * (shape["z2"] - shape["z1"]) + shape["z1"]]))
+            axis_z = shape["z1"] + np.linspace(0.3, 0.7, 5) * (shape["z2"] - shape["z1"])
+            axis = cams[c].project(pose.to_world(np.zeros(5, int), np.c_[np.zeros((5, 2)), axis_z]))
             assert signed_boundary_distance(mask, axis).min() > 3.0
             checked += sel.sum()
     assert checked > 200

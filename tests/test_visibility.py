@@ -118,7 +118,8 @@ def ray_march(model, pose, centres, ct, rows, n_steps=200):
         Cn, Dn = C[near], D[near]
         for _ in range(45):
             m1, m2 = lo + (hi - lo) / 3, hi - (hi - lo) / 3
-            left = solid_value(model, pose, q, Cn + m1[:, None] * Dn) < solid_value(model, pose, q, Cn + m2[:, None] * Dn)
+            f1 = solid_value(model, pose, q, Cn + m1[:, None] * Dn)
+            left = f1 < solid_value(model, pose, q, Cn + m2[:, None] * Dn)
             lo, hi = np.where(left, lo, m1), np.where(left, m2, hi)
         coarse[near] = np.minimum(coarse[near], solid_value(model, pose, q, Cn + lo[:, None] * Dn))
         worst = np.where(ct.part[rows] == q, worst, np.minimum(worst, coarse))
