@@ -6,7 +6,7 @@ import pytest
 from capture.camera import Camera
 from tracker.contours import extremal_contours
 from tracker.jacobian import contour_jacobian, contour_motion, contour_point_jacobian
-from tracker.kinematics import body_jacobian, forward
+from tracker.kinematics import body_jacobian, forward, point_jacobian
 from tracker.model import load_model
 
 MODELS = ["knossow40", "knossow54"]
@@ -102,6 +102,12 @@ def test_factors_compose(case):
     JH = body_jacobian(model, pose)[ct.part]  # (N, 6, n_params)
     AB = contour_motion(model, pose, CAMERAS, ct)
     np.testing.assert_allclose(AB @ JH, contour_point_jacobian(model, pose, CAMERAS, ct), atol=1e-12)
+    # the rigid term alone is tracker.kinematics.point_jacobian (A J_H)
+    np.testing.assert_allclose(
+        contour_point_jacobian(model, pose, CAMERAS, ct, sliding=False),
+        point_jacobian(model, pose, ct.part, ct.points),
+        atol=1e-12,
+    )
     rows = np.flatnonzero(ct.valid)
     JI = np.concatenate([CAMERAS[c].project_with_jacobian(ct.points[rows][ct.cam[rows] == c])[1] for c in range(6)])
     np.testing.assert_allclose(
