@@ -60,7 +60,7 @@ class Contours:
     points : ndarray, shape (N, 3)
         World coordinates, metres.
     uv : ndarray, shape (N, 2)
-        Pixel coordinates (finite; meaningless where not ``valid``).
+        Pixel coordinates (``Camera.project``) where ``valid``; 0 elsewhere (always finite).
     valid : ndarray of bool, shape (N,)
         The camera is outside the cone (a real contour generator), the point is in
         front of the camera and inside the image.
