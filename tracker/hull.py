@@ -344,38 +344,47 @@ def _pixel_rays(camera: Camera, uv: np.ndarray) -> np.ndarray:
     return rays_c @ camera.rotation  # R^T applied to row vectors
 
 
-def render_hull(hull: VoxelHull, camera: Camera, *, max_pairs: int = 4_000_000) -> np.ndarray:
+def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) -> np.ndarray:
     """Rasterise the hull into ``camera``: (h, w) uint8 mask, 255 where a pixel's ray meets a voxel.
 
     Each voxel's footprint box is enumerated (ragged, vectorised) and every pixel centre's ray
-    is tested against the cube (slab test), so the result is exact up to pixel sampling.
+    is tested against the cube (slab test), so the result is exact up to pixel sampling.  Voxels
+    go largest first in chunks of about ``chunk_pairs`` (pixel, voxel) pairs, and pixels already
+    set are not tested again (a ray crosses many voxels).
     """
     h, w = camera.height, camera.width
     out = np.zeros((h, w), np.uint8)
     if hull.empty:
         return out
-    lo = hull.centres - 0.5 * hull.sizes[:, None]
-    hi = hull.centres + 0.5 * hull.sizes[:, None]
-    corners = (lo[:, None, :] + hull.sizes[:, None, None] * _CORNERS[None]).reshape(-1, 3)
-    front = (camera.depth(corners) > 1e-6).reshape(-1, 8).all(1)
-    uv = camera.project(corners).reshape(-1, 8, 2)
-    c0 = np.clip(np.floor(uv[..., 0].min(1)), 0, w).astype(int)
-    c1 = np.clip(np.ceil(uv[..., 0].max(1)) + 1, 0, w).astype(int)
-    r0 = np.clip(np.floor(uv[..., 1].min(1)), 0, h).astype(int)
-    r1 = np.clip(np.ceil(uv[..., 1].max(1)) + 1, 0, h).astype(int)
+    order = np.argsort(-hull.sizes, kind="stable")
+    lo = hull.centres[order] - 0.5 * hull.sizes[order, None]
+    hi = hull.centres[order] + 0.5 * hull.sizes[order, None]
+    corners = (lo[:, None, :] + hull.sizes[order, None, None] * _CORNERS[None]).reshape(-1, 3)
+    uv, z = _project(camera, corners)
+    front = (z > 1e-6).reshape(-1, 8).all(1)
+    uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0).reshape(-1, 8, 2)
+    c0 = np.clip(np.floor(uv[..., 0].min(1)), 0, w).astype(np.intp)
+    c1 = np.clip(np.ceil(uv[..., 0].max(1)) + 1, 0, w).astype(np.intp)
+    r0 = np.clip(np.floor(uv[..., 1].min(1)), 0, h).astype(np.intp)
+    r1 = np.clip(np.ceil(uv[..., 1].max(1)) + 1, 0, h).astype(np.intp)
     bw, bh = np.maximum(c1 - c0, 0) * front, np.maximum(r1 - r0, 0) * front
     n_pix = bw * bh
     C = camera.center
-    cols, rows = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    rays = _pixel_rays(camera, np.column_stack([cols.ravel(), rows.ravel()]))  # (h*w, 3)
-    start = 0
-    # process voxels in chunks so the ragged expansion stays under max_pairs
+    if np.any(camera.distortion != 0):
+        cols, rows = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+        table = _pixel_rays(camera, np.column_stack([cols.ravel(), rows.ravel()]))  # (h*w, 3)
+        rays = lambda col, row: table[row * w + col]  # noqa: E731
+    else:  # the ray direction is affine in the pixel: R^T K^-1 (u, v, 1)
+        A = camera.rotation.T @ np.linalg.inv(camera.matrix)
+        rays = lambda col, row: col[:, None] * A[:, 0] + row[:, None] * A[:, 1] + A[:, 2]  # noqa: E731
+    flat = out.ravel()
     cum = np.cumsum(n_pix)
+    start = 0
     while start < len(n_pix):
         base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + max_pairs, side="right")))
-        sel = np.arange(start, min(stop, len(n_pix)))
-        start = sel[-1] + 1
+        stop = min(len(n_pix), max(start + 1, int(np.searchsorted(cum, base + chunk_pairs, side="right"))))
+        sel = np.arange(start, stop)
+        start = stop
         counts = n_pix[sel]
         if counts.sum() == 0:
             continue
@@ -383,7 +392,9 @@ def render_hull(hull: VoxelHull, camera: Camera, *, max_pairs: int = 4_000_000) 
         k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
         col = c0[vox] + k % bw[vox]
         row = r0[vox] + k // bw[vox]
-        d = rays[row * w + col]
+        todo = flat[row * w + col] == 0
+        vox, col, row = vox[todo], col[todo], row[todo]
+        d = rays(col, row)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / d
             t1 = (lo[vox] - C) * inv
@@ -393,7 +404,7 @@ def render_hull(hull: VoxelHull, camera: Camera, *, max_pairs: int = 4_000_000) 
         tmin = np.minimum(t1, t2).max(1)
         tmax = np.maximum(t1, t2).min(1)
         hit = tmax >= np.maximum(tmin, 0.0)
-        out[row[hit], col[hit]] = 255
+        flat[row[hit] * w + col[hit]] = 255
     return out
 
 

@@ -201,7 +201,7 @@ def _stages(model: BodyModel) -> list[np.ndarray]:
 
 
 def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, params: np.ndarray, *,
-           stages: Sequence[np.ndarray] | None = None, max_iterations: int = 15, n_samples: int = 8,
+           stages: Sequence[np.ndarray] | None = None, max_iterations: int = 10, n_samples: int = 6,
            f_scale: float = 5.0, truncate_px: float = 30.0, prior_rad: float = 500.0):
     """Staged bounded LM on the chamfer cost from ``params``; default stages: root, joints, all.
 
@@ -228,7 +228,7 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
 
 
 def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, views: ScoreViews, hull: VoxelHull,
-                candidates: Sequence, *, keep: int = 3, max_iterations: int = 15, prepare=None,
+                candidates: Sequence, *, keep: int = 2, max_iterations: int = 10, prepare=None,
                 prior_rad: float = 500.0) -> InitResult:
     """Score ``candidates`` ``[(label, heading, params)]`` by IoU, refine the best ``keep`` with
     ``refine`` (after ``prepare(params, score) -> (params, score)`` if given) and return the
@@ -278,8 +278,8 @@ def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Map
 
 def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
                chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
-               arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
-               score_scale: float = 0.5, max_iterations: int = 15) -> InitResult:
+               arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 2, min_voxel_m: float = 0.03,
+               score_scale: float = 0.5, max_iterations: int = 10) -> InitResult:
     """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
 
     Parameters

@@ -176,8 +176,8 @@ def _limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score:
 
 
 def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
-            chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 3,
-            min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 15,
+            chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 2,
+            min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 10,
             prior_rad: float = 50.0) -> InitResult:
     """Re-initialise a lost track from the hull, seeded from ``last_good_params`` (n_params,).
 
