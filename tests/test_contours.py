@@ -183,3 +183,35 @@ def test_bad_arguments_are_named(model):
         extremal_contours(model, pose, ring(1), n_samples=0)
     with pytest.raises(ValueError, match="cameras"):
         extremal_contours(model, pose, [])
+
+
+try:
+    from hypothesis import given
+    from hypothesis import strategies as st
+except ImportError:  # pragma: no cover
+    given = None
+
+if given is not None:
+    finite = dict(allow_nan=False, allow_infinity=False)
+
+    @given(
+        a=st.floats(0.01, 0.3, **finite),
+        b=st.floats(0.01, 0.3, **finite),
+        k=st.floats(-3.0, 3.0, **finite),
+        m=st.tuples(*[st.floats(-5.0, 5.0, **finite)] * 3),
+    )
+    def test_roots_satisfy_the_tangency_equation(a, b, k, m):
+        """Any cone, any camera centre: finite angles; where real, both roots solve f(θ) = 0."""
+        cone = np.array([[a, b, k, 0.0, 0.1]])
+        mv = np.array([m], dtype=float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            theta, real = contour_generator_angles(cone, mv)
+        assert np.isfinite(theta).all()
+        F, G, H = -b * mv[0, 0], -a * mv[0, 1], a * b * (1 + k * mv[0, 2])
+        scale = np.sqrt(F * F + G * G + H * H)
+        f = F * np.cos(theta[0]) + G * np.sin(theta[0]) + H
+        if real[0]:
+            assert np.abs(f).max() <= 1e-9 * scale
+        else:
+            assert F * F + G * G - H * H <= 1e-12 * scale * scale
