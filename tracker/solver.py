@@ -35,7 +35,7 @@ MAX_ITERATIONS = 0
 STALLED = -1
 
 _MESSAGES = {
-    CONVERGED_COST: "relative cost change below ftol",
+    CONVERGED_COST: "relative cost change below ftol (or residual change below rtol)",
     CONVERGED_STEP: "step size below xtol",
     CONVERGED_GRADIENT: "gradient below gtol",
     MAX_ITERATIONS: "iteration limit reached",
@@ -115,8 +115,9 @@ def _check_inputs(x0, lower, upper, prior, prior_weight):
 
 def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=None, prior_weight=None,
                         loss: str = "huber", f_scale: float = 5.0, max_iterations: int = 20,
-                        ftol: float = 1e-3, xtol: float = 1e-5, gtol: float = 1e-8,
-                        damping: float = 1e-3, min_diagonal: float = 1e-6) -> SolverResult:
+                        ftol: float = 1e-3, xtol: float = 1e-5, gtol: float = 1e-8, rtol: float = 0.0,
+                        damping: float = 1e-3, min_diagonal: float = 1e-6,
+                        diagonal_floor: float = 0.0) -> SolverResult:
     """Minimise the robust, bounded, prior-regularised least-squares problem of the module docstring.
 
     Parameters
@@ -128,7 +129,11 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
     loss, f_scale : robust loss and its scale in residual units (pixels).
     ftol : stop when an accepted step lowers the cost by less than ``ftol`` × cost.
     xtol : stop when ``‖δ‖ ≤ xtol (‖x‖ + xtol)``.
+    rtol : stop after an accepted step that changes no residual by more than ``rtol``
+        (linearised, ``max |J δ|``, residual units: "no contour point moved rtol pixels").
     damping : initial μ (relative to the diagonal).
+    min_diagonal, diagonal_floor : the damping diagonal is ``max(diag, min_diagonal,
+        diagonal_floor × max(diag))``, so weakly observed parameters are damped too.
     """
     x, lo, hi, xp, pw = _check_inputs(x0, lower, upper, prior, prior_weight)
     robust_weights(np.zeros(1), loss=loss, f_scale=f_scale)  # validates loss
@@ -159,7 +164,8 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
             break
         Af = A[np.ix_(free, free)]
         gf = g[free]
-        diag = np.maximum(np.diag(Af), min_diagonal)
+        diag = np.diag(Af)
+        diag = np.maximum(diag, max(min_diagonal, diagonal_floor * float(diag.max(initial=0.0))))
         accepted = False
         while it < max_iterations:
             it += 1
@@ -183,6 +189,7 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
             if ok and cost_new < cost:
                 accepted = True
                 rel = (cost - cost_new) / max(cost, 1e-300)
+                moved = float(np.max(np.abs(J @ step), initial=0.0))
                 x, cost = x_new, cost_new
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * max(gain, 0.0) - 1.0) ** 3)
                 nu = 2.0
@@ -198,7 +205,12 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
             break
         r, J = fun(x, True)
         n_eval += 1
-        if rel < ftol:
+        if not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
+            status = STALLED
+            break
+        # the residual set may be refreshed at a new linearisation point (e.g. occlusion)
+        cost = total_cost(r, x)
+        if rel < ftol or moved < rtol:
             status = CONVERGED_COST
             break
         if small_step:

@@ -1,0 +1,115 @@
+"""Chamfer cost: residual Jacobian vs central differences, truncation, layout, real chamfer images."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from segmentation.distance import chamfer_images
+from tracker.cost import ChamferCost
+from tracker.kinematics import forward
+from tracker.model import load_model
+from tracker.render import internal_edges, render_label_images
+from tracker.scene import ring_cameras
+
+
+class SmoothField:
+    """A smooth synthetic 'distance' pair over the image with analytic gradients (pixels)."""
+
+    def __init__(self, centre, scale):
+        self.c = np.asarray(centre, float)
+        self.s = float(scale)
+
+    def sample(self, uv):
+        q = (uv - self.c) / self.s
+        d_sil = 3.0 + 2.0 * np.sin(q[:, 0]) * np.cos(0.7 * q[:, 1])
+        g_sil = np.stack([2.0 * np.cos(q[:, 0]) * np.cos(0.7 * q[:, 1]),
+                          -1.4 * np.sin(q[:, 0]) * np.sin(0.7 * q[:, 1])], axis=1) / self.s
+        d_edge = 0.5 * (q * q).sum(axis=1) + 1.0
+        g_edge = q / self.s
+        return d_sil, g_sil, d_edge, g_edge
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return ring_cameras(4, size=(800, 600))
+
+
+@pytest.mark.parametrize("name", ["knossow40", "knossow54"])
+def test_residual_jacobian_matches_central_differences(name, scene, rng):
+    model = load_model(name)
+    fields = [SmoothField((400 + 10 * i, 300 - 5 * i), 60.0 + 7 * i) for i in range(len(scene))]
+    for trial in range(3):
+        p = model.random_params(rng, fraction=0.4)
+        p[:3] = rng.uniform(-0.3, 0.3, 3) * [1, 1, 0.1]
+        cost = ChamferCost(model, scene, fields, sliding=True, n_samples=5, visibility="none", truncate_px=None)
+        terms = cost.evaluate(p, jacobian=True)
+        J = terms.jacobian
+        h = 1e-6
+        Jfd = np.empty_like(J)
+        for k in range(model.n_params):
+            dp = np.zeros(model.n_params)
+            dp[k] = h
+            rp = cost.evaluate(p + dp).residuals
+            rm = cost.evaluate(p - dp).residuals
+            Jfd[:, k] = (rp - rm) / (2 * h)
+        used = np.repeat(terms.used, 2)
+        assert used.sum() > 200
+        scale = np.abs(Jfd[used]).max()
+        err = np.abs(J[used] - Jfd[used]).max()
+        assert err < 1e-5 * scale, (trial, err, scale)
+        # rows not used are exactly zero
+        assert not np.any(J[~used]) and not np.any(terms.residuals[~used])
+    # without the sliding term the Jacobian is only an approximation of the true derivative
+    cost_ns = ChamferCost(model, scene, fields, sliding=False, n_samples=5, visibility="none", truncate_px=None)
+    Jns = cost_ns.evaluate(p, jacobian=True).jacobian
+    assert np.abs(Jns[used] - Jfd[used]).max() > 1e-3 * scale
+
+
+def test_truncation_zeroes_gradient_and_caps_residual(scene, rng):
+    model = load_model("knossow40")
+    fields = [SmoothField((400, 300), 20.0) for _ in scene]  # edge distance grows large off-centre
+    cost = ChamferCost(model, scene, fields, n_samples=4, visibility="none", truncate_px=4.0)
+    terms = cost.evaluate(model.zero(), jacobian=True)
+    r = terms.residuals.reshape(-1, 2)
+    J = terms.jacobian.reshape(-1, 2, model.n_params)
+    assert r.max() <= 4.0 + 1e-12
+    capped = r >= 4.0
+    assert capped.any() and (~capped & terms.used[:, None]).any()
+    assert not np.any(J[capped])
+
+
+def test_compact_layout_and_bad_arguments(scene):
+    model = load_model("knossow40")
+    fields = [SmoothField((400, 300), 50.0) for _ in scene]
+    cost = ChamferCost(model, scene, fields, n_samples=4)
+    full = cost.evaluate(model.zero(), jacobian=True)
+    comp = cost.evaluate(model.zero(), jacobian=True, compact=True)
+    used = np.repeat(full.used, 2)
+    np.testing.assert_array_equal(comp.residuals, full.residuals[used])
+    np.testing.assert_array_equal(comp.jacobian, full.jacobian[used])
+    assert full.residuals.shape == (2 * cost.n_rows,)
+    with pytest.raises(ValueError, match="chamfer"):
+        ChamferCost(model, scene, fields[:2])
+    with pytest.raises(TypeError, match="cam0"):
+        ChamferCost(model, scene, [object()] * len(scene))
+    with pytest.raises(ValueError, match="visibility"):
+        ChamferCost(model, scene, fields, visibility="sometimes")
+
+
+def test_rendered_true_pose_has_subpixel_cost_and_perturbed_pose_does_not(scene, rng):
+    """On chamfer images of a render, the true pose scores ~0 and a perturbed pose scores more."""
+    model = load_model("knossow40")
+    p = model.random_params(rng, fraction=0.3)
+    p[:3] = [0.1, -0.1, 0.0]
+    labels = render_label_images(model, forward(model, p), scene)
+    chamfer = [chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab)) for lab in labels]
+    cost = ChamferCost(model, scene, chamfer)
+    true = cost.evaluate(p)
+    assert true.n_used > 300
+    assert true.rms_px() < 0.8
+    assert true.inside_fraction() > 0.95
+    q = p.copy()
+    q[6:] += np.radians(8.0) * rng.choice([-1, 1], model.n_params - 6)
+    off = ChamferCost(model, scene, chamfer).evaluate(model.clamp(q))
+    assert off.rms_px() > 2 * true.rms_px()

@@ -1,0 +1,127 @@
+"""Tracking loop on direct renders: convergence from perturbed poses, missing cameras, empty frames."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from segmentation.distance import chamfer_images
+from tracker.bvh import load_bvh
+from tracker.kinematics import forward, joint_centre_array
+from tracker.model import JOINT_ROTATION
+from tracker.render import internal_edges, render_label_images
+from tracker.retarget import retarget_bvh
+from tracker.scene import ring_cameras
+from tracker.tracking import Tracker, TrackerOptions
+
+HOP = Path(__file__).resolve().parent.parent / "tracker" / "data" / "scaled_131_03.bvh"
+
+
+def render_chamfer(model, params, cameras) -> tuple[dict, dict]:
+    """Chamfer images and silhouettes of the model at ``params`` seen by ``cameras`` (by name)."""
+    labels = render_label_images(model, forward(model, params), cameras)
+    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cameras, labels)}
+    chamfer = {c.name: chamfer_images(sils[c.name], internal_edges(lab)) for c, lab in zip(cameras, labels)}
+    return chamfer, sils
+
+
+@pytest.fixture(scope="module")
+def cameras():
+    return ring_cameras(6, size=(800, 600))
+
+
+@pytest.fixture(scope="module", params=["knossow40", "knossow54"])
+def hop_pose(request):
+    """A natural pose: frame 1.0 s of the bundled hop clip retargeted onto the model."""
+    rt = retarget_bvh(load_bvh(HOP), model=request.param, frames=1, start_s=1.0)
+    return rt.model, rt.params[0]
+
+
+def perturb(model, p, rng, *, deg=10.0, root_m=0.05):
+    q = p.copy()
+    joints = model.param_kind == JOINT_ROTATION
+    q[joints] += np.radians(rng.uniform(-deg, deg, joints.sum()))
+    q[:3] += rng.uniform(-root_m, root_m, 3)
+    return model.clamp(q)
+
+
+#: converge fully (the tracking defaults stop earlier, for speed, on small inter-frame motion)
+CONVERGE = TrackerOptions(max_iterations=40, reverse_min_px=2.0, f_scale=3.0, ftol=2e-3, rtol=0.0)
+
+
+def test_perturbed_pose_converges_back(hop_pose, cameras, rng):
+    """From the truth perturbed by up to 10° per joint and 5 cm at the root (joint centres start
+    50–200 mm off), one frame converges back: < 1 px RMS, < 10 mm mean joint-centre error.
+
+    Angles: rotations of a part about its own long axis (twist, pronation: axis ±z in the part
+    frame) barely change a cone's outline, so they are weakly observable; for knossow40 the mean
+    error of the other DOF must be < 2°.  (Measured, seed 12345: knossow40 1.1° non-axial /
+    1.7° all DOF; knossow54 4.6° non-axial, driven by the small hand cones' flexion/deviation.)
+    """
+    model, truth = hop_pose
+    chamfer, _ = render_chamfer(model, truth, cameras)
+    start = perturb(model, truth, rng)
+    tracker = Tracker(model, cameras, initial_params=start, options=CONVERGE)
+    rec = tracker.step(7, 123, chamfer)
+    assert rec["ok"], rec.get("reason")
+    joints = model.param_kind == JOINT_ROTATION
+    err_deg = np.degrees(np.abs(np.asarray(rec["params"]) - truth))
+    jc = joint_centre_array(model, forward(model, np.asarray(rec["params"])))
+    jc_true = joint_centre_array(model, forward(model, truth))
+    mpjpe_mm = 1e3 * np.linalg.norm(jc - jc_true, axis=1).mean()
+    start_mm = 1e3 * np.linalg.norm(joint_centre_array(model, forward(model, start)) - jc_true, axis=1).mean()
+    assert start_mm > 40.0  # the perturbation is not trivial
+    assert rec["rms_px"] < 1.0
+    assert mpjpe_mm < 10.0, (mpjpe_mm, start_mm)
+    if model.name == "knossow40":
+        non_axial = joints & (np.abs(model.param_axis[:, 2]) < 0.5)
+        assert err_deg[non_axial].mean() < 2.0, err_deg[non_axial].mean()
+    assert rec["frame"] == 7 and rec["timestamp_ns"] == 123 and rec["cameras"] == 6
+    assert rec["inside_fraction"] > 0.9 and rec["iterations"] >= 1 and rec["latency_ms"] >= 0
+    assert set(rec["joints"]) >= {"pelvis", "head", "left_wrist", "right_ankle"}
+
+
+def test_missing_camera_still_solves(cameras, rng):
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=1.5)
+    model, truth = rt.model, rt.params[0]
+    chamfer, _ = render_chamfer(model, truth, cameras)
+    del chamfer["cam2"]
+    tracker = Tracker(model, cameras, initial_params=perturb(model, truth, rng, deg=4.0, root_m=0.02))
+    rec = tracker.step(0, 0, chamfer)
+    assert rec["ok"], rec.get("reason")
+    assert rec["cameras"] == 5
+    jc = joint_centre_array(model, forward(model, np.asarray(rec["params"])))
+    assert 1e3 * np.linalg.norm(jc - joint_centre_array(model, forward(model, truth)), axis=1).mean() < 15.0
+
+
+def test_empty_and_bad_frames_are_records_not_exceptions(cameras):
+    from tracker.model import load_model
+
+    model = load_model("knossow40")
+    empty = np.zeros((600, 800), np.uint8)
+    chamfer = {c.name: chamfer_images(empty, empty) for c in cameras}
+    tracker = Tracker(model, cameras, initial_params=model.zero())
+    rec = tracker.step(3, 99, chamfer)
+    assert rec["ok"] is False and "silhouette" in rec["reason"] and rec["cameras"] == 0
+    rec = tracker.step(4, 100, {})
+    assert rec["ok"] is False and rec["frame"] == 4
+    rec = tracker.step(5, 101, {"nonexistent": chamfer["cam0"]})
+    assert rec["ok"] is False and "nonexistent" in rec["reason"]
+    # silhouettes given and all empty: same answer
+    rec = tracker.step(6, 102, chamfer, silhouettes={c.name: empty for c in cameras})
+    assert rec["ok"] is False
+
+
+def test_constant_velocity_prediction_and_bad_arguments(cameras):
+    from tracker.model import load_model
+
+    model = load_model("knossow40")
+    tr = Tracker(model, cameras, initial_params=model.zero(), options=TrackerOptions(constant_velocity=True))
+    tr.previous, tr.params = model.zero(), model.zero() + 0.01
+    np.testing.assert_allclose(tr.predict(), model.clamp(model.zero() + 0.02))
+    with pytest.raises(ValueError, match="solver"):
+        Tracker(model, cameras, solver="newton")
+    with pytest.raises(ValueError, match="initial_params"):
+        Tracker(model, cameras, initial_params=np.zeros(3))

@@ -1,0 +1,265 @@
+"""Chamfer residuals of predicted extremal contours and their analytic Jacobian.
+
+For every visible contour point ``x_i = uv(Φ)`` (``tracker.contours``) seen by camera c, two
+residuals (Knossow et al., ACCV 2006 §3): the bilinearly interpolated distance to camera c's
+silhouette (0 inside it) and the distance to the edges inside the silhouette.  Their sum has
+one clear minimum where the predicted contour lies on the observed one.  The residual Jacobian
+is the image gradient of the distance times the contour-point Jacobian (IJCV 2008 §5)::
+
+    dr_i/dΦ = ∇D_c(x_i) · dx_i/dΦ,     dx_i/dΦ = J_I (A + B) J_H   (tracker.jacobian)
+
+Distances are truncated at ``truncate_px`` (zero gradient beyond), so clutter and a missing limb
+add a bounded constant; the solver's robust loss (IRLS) does the rest.
+
+``chamfer`` objects are anything with ``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2),
+d_edge (n,), grad_edge (n, 2))`` in pixels, e.g. ``segmentation.distance.ChamferImages``.
+
+**Reverse term** (optional, ``reverse_weight > 0``): the chamfer cost above is model → image
+only, so a limb whose contour lies inside the silhouette (e.g. over the torso) is not pulled
+back to the part of the silhouette it left uncovered.  For ``reverse_samples`` points ``y_j``
+per camera on the observed silhouette boundary, the residual is
+``w (max(0, ‖y_j − x_m(j)‖ − reverse_min_px))`` with ``x_m(j)`` the nearest used predicted
+contour point of that camera (matches recomputed at every evaluation, as in ICP); its Jacobian
+is ``−w u_jᵀ dx_m(j)/dΦ`` with ``u_j`` the unit vector from ``x_m(j)`` to ``y_j``.
+
+Residual layout: ``r`` has shape ``(2 N + K,)``: ``r[2i] = d_sil_i``, ``r[2i+1] = d_edge_i`` for
+the N contour rows, 0 for rows not used (not visible, or camera absent), then the K reverse
+residuals (K = 0 without the reverse term).  ``compact=True`` keeps only the used contour rows
+(what the LM solver takes; the scipy baseline needs the fixed length).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+from capture.camera import Camera
+from tracker.contours import Contours, extremal_contours
+from tracker.jacobian import contour_jacobian
+from tracker.kinematics import Pose, forward
+from tracker.model import BodyModel
+
+__all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
+
+_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+
+
+def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
+    """Up to ``max_points`` pixels ``(k, 2)`` (u, v) on the inner boundary of the silhouette held by
+    a ``ChamferImages`` (its zero-distance region), evenly spread in raster order; ``(0, 2)`` when
+    the object holds no silhouette array or the silhouette is empty."""
+    q = getattr(chamfer, "silhouette_q", None)
+    if q is None or q.size == 0 or max_points < 1:
+        return np.zeros((0, 2))
+    inside = np.where(q == 0, 255, 0).astype(np.uint8)
+    border = cv2.subtract(inside, cv2.erode(inside, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=0))
+    ys, xs = np.nonzero(border)
+    if xs.size == 0:
+        return np.zeros((0, 2))
+    pick = np.unique(np.linspace(0, xs.size - 1, min(max_points, xs.size)).round().astype(np.intp))
+    ox, oy = chamfer.offset_xy
+    return np.stack([xs[pick] + ox, ys[pick] + oy], axis=1).astype(float)
+
+
+@dataclass(frozen=True, eq=False)
+class CostTerms:
+    """The cost evaluated at one pose.
+
+    pose : Pose; contours : Contours (N rows over the cost's cameras)
+    used : (N,) bool, rows that contribute
+    d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
+    residuals : (2 N + K,) or (2 n_used + K,) when compact (K reverse residuals)
+    jacobian : (len(residuals), n_params) or None
+    """
+
+    pose: Pose
+    contours: Contours
+    used: np.ndarray
+    d_sil: np.ndarray
+    d_edge: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray | None
+
+    @property
+    def n_used(self) -> int:
+        return int(self.used.sum())
+
+    def inside_fraction(self, *, tol_px: float = 1.0) -> float:
+        """Fraction of used contour points within ``tol_px`` of their camera's silhouette (NaN if none)."""
+        n = self.n_used
+        return float(np.count_nonzero(self.d_sil[self.used] <= tol_px) / n) if n else float("nan")
+
+    def rms_px(self) -> float:
+        """RMS of the used residuals (both terms), pixels (NaN if none)."""
+        n = self.n_used
+        if not n:
+            return float("nan")
+        return float(np.sqrt((self.d_sil[self.used] ** 2 + self.d_edge[self.used] ** 2).sum() / (2 * n)))
+
+
+class ChamferCost:
+    """The tracker's data term for one frame set.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera, length n_cams (only the cameras with an image this frame)
+    chamfer : sequence, length n_cams, of objects with ``sample(uv)`` (see module docstring)
+    sliding : use the sliding term B of the contour Jacobian (IJCV eq. 38)
+    n_samples : contour points per side of each part
+    truncate_px : distances above it are clipped (zero gradient); None keeps the images' own
+    edge_weight : scale of the edge residual relative to the silhouette residual
+    reverse_weight, reverse_samples, reverse_min_px : the reverse term (module docstring); off
+        at weight 0.  Boundary samples come from the chamfer objects' ``silhouette_q``.
+    visibility : ``"step"`` (default): occlusion is recomputed where the Jacobian is evaluated
+        (each linearisation point) and that set of rows is kept for the trial steps from it;
+        ``"frame"``: computed once, at the first pose evaluated, and kept; ``"always"``: at every
+        evaluation; ``"none"``: occlusion ignored.  (Occlusion tests are the costly part.)
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, *, sliding: bool = True,
+                 n_samples: int = 12, visibility: str = "step", truncate_px: float | None = 30.0,
+                 edge_weight: float = 1.0, reverse_weight: float = 0.0, reverse_samples: int = 120,
+                 reverse_min_px: float = 2.0) -> None:
+        cameras = list(cameras)
+        chamfer = list(chamfer)
+        if len(cameras) != len(chamfer):
+            raise ValueError(f"chamfer: expected one per camera ({len(cameras)}), got {len(chamfer)}")
+        for cam, ch in zip(cameras, chamfer):
+            if not callable(getattr(ch, "sample", None)):
+                raise TypeError(f"chamfer for camera {cam.name!r}: expected an object with sample(uv)")
+        if n_samples < 1:
+            raise ValueError(f"n_samples: expected >= 1, got {n_samples}")
+        self.model = model
+        self.cameras = cameras
+        self.chamfer = chamfer
+        self.sliding = bool(sliding)
+        self.n_samples = int(n_samples)
+        if visibility not in ("step", "frame", "always", "none"):
+            raise ValueError(f"visibility: expected 'step', 'frame', 'always' or 'none', got {visibility!r}")
+        self.visibility = visibility
+        self._frozen_visible: np.ndarray | None = None
+        self.truncate_px = None if truncate_px is None else float(truncate_px)
+        self.edge_weight = float(edge_weight)
+        self.reverse_weight = float(reverse_weight)
+        self.reverse_min_px = float(reverse_min_px)
+        if self.reverse_weight > 0:
+            self.boundary = [boundary_samples(ch, max_points=reverse_samples) for ch in chamfer]
+        else:
+            self.boundary = [np.zeros((0, 2)) for _ in chamfer]
+        self.n_reverse = sum(len(b) for b in self.boundary)
+        self._cache: tuple | None = None
+        self.n_evaluations = 0
+
+    @property
+    def n_rows(self) -> int:
+        """N, the number of contour rows (residuals = 2 N)."""
+        return len(self.cameras) * self.model.n_parts * 2 * self.n_samples
+
+    def _sample(self, contours: Contours, used: np.ndarray):
+        """Distances (N,) and gradients (N, 2) of both images at the used rows, per camera."""
+        N = contours.n_points
+        d = np.zeros((N, 2))
+        grad = np.zeros((N, 2, 2))
+        per_cam = N // max(len(self.cameras), 1)
+        for c, ch in enumerate(self.chamfer):
+            sl = slice(c * per_cam, (c + 1) * per_cam)
+            rows = np.flatnonzero(used[sl]) + c * per_cam
+            if rows.size == 0:
+                continue
+            ds, gs, de, ge = ch.sample(contours.uv[rows])
+            d[rows, 0], d[rows, 1] = ds, de
+            grad[rows, 0], grad[rows, 1] = gs, ge
+        if self.truncate_px is not None:
+            over = d > self.truncate_px
+            d[over] = self.truncate_px
+            grad[over] = 0.0
+        d[:, 1] *= self.edge_weight
+        grad[:, 1] *= self.edge_weight
+        return d, grad
+
+    def _reverse(self, contours: Contours, used: np.ndarray):
+        """Reverse residuals (K,), matched contour rows (K,) and unit directions (K, 2)."""
+        K = self.n_reverse
+        r = np.zeros(K)
+        match = np.full(K, -1)
+        unit = np.zeros((K, 2))
+        per_cam = contours.n_points // max(len(self.cameras), 1)
+        k0 = 0
+        for c, y in enumerate(self.boundary):
+            k1 = k0 + len(y)
+            rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
+            if len(y) and rows.size:
+                x = contours.uv[rows]
+                dist, j = cKDTree(x).query(y)
+                diff = y - x[j]
+                far = dist > self.reverse_min_px
+                r[k0:k1] = np.where(far, dist - self.reverse_min_px, 0.0)
+                match[k0:k1] = np.where(far, rows[j], -1)
+                unit[k0:k1] = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
+            k0 = k1
+        if self.truncate_px is not None:
+            over = r > self.truncate_px
+            r[over] = self.truncate_px
+            match[over] = -1
+        return self.reverse_weight * r, match, unit
+
+    def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
+        """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""
+        params = np.asarray(params, dtype=float)
+        fresh = self.visibility == "always" or (self.visibility in ("frame", "step") and self._frozen_visible is None)
+        if self.visibility == "step" and jacobian and not (self._cache is not None and self._cache[-1]
+                                                           and np.array_equal(self._cache[0], params)):
+            fresh = True  # a new linearisation point: recompute occlusion there
+        if not fresh and self._cache is not None and np.array_equal(self._cache[0], params):
+            pose, contours, used, d, grad, rev = self._cache[1:-1]
+        else:
+            pose = forward(self.model, params)
+            contours = extremal_contours(self.model, pose, self.cameras, n_samples=self.n_samples,
+                                         visibility=fresh)
+            if fresh and self.visibility in ("frame", "step"):
+                self._frozen_visible = contours.visible.copy()
+            if self.visibility in ("frame", "step"):
+                used = contours.valid & self._frozen_visible
+            else:
+                used = contours.visible.copy()
+            d, grad = self._sample(contours, used)
+            rev = self._reverse(contours, used) if self.n_reverse else None
+            self._cache = (params.copy(), pose, contours, used, d, grad, rev, fresh)
+            self.n_evaluations += 1
+        rows = np.flatnonzero(used) if compact else np.arange(contours.n_points)
+        r = d[rows].ravel()
+        if rev is not None:
+            r = np.concatenate([r, rev[0]])
+        J = None
+        if jacobian:
+            urows = np.flatnonzero(used)
+            Jx = contour_jacobian(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
+            Ju = np.einsum("nkj,njp->nkp", grad[urows], Jx)  # (n_used, 2, n_params)
+            if compact:
+                J = Ju.reshape(-1, self.model.n_params)
+            else:
+                J = np.zeros((contours.n_points, 2, self.model.n_params))
+                J[urows] = Ju
+                J = J.reshape(-1, self.model.n_params)
+            if rev is not None:
+                _, match, unit = rev
+                Jr = np.zeros((self.n_reverse, self.model.n_params))
+                m = match >= 0
+                pos = np.searchsorted(urows, match[m])  # matched rows are used rows
+                Jr[m] = -self.reverse_weight * np.einsum("ki,kip->kp", unit[m], Jx[pos])
+                J = np.concatenate([J, Jr])
+        return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J)
+
+    def residual_fn(self, *, compact: bool = True):
+        """``fun(x, jacobian) -> (r, J | None)`` for ``tracker.solver``."""
+
+        def fun(x, jacobian):
+            t = self.evaluate(x, jacobian=jacobian, compact=compact)
+            return t.residuals, t.jacobian
+
+        return fun

@@ -1,0 +1,217 @@
+"""The tracking loop: one pose record per frame set (DESIGN.md pose record).
+
+Per frame: keep the cameras that sent chamfer images, predict (last pose, or constant velocity),
+fit with Levenberg–Marquardt on the chamfer cost (``tracker.cost``) with a small prior towards the
+prediction, measure quality (RMS residual, fraction of predicted contour points inside the
+silhouettes) and emit the record.  Initialisation and re-initialisation after a lost frame are
+delegated to ``tracker.initialise.initialise`` when that module is present; otherwise the caller
+passes ``initial_params``.
+
+Never raises on data: a frame that cannot be solved (no camera, all silhouettes empty, no
+initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from tracker.cost import ChamferCost
+from tracker.kinematics import joint_centre_array
+from tracker.model import ROOT_TRANSLATION, BodyModel
+from tracker.solver import SolverResult, least_squares_fd, levenberg_marquardt
+
+__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Fitting options.
+
+    n_samples : contour points per side of a part; max_iterations : LM trial steps per frame;
+    loss, f_scale : robust loss on the pixel residuals; truncate_px : distance truncation;
+    prior_m, prior_rad : prior weights per m² (root translation) and per rad² (rotations), in
+    units of px² residual; constant_velocity : predict ``2 p_t − p_{t−1}``;
+    max_rms_px, min_inside_fraction : below these a frame is reported lost.
+    """
+
+    n_samples: int = 12
+    max_iterations: int = 12
+    ftol: float = 1e-2
+    xtol: float = 1e-4
+    rtol: float = 0.3
+    loss: str = "huber"
+    f_scale: float = 10.0
+    truncate_px: float = 30.0
+    prior_m: float = 200.0
+    prior_rad: float = 30.0
+    reverse_weight: float = 1.0
+    reverse_samples: int = 200
+    reverse_min_px: float = 8.0
+    damping: float = 1e-3
+    diagonal_floor: float = 0.0
+    constant_velocity: bool = False
+    max_rms_px: float = 6.0
+    min_inside_fraction: float = 0.6
+
+
+def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
+    """Per-parameter prior weights (n_params,): ``prior_m`` on root translation, ``prior_rad`` else."""
+    return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
+
+
+def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, start: np.ndarray, *,
+              prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
+              options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
+    """Fit one frame from ``start`` (n_params,); returns the solver result and the cost object."""
+    cost = ChamferCost(model, cameras, chamfer, sliding=sliding, n_samples=options.n_samples,
+                       truncate_px=options.truncate_px, reverse_weight=options.reverse_weight,
+                       reverse_samples=options.reverse_samples, reverse_min_px=options.reverse_min_px)
+    prior = start if prediction is None else prediction
+    kw = dict(lower=model.lower, upper=model.upper, prior=model.clamp(prior),
+              prior_weight=prior_weights(model, options), loss=options.loss, f_scale=options.f_scale,
+              max_iterations=options.max_iterations, ftol=options.ftol, xtol=options.xtol)
+    lm_only = dict(damping=options.damping, diagonal_floor=options.diagonal_floor, rtol=options.rtol)
+    if solver == "lm":
+        res = levenberg_marquardt(cost.residual_fn(compact=True), start, **lm_only, **kw)
+    elif solver == "lsq":
+        res = least_squares_fd(cost.residual_fn(compact=False), start, **kw)
+    else:
+        raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
+    return res, cost
+
+
+def _silhouette_empty(chamfer, silhouette) -> bool:
+    if silhouette is not None:
+        return not np.any(silhouette)
+    q = getattr(chamfer, "silhouette_q", None)
+    if q is None:
+        return False
+    return q.size == 0 or int(q.min()) > 0
+
+
+class Tracker:
+    """Frame-to-frame tracker of one person.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera (the studio; a frame may bring any subset)
+    sliding : use the sliding term of the contour Jacobian
+    solver : ``"lm"`` (analytic Jacobian) or ``"lsq"`` (scipy, finite differences)
+    initial_params : (n_params,) start pose; without it the first frame is initialised by
+        ``tracker.initialise.initialise`` (needs ``silhouettes``)
+    options : TrackerOptions
+    clock : callable returning seconds (latency measurement), default ``time.perf_counter``
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
+                 initial_params=None, options: TrackerOptions = TrackerOptions(),
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        if solver not in ("lm", "lsq"):
+            raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
+        self.model = model
+        self.cameras = {c.name: c for c in cameras}
+        if len(self.cameras) != len(cameras):
+            raise ValueError("cameras: names must be unique")
+        self.sliding = bool(sliding)
+        self.solver = solver
+        self.options = options
+        self.clock = clock
+        self.params: np.ndarray | None = None
+        self.previous: np.ndarray | None = None
+        if initial_params is not None:
+            p = np.asarray(initial_params, dtype=float)
+            if p.shape != (model.n_params,) or not np.all(np.isfinite(p)):
+                raise ValueError(f"initial_params: expected a finite array of shape ({model.n_params},)")
+            self.params = model.clamp(p)
+        self.lost = False
+        self.last_result: SolverResult | None = None
+
+    # -- prediction / (re)initialisation -------------------------------------------------
+    def predict(self) -> np.ndarray | None:
+        """Start pose for the next frame (n_params,) or None before initialisation."""
+        if self.params is None:
+            return None
+        if self.options.constant_velocity and self.previous is not None:
+            return self.model.clamp(2.0 * self.params - self.previous)
+        return self.params
+
+    def _initialise(self, cams, chamfer, silhouettes, hint):
+        try:
+            init = importlib.import_module("tracker.initialise")
+        except ImportError:
+            return None, "no initial pose: pass initial_params (tracker.initialise is not available)"
+        if silhouettes is None:
+            return None, "no initial pose: initialisation needs silhouettes"
+        try:
+            p = init.initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
+                                {c.name: chamfer[c.name] for c in cams}, hint=hint)
+        except Exception as exc:  # noqa: BLE001 - a failed initialisation is a lost frame, not a crash
+            return None, f"initialisation failed: {exc}"
+        return np.asarray(p, dtype=float), None
+
+    # -- one frame ------------------------------------------------------------------------
+    def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
+             silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
+        """Fit one frame set and return its pose record (a JSON-ready dict)."""
+        t0 = self.clock()
+        record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
+        unknown = [name for name in chamfer if name not in self.cameras]
+        names = [n for n in self.cameras if n in chamfer
+                 and not _silhouette_empty(chamfer[n], None if silhouettes is None else silhouettes.get(n))]
+        record["cameras"] = len(names)
+
+        def fail(reason: str) -> dict:
+            record.update(ok=False, reason=reason, latency_ms=1e3 * (self.clock() - t0))
+            self.lost = True
+            return record
+
+        if unknown:
+            return fail(f"unknown camera(s) {sorted(unknown)}")
+        if not names:
+            return fail("no camera with a non-empty silhouette")
+        cams = [self.cameras[n] for n in names]
+        chs = [chamfer[n] for n in names]
+        start = self.predict()
+        if start is None or (self.lost and silhouettes is not None):
+            p, why = self._initialise(cams, chamfer, silhouettes, hint=self.params)
+            if p is None and start is None:
+                return fail(why)
+            if p is not None:
+                start, self.previous = self.model.clamp(p), None
+        res, cost = fit_frame(self.model, cams, chs, start, prediction=start, sliding=self.sliding,
+                              solver=self.solver, options=self.options)
+        self.last_result = res
+        terms = cost.evaluate(np.asarray(res.params))
+        inside = terms.inside_fraction()
+        rms = terms.rms_px()
+        pose = terms.pose
+        joints = joint_centre_array(self.model, pose)
+        record.update(
+            ok=True, params=[float(v) for v in res.params],
+            joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
+            rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
+        )
+        bad = (not np.isfinite(rms) or rms > self.options.max_rms_px or not np.isfinite(inside)
+               or inside < self.options.min_inside_fraction)
+        if bad:
+            record.update(ok=False, reason=f"lost: rms {rms:.2f} px, {100 * inside:.0f}% of contour inside "
+                                           f"silhouettes")
+            self.lost = True
+            # keep the fit only as a start: the previous good pose stays the velocity reference
+            self.params = np.array(res.params)
+        else:
+            self.previous, self.params = self.params, np.array(res.params)
+            self.lost = False
+        record["latency_ms"] = 1e3 * (self.clock() - t0)
+        return record
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
