@@ -155,14 +155,38 @@ def _centroid(model: BodyModel, params: np.ndarray) -> np.ndarray:
     return body_points(model, forward(model, params), n_theta=8, n_z=2).reshape(-1, 3).mean(0)
 
 
+#: Canonical limb poses tried by the limb search, degrees, per DOF name suffix (other DOF of the
+#: chain 0).  The models mirror the right side's axes, so one table serves both sides.
+ARM_POSES_DEG = tuple({"upper_arm.abduction": a, "upper_arm.flexion": f}
+                      for a in (-80, -45, 0, 35, 70) for f in (-40, 0, 50) if (a, f) != (0, 0)) + (
+                 {"upper_arm.abduction": -45, "forearm.flexion": 70}, {"upper_arm.flexion": 60, "forearm.flexion": 70})
+LEG_POSES_DEG = ({"thigh.flexion": 30}, {"thigh.flexion": -15}, {"thigh.abduction": 20},
+                 {"thigh.flexion": 45, "shank.flexion": 60}, {"shank.flexion": 45})
+
+
+def _canonical(model: BodyModel, chain: str, idx: np.ndarray) -> list[np.ndarray]:
+    side = chain.split("_")[0]
+    table = ARM_POSES_DEG if chain.endswith("arm") else LEG_POSES_DEG if chain.endswith("leg") else ()
+    out = []
+    for pose in table:
+        vals = np.zeros(idx.size)
+        for suffix, deg in pose.items():
+            name = f"{side}_{suffix}"
+            if name in model.param_names and model.param_names.index(name) in idx:
+                vals[list(idx).index(model.param_names.index(name))] = np.radians(deg)
+        out.append(vals)
+    return out
+
+
 def _limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: float) -> tuple[np.ndarray, float]:
-    """Greedy per-chain search over a few angle sets, scored by IoU; returns (params, score)."""
+    """Greedy per-chain search, scored by IoU with the rest fixed: the chain's current angles
+    halved, zeroed, mirrored from the other side, and the canonical poses; returns (params, score)."""
     mirror = _mirror_pairs(model)
     x = params.copy()
     for chain, idx in limb_chains(model).items():
         if idx.size == 0:
             continue
-        options = [np.zeros(idx.size), 0.5 * x[idx]]
+        options = [np.zeros(idx.size), 0.5 * x[idx]] + _canonical(model, chain, idx)
         if all(i in mirror for i in idx):
             options.append(x[[mirror[i] for i in idx]])
         for vals in options:
