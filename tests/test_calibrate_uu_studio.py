@@ -76,3 +76,24 @@ def test_bad_corner_argument_is_named(shared_data, tmp_path, capsys):
     assert "--corners" in capsys.readouterr().err
     rc = main(_args(d, ["cam9"], tmp_path / "x.toml"))
     assert rc == 2
+
+
+def test_manual_outline_is_robust_to_click_errors(shared_data):
+    """Outlines clicked up to 4 px off give the same inner corners (ECC multi-start picks the same optimum)."""
+    from capture.board import Checkerboard, corners_from_outline
+    from capture.calib_formats import read_opencv_camera
+    from capture.floor_board import load_corner_file, read_board_frames
+
+    d = shared_data / "uu_studio"
+    board = Checkerboard.from_opencv_xml(d / "checkerboard.xml")
+    outlines, _ = load_corner_file(CORNERS)
+    cam = read_opencv_camera(d / "cam4" / "config.xml", size=(644, 486))
+    frames, _ = read_board_frames(d / "cam4" / "checkerboard.avi", n_frames=3)
+    mean = np.mean(np.stack([f.astype(np.float32) for f in frames]), axis=0)
+    ref = corners_from_outline(mean, board, outlines["cam4"], matrix=cam.matrix, distortion=cam.distortion)
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        clicks = outlines["cam4"] + rng.uniform(-4, 4, (4, 2))
+        got = corners_from_outline(mean, board, clicks, matrix=cam.matrix, distortion=cam.distortion)
+        assert np.abs(got.corners - ref.corners).max() < 0.05
+        assert got.correlation == pytest.approx(ref.correlation, abs=1e-3)
