@@ -38,6 +38,11 @@ Fitter = Callable[[int, int, dict], dict]
 TRACK_CONSUMER = "track"
 
 
+def segment_token(camera: str) -> str:
+    """Liveliness name of "camera ``camera`` is being segmented" (lossless cameras wait for it)."""
+    return f"segment.{camera}"
+
+
 class EpochPacer:
     """Live replay pacing shared by all camera workers of a studio: a frame with session time ``t``
     is due at wall time ``epoch_ns + t``; frames already late by more than ``max_late_ns`` are
@@ -59,13 +64,14 @@ class EpochPacer:
 
 def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, Source], *, mode: str = "live",
                       encodings: Mapping[str, str] | None = None, jpeg_quality: int = 90, window: int = 8,
-                      stop: threading.Event, credit_timeout_s: float = 30.0,
+                      stop: threading.Event, credit_timeout_s: float = 600.0, startup_timeout_s: float = 120.0,
                       wall_ns: Callable[[], int] = time.time_ns, component: str = "camera",
                       pace: Callable[[int], bool] | None = None) -> dict:
     """Read every source round-robin and publish its frames until all end or ``stop``.
 
     Lossless: frame ``k`` is published only once the tracker acknowledged ``k - window``
-    (:class:`~service.bus.CreditGate`); a missing credit for ``credit_timeout_s`` ends the worker.
+    (:class:`~service.bus.CreditGate`) and only once the tracker and a segment worker for each camera
+    are alive (``startup_timeout_s``); a missing credit for ``credit_timeout_s`` ends the worker.
     Sources must already be open (context managers entered by the caller).  ``pace(timestamp_ns)``
     (e.g. :class:`EpochPacer`) may sleep and returns False to skip a frame (counted in ``skipped``).
     """
@@ -76,10 +82,11 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
     active = dict(sources)
     try:
         if gate is not None:  # lossless: nothing may be published before the consumers listen
-            ready = (wait_until_alive(session, keys, (TRACK_CONSUMER,), timeout_s=credit_timeout_s, stop=stop)
-                     and wait_until_matched(pubs.values(), timeout_s=credit_timeout_s, stop=stop))
+            needed = (TRACK_CONSUMER,) + tuple(segment_token(c) for c in sources)
+            ready = (wait_until_alive(session, keys, needed, timeout_s=startup_timeout_s, stop=stop)
+                     and wait_until_matched(pubs.values(), timeout_s=startup_timeout_s, stop=stop))
             if not ready:
-                log.error("lossless: tracker or segment workers not reachable within %g s", credit_timeout_s)
+                log.error("lossless: tracker or segment workers not reachable within %g s", startup_timeout_s)
                 return dict(status.counters)
         while active and not stop.is_set():
             for name, src in list(active.items()):
@@ -131,6 +138,7 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                           depth=1 if mode == "live" else 4096),
                     declare_publisher(session, keys.chamfer(name), mode=mode)) for name in segmenters}
     status = StatusReporter(session, keys, component)  # liveliness only once subscribed
+    tokens = [session.liveliness().declare_token(keys.status(segment_token(name))) for name in segmenters]
 
     def loop(name: str, segment: Segmenter) -> None:
         inbox, pub = wires[name]
@@ -178,6 +186,8 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
             t.join(2.0)
         status.tick(state="finished", force=True)
         status.close()
+        for token in tokens:
+            token.undeclare()
     return dict(status.counters)
 
 

@@ -106,7 +106,7 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
         s.open()
     cam_stats = run_camera_worker(studio.session(), keys, sources, mode="lossless", window=2,
                                   encodings={"cam0": "png", "cam1": "raw", "cam2": "png"}, stop=studio.stop,
-                                  credit_timeout_s=10.0)
+                                  credit_timeout_s=10.0, startup_timeout_s=10.0)
     studio.threads[0].join(10.0)
     assert cam_stats["processed"] == 3 * len(offline)
     assert [p.to_dict()["params"] for p in poses] == [o["params"] for o in offline]

@@ -1,0 +1,227 @@
+"""``contourcap demo``: a synthetic studio end to end over zenoh on loopback.
+
+1. A demo session is rendered once from a CMU BVH bundled with the package (``tracker.synth``) and
+   cached under ``cache_dir`` (keyed by its options).
+2. A studio config for it is written to ``out_dir`` (replay cameras, loopback peer hub, multicast
+   off); the camera, segment and track workers run as processes under the :class:`Supervisor`.
+3. This process is the hub and the client: it records every pose (``poses.jsonl``), bridges poses,
+   images and silhouettes to rerun (``demo.rrd``) and exports ``poses.bvh``.
+4. The summary: frames, fps, latency p50/p99, median rms_px, mean joint error against the
+   session's ``ground_truth.jsonl`` (joints both records name, ok frames), dropped sets, paths.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import resource
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from service.bus import Inbox, Keys, ZenohSettings, free_port, open_session
+from service.records import PoseRecord, StatusMessage
+
+STUDIO = "demo"
+HOST = "demo"
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    cameras: int = 4
+    size: tuple[int, int] = (320, 240)
+    frames: int = 30
+    fps: float = 30.0
+    motion: str = "scaled_131_03"
+    delivery: str = "lossless"
+    out_dir: Path = Path("contourcap-demo")
+    cache_dir: Path = Path.home() / ".cache" / "contourcap"
+    image_every: int = 5
+    timeout_s: float = 1800.0
+    segment_plugin: str | None = None
+    fit_plugin: str | None = None
+
+
+@dataclass(frozen=True)
+class DemoSummary:
+    frames: int
+    ok: int
+    cameras: int
+    fps_in: float
+    fps_out: float
+    realtime_factor: float
+    latency_ms_p50: float | None
+    latency_ms_p99: float | None
+    median_rms_px: float | None
+    mean_joint_error_m: float | None
+    dropped_sets: int
+    cpu_percent: float
+    wall_s: float
+    session: str
+    poses: str
+    bvh: str | None
+    rrd: str
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> Path:
+    """The cached synthetic session for ``opts`` (rendered on first use)."""
+    from tracker.synth import bundled_motion, make_synthetic_session
+
+    key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps], sort_keys=True)
+    root = Path(opts.cache_dir) / f"demo-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
+    if (root / "ground_truth.jsonl").is_file() and (root / "session.toml").is_file():
+        progress(f"demo session (cached): {root}")
+        return root
+    progress(f"rendering the demo session ({opts.cameras} cameras, {opts.frames} frames) into {root} ...")
+    make_synthetic_session(bundled_motion(opts.motion), root, cameras=opts.cameras, size=tuple(opts.size),
+                           frames=opts.frames, fps=opts.fps, seed=0, name="demo",
+                           progress=lambda d, n: progress(f"  rendered {d}/{n}") if d % 10 == 0 or d == n else None)
+    return root
+
+
+def write_studio(session_root: Path, out_dir: Path, *, port: int, delivery: str) -> Path:
+    """A studio config replaying ``session_root`` on one host over a loopback peer hub."""
+    from capture.session import load_session
+    from capture.tomlio import dumps
+
+    session = load_session(session_root)
+    data = {"studio": {"name": STUDIO, "delivery": delivery, "session": str(session_root.resolve())},
+            "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]},
+            "tracker": {"host": HOST, "set_timeout_ms": 200, "window": 4},
+            "camera": [{"name": c, "host": HOST, "backend": "replay", "encoding": "raw"}
+                       for c in session.camera_names]}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "studio.toml"
+    path.write_text(dumps(data))
+    return path
+
+
+def joint_error(poses: list[PoseRecord], truth_path: Path) -> float | None:
+    """Mean distance (m) between estimated and true joints over ok frames and shared joint names."""
+    truth = {}
+    for line in truth_path.read_text().splitlines():
+        if line.strip():
+            rec = json.loads(line)
+            truth[rec["frame"]] = rec.get("joints", {})
+    errs = []
+    for p in poses:
+        gt = truth.get(p.frame)
+        if not p.ok or not gt:
+            continue
+        names = [n for n in p.joints if n in gt]
+        if names:
+            est = np.array([p.joints[n] for n in names])
+            errs.append(np.linalg.norm(est - np.array([gt[n] for n in names]), axis=1))
+    return float(np.concatenate(errs).mean()) if errs else None
+
+
+def _pct(values, q) -> float | None:
+    return float(np.percentile(values, q)) if len(values) else None
+
+
+def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> DemoSummary:
+    """Run the whole demo (see module docstring); returns its summary."""
+    import rerun as rr
+
+    from capture.session import load_session
+    from service.config import load_config
+    from service.export import ExportError, write_bvh, write_pose_records
+    from service.messages import ChamferMessage, FrameMessage
+    from service.supervisor import Supervisor, plan_host
+    from service.viewer import RerunBridge
+
+    session_root = demo_session(opts, progress=progress)
+    session = load_session(session_root)
+    out = Path(opts.out_dir)
+    port = free_port()
+    cfg_path = write_studio(session_root, out, port=port, delivery=opts.delivery)
+    cfg = load_config(cfg_path)
+    n_total = opts.frames
+    hub = open_session(ZenohSettings.loopback(port, listen=True))
+    keys = Keys(STUDIO)
+    poses_in = Inbox(hub, keys.pose, PoseRecord.from_bytes, mode="lossless", depth=1_000_000)
+    status_in = Inbox(hub, keys.status("track"), StatusMessage.from_bytes, mode="live", depth=4)
+    rrd = out / "demo.rrd"
+    rec = rr.RecordingStream("contourcap", recording_id="contourcap-demo")
+    rec.save(str(rrd))
+    bridge = RerunBridge(rec, cameras=list(session.calibration), image_every=opts.image_every)
+    taps = [(Inbox(hub, keys.frame("*"), FrameMessage.from_bytes, depth=2 * opts.cameras), bridge.on_frame),
+            (Inbox(hub, keys.chamfer("*"), ChamferMessage.from_bytes, depth=2 * opts.cameras), bridge.on_chamfer)]
+    epoch = time.time_ns() + int(3e9) if opts.delivery == "live" else None
+    specs = plan_host(cfg, str(cfg_path), HOST, hub=f"tcp/127.0.0.1:{port}", epoch_ns=epoch, idle_exit_s=5.0,
+                      segment_plugin=opts.segment_plugin, fit_plugin=opts.fit_plugin)
+    sup = Supervisor(specs, backoff_s=0.5, max_backoff_s=2.0)
+    poses: list[PoseRecord] = []
+    last_status: StatusMessage | None = None
+    t0 = time.monotonic()
+    first_pose_t = last_pose_t = None
+    progress(f"starting {len(specs)} worker processes ({opts.delivery}), zenoh hub tcp/127.0.0.1:{port}")
+    sup.start()
+    try:
+        last_report = 0.0
+        while time.monotonic() - t0 < opts.timeout_s and not sup.all_finished:
+            sup.poll()
+            got = poses_in.recv(0.05)
+            while got is not None:
+                now = time.monotonic()
+                first_pose_t = first_pose_t or now
+                last_pose_t = now
+                poses.append(got.message)
+                bridge.on_pose(got.message)
+                got = poses_in.recv(0) if len(poses_in) else None
+            for inbox, handle in taps:
+                for item in inbox.drain():
+                    handle(item.message)
+            for item in status_in.drain():
+                last_status = item.message
+            if time.monotonic() - last_report > 2.0 and poses:
+                last_report = time.monotonic()
+                lat = [p.get("latency_ms") for p in poses[-30:] if p.get("latency_ms") is not None]
+                progress(f"  {len(poses)}/{n_total} poses, {sum(p.ok for p in poses)} ok"
+                         + (f", latency {np.median(lat):.0f} ms" if lat else ""))
+            if opts.delivery == "lossless" and len(poses) >= n_total:
+                break
+    finally:
+        sup.stop()
+        for item in status_in.drain():
+            last_status = item.message
+        for inbox, _ in taps + [(poses_in, None), (status_in, None)]:
+            inbox.close()
+        hub.close()
+        rec.flush()
+        rec.disconnect()
+    wall = time.monotonic() - t0
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    mine = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = usage.ru_utime + usage.ru_stime + mine.ru_utime + mine.ru_stime
+    poses_path = out / "poses.jsonl"
+    write_pose_records(poses_path, poses)
+    bvh = None
+    if any(p.ok and p.get("params") for p in poses):
+        from tracker.model import ModelError
+        from tracker.offline import session_model
+
+        try:
+            bvh = str(write_bvh(out / "poses.bvh", session_model(session, poses[0].get("model") or "knossow40"),
+                                poses, fps=session.fps).path)
+        except (ExportError, ModelError) as exc:
+            progress(f"no BVH: {exc}")
+    lat = [p.get("latency_ms") for p in poses if p.get("latency_ms") is not None]
+    rms = [p.get("rms_px") for p in poses if p.ok and p.get("rms_px") is not None]
+    span = (last_pose_t - first_pose_t) if first_pose_t and last_pose_t and len(poses) > 1 else 0.0
+    fps_out = (len(poses) - 1) / span if span > 0 else 0.0
+    fps_in = session.fps
+    dropped = int(last_status.stats.get("stale_sets", 0)) if last_status is not None else 0
+    return DemoSummary(
+        frames=len(poses), ok=sum(p.ok for p in poses), cameras=opts.cameras, fps_in=fps_in, fps_out=fps_out,
+        realtime_factor=fps_out / fps_in if fps_in else 0.0, latency_ms_p50=_pct(lat, 50),
+        latency_ms_p99=_pct(lat, 99), median_rms_px=float(np.median(rms)) if rms else None,
+        mean_joint_error_m=joint_error(poses, session_root / "ground_truth.jsonl"), dropped_sets=dropped,
+        cpu_percent=100.0 * cpu / wall if wall > 0 else 0.0, wall_s=wall, session=str(session_root),
+        poses=str(poses_path), bvh=bvh, rrd=str(rrd))

@@ -1,0 +1,42 @@
+"""`contourcap demo` plumbing end to end (workers as processes, real segmentation over zenoh, a
+deterministic stand-in for the tracker): every frame arrives, in order, with exactly the values the
+offline segmentation gives; summary, poses.jsonl and .rrd are written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("tracker.synth")
+
+from capture.replay import iter_frame_sets  # noqa: E402
+from capture.session import load_session  # noqa: E402
+from segmentation.pipeline import segment_frame  # noqa: E402
+from service.components import chamfer_to_message  # noqa: E402
+from service.demo import DemoOptions, run_demo  # noqa: E402
+from tracker.offline import background_models  # noqa: E402
+
+from test_service_plugins import fitter  # noqa: E402
+
+
+def test_demo_lossless_equals_offline_segmentation(tmp_path):
+    opts = DemoOptions(cameras=2, size=(160, 120), frames=6, fps=30.0, out_dir=tmp_path / "out",
+                       cache_dir=tmp_path / "cache", timeout_s=120.0,
+                       fit_plugin="tests.test_service_plugins:fitter_factory")
+    summary = run_demo(opts, progress=lambda m: None)
+    assert summary.frames == 6 and summary.ok == 6
+    poses = [json.loads(line) for line in (tmp_path / "out" / "poses.jsonl").read_text().splitlines()]
+    session = load_session(summary.session)
+    models, _ = background_models(session, list(session.camera_names))
+    offline = []
+    for fid, group in iter_frame_sets(session):
+        msgs = {c: chamfer_to_message(c, fid, f.timestamp_ns, segment_frame(models[c], f.image).chamfer)
+                for c, f in group.items()}
+        offline.append(fitter(fid, next(iter(group.values())).timestamp_ns, msgs))
+    assert [p["frame"] for p in poses] == [o["frame"] for o in offline]
+    assert [p["params"] for p in poses] == [o["params"] for o in offline]
+    assert summary.latency_ms_p50 is not None and summary.latency_ms_p99 >= summary.latency_ms_p50 > 0
+    assert summary.mean_joint_error_m is not None and np.isfinite(summary.mean_joint_error_m)
+    assert (tmp_path / "out" / "demo.rrd").stat().st_size > 0
