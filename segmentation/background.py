@@ -56,6 +56,14 @@ _COV_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # layout of the 6
 _FORMAT_VERSION = 1
 
 
+def _downsample(image: np.ndarray) -> np.ndarray:
+    """2x2 block means ``(ceil(h/2), ceil(w/2), c)``; odd sizes are padded by replication."""
+    h, w = image.shape[:2]
+    if h % 2 or w % 2:
+        image = cv2.copyMakeBorder(image, 0, h % 2, 0, w % 2, cv2.BORDER_REPLICATE)
+    return cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA)
+
+
 def bgr_to_yuv(image_bgr: np.ndarray) -> np.ndarray:
     """Centred YUV ``(h, w, 3)`` float32 of a BGR uint8 image ``(h, w, 3)`` (Y in 0..255, U, V about 0)."""
     return cv2.transform(image_bgr.astype(np.float32), BGR2YUV)
@@ -107,6 +115,7 @@ class BackgroundModel:
         self.shadow_range = (lo, hi)
         self.min_sigma = float(min_sigma)
         self._scratch: dict = {}
+        self._coarse: BackgroundModel | None = None
         self._precision()
         self._derive_mean_terms()
 
@@ -208,10 +217,13 @@ class BackgroundModel:
         """
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         x0, y0, x1, y1 = check_roi(roi, self.size)
-        sl = (slice(y0, y1), slice(x0, x1))
-        ws = self._workspace((y1 - y0, x1 - x0))
+        return self._distance_in(image_bgr[y0:y1, x0:x1], (slice(y0, y1), slice(x0, x1)))
+
+    def _distance_in(self, region: np.ndarray, sl) -> np.ndarray:
+        """Distance of a BGR uint8 ``region`` ``(h, w, 3)`` against the model pixels ``sl``."""
+        ws = self._workspace(region.shape[:2])
         bgr, p, t3, big_c, big_b, s, t = ws["bgr"], ws["p"], ws["t3"], ws["c"], ws["b"], ws["s"], ws["t"]
-        np.copyto(bgr, image_bgr[sl], casting="unsafe")  # uint8 -> float32 into a reused buffer
+        np.copyto(bgr, region, casting="unsafe")  # uint8 -> float32 into a reused buffer
         cv2.transform(bgr, BGR2YUV, dst=p)
         cv2.multiply(p, p, dst=t3)
         cv2.multiply(t3, self._pdiag[sl], dst=t3)
@@ -249,6 +261,21 @@ class BackgroundModel:
             self._scratch[shape] = ws
         return ws
 
+    def coarse_distance(self, image_bgr: np.ndarray) -> np.ndarray:
+        """The distance at half resolution, float32 ``(ceil(h/2), ceil(w/2))``: 2x2 block means of
+        the image against 2x2 block means of the model (~4x cheaper; a first pass that finds where
+        the person is, e.g. for an automatic ROI).  Pixel ``(i, j)`` covers full pixels ``2i..2i+1``."""
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        coarse = self._coarse_model()
+        return coarse._distance_in(_downsample(image_bgr), (slice(None), slice(None)))
+
+    def _coarse_model(self) -> "BackgroundModel":
+        if self._coarse is None:
+            self._coarse = BackgroundModel(_downsample(self.mean_yuv), _downsample(self.cov_yuv),
+                                           covariance=self.covariance, luma_relax=self.luma_relax,
+                                           shadow_range=self.shadow_range, min_sigma=self.min_sigma)
+        return self._coarse
+
     def update(self, image_bgr: np.ndarray, foreground: np.ndarray, *, rate: float = 0.01) -> None:
         """Slow adaptation: ``mu += rate * (p - mu)`` where ``foreground == 0`` (in place).
 
@@ -261,6 +288,11 @@ class BackgroundModel:
         background = cv2.compare(fg, 0, cv2.CMP_EQ)
         cv2.accumulateWeighted(bgr_to_yuv(image_bgr), self.mean_yuv, float(rate), mask=background)
         self._derive_mean_terms()
+        if self._coarse is not None:  # a coarse pixel learns only where its whole 2x2 block is background
+            coarse_bg = cv2.compare(_downsample(background), 255, cv2.CMP_EQ)
+            cv2.accumulateWeighted(bgr_to_yuv(_downsample(image_bgr)), self._coarse.mean_yuv, float(rate),
+                                   mask=coarse_bg)
+            self._coarse._derive_mean_terms()
 
     # ----------------------------------------------------------------- persistence
     def save(self, path) -> Path:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -82,11 +83,15 @@ def test_update_adapts_where_background_only(scene):
     fg[:, : w // 2] = 255  # pretend the left half is a person: no learning there
     before = np.mean(model.distance(shifted) > 16)
     assert before > 0.9
+    assert np.mean(model.coarse_distance(shifted) > 16) > 0.9  # builds the coarse model too
     for _ in range(60):
         model.update(shifted, fg, rate=0.1)
     d = model.distance(shifted)
     assert np.mean(d[:, w // 2:] > 16) < 0.01
     assert np.mean(d[:, : w // 2] > 16) > 0.9
+    dc = model.coarse_distance(shifted)
+    assert np.mean(dc[:, (w // 2 + 2) // 2:] > 16) < 0.01
+    assert np.mean(dc[:, : w // 4 - 1] > 16) > 0.9
 
 
 def test_malformed_input_names_argument(models):
@@ -122,6 +127,36 @@ def test_roi_only_processes_the_box(scene, models):
     outside = np.ones_like(person)
     outside[roi[1]:roi[3], roi[0]:roi[2]] = False
     assert not seg.silhouette[outside].any()
+
+
+def test_auto_roi_matches_full_image(scene, models):
+    """The half-resolution first pass finds the person; the full-resolution result inside its box
+    is the same as processing the whole image."""
+    model = models["diag"]
+    auto = SegmentationParams(auto_roi=True)
+    for frame, person in zip(scene.frames, scene.person_masks):
+        seg = segment_frame(model, frame, params=auto)
+        full = segment_frame(model, frame)
+        x0, y0, x1, y1 = seg.roi
+        assert 0 < (x1 - x0) * (y1 - y0) < 0.5 * person.size
+        assert iou(seg.silhouette, full.silhouette) > 0.995
+        assert iou(seg.silhouette, person) >= 0.95
+    empty = segment_frame(model, scene.background_frames[0], params=auto)
+    assert empty.roi == (0, 0, 0, 0) and not empty.silhouette.any() and empty.chamfer.silhouette_q.size == 0
+    assert (empty.chamfer.sample(np.array([[10.0, 10.0]])).d_sil == 48.0).all()
+
+
+def test_coarse_distance_is_half_resolution_block_test(models, scene):
+    model = models["diag"]
+    frame = scene.frames[0]
+    small = model.coarse_distance(frame)
+    h, w = frame.shape[:2]
+    assert small.shape == ((h + 1) // 2, (w + 1) // 2)
+    person_small = cv2.resize(scene.person_masks[0].astype(np.uint8), (small.shape[1], small.shape[0]),
+                              interpolation=cv2.INTER_AREA) > 0
+    core = cv2.erode(person_small.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert np.mean(small[core] > 16) > 0.9  # the person's core is foreground at half resolution
+    assert np.mean(small[~cv2.dilate(person_small.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)] > 16) < 0.01
 
 
 def test_real_uu_studio_background_and_person(shared_data):
