@@ -89,7 +89,7 @@ def hidden_points(
     m = m_all[c[i], q]
     D = P - centres[c]
     d = (D @ R.transpose(1, 0, 2).reshape(3, 3 * n_parts)).reshape(-1, n_parts, 3)[i, q]
-    a, b, k, z1, z2 = (model.cones[q, j] for j in range(5))
+    a, b, k, z1, z2 = model.cones.T[:, q]  # each (pairs,)
     g1, g2, g3 = m[:, 0] / a, m[:, 1] / b, 1.0 + k * m[:, 2]
     h1, h2, h3 = d[:, 0] / a, d[:, 1] / b, k * d[:, 2]
     qa = h1 * h1 + h2 * h2 - h3 * h3
