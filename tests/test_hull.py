@@ -85,6 +85,23 @@ def test_fewer_cameras_give_a_superset(rng):
     assert not np.any(h6.contains(pts) & ~h3.contains(pts))
 
 
+def test_tolerance_keeps_a_limb_one_view_missed():
+    model, pose, cams, sils = _synthetic(5)
+    joints = joint_centre_array(model, pose)
+    wrist = joints[model.joint_names.index("right_wrist")]
+    u, v = np.rint(cams[0].project(wrist)).astype(int)
+    damaged = [s.copy() for s in sils]
+    cv2.circle(damaged[0], (int(u), int(v)), 25, 0, -1)  # segmentation lost the hand in cam0
+    box = common_view_bounds(cams)
+    strict = visual_hull(cams, damaged, min_voxel_m=0.02, bounds=box)
+    tolerant = visual_hull(cams, damaged, min_voxel_m=0.02, bounds=box, tolerance=1)
+    assert not strict.contains(wrist[None])[0]
+    assert tolerant.contains(wrist[None])[0] and tolerant.contains(joints).all()
+    assert tolerant.contains(strict.centres).all() and tolerant.volume > strict.volume
+    with pytest.raises(ValueError, match="tolerance"):
+        visual_hull(cams, sils, tolerance=len(cams))
+
+
 def test_contains_matches_cubes(rng):
     model, pose, cams, sils = _synthetic(4)
     hull = visual_hull(cams, sils, min_voxel_m=0.03)

@@ -200,14 +200,15 @@ def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return x[:, :2] / z[:, None], z
 
 
-def _classify(lower: np.ndarray, size: float, cameras, integrals) -> tuple[np.ndarray, np.ndarray]:
+def _classify(lower: np.ndarray, size: float, cameras, integrals, tolerance: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Classify cubes ``lower`` (n, 3) of edge ``size``: returns (empty (n,), full (n,)) bool.
 
-    Cameras are taken in turn and a cube found empty is dropped from the later ones.
+    Empty: wholly outside more than ``tolerance`` silhouettes; full: not wholly inside at most
+    ``tolerance`` of them.  Cameras are taken in turn and a cube found empty is dropped.
     """
     n = len(lower)
-    empty = np.zeros(n, bool)
-    full = np.ones(n, bool)
+    n_out = np.zeros(n, int)
+    n_partial = np.zeros(n, int)
     active = np.arange(n)
     for cam, ii in zip(cameras, integrals):
         if active.size == 0:
@@ -246,18 +247,19 @@ def _classify(lower: np.ndarray, size: float, cameras, integrals) -> tuple[np.nd
         count = ii[r1, c1] - ii[r0, c1] - ii[r1, c0] + ii[r0, c0]
         area = (c1 - c0) * (r1 - r0)
         # wholly behind the camera or off the image: empty; partly behind: undecided
-        gone = ~any_front | (area <= 0) | (all_front & (count == 0))
-        full[active] &= inside_img & (count == area)
-        empty[active[gone]] = True
-        active = active[~gone]
-    return empty, full & ~empty
+        out = ~any_front | (area <= 0) | (all_front & (count == 0))
+        n_out[active] += out
+        n_partial[active] += ~(inside_img & (count == area))
+        active = active[n_out[active] <= tolerance]
+    empty = n_out > tolerance
+    return empty, (n_partial <= tolerance) & ~empty
 
 
-def _centres_inside(centres: np.ndarray, cameras, masks) -> np.ndarray:
-    """Whether points (n, 3) project onto the silhouette in every view, (n,) bool."""
-    on = np.ones(len(centres), bool)
+def _centres_inside(centres: np.ndarray, cameras, masks, tolerance: int = 0) -> np.ndarray:
+    """Whether points (n, 3) project onto the silhouette in all but ``tolerance`` views, (n,) bool."""
+    misses = np.zeros(len(centres), int)
     for cam, m in zip(cameras, masks):
-        idx = np.flatnonzero(on)
+        idx = np.flatnonzero(misses <= tolerance)
         if idx.size == 0:
             break
         uv, z = _project(cam, centres[idx])
@@ -265,8 +267,8 @@ def _centres_inside(centres: np.ndarray, cameras, masks) -> np.ndarray:
         inside = (z > 1e-6) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
         hit = np.zeros(idx.size, bool)
         hit[inside] = m[uv[inside, 1], uv[inside, 0]] > 0
-        on[idx] = hit
-    return on
+        misses[idx] += ~hit
+    return misses <= tolerance
 
 
 def visual_hull(
@@ -276,6 +278,7 @@ def visual_hull(
     bounds=None,
     min_voxel_m: float = 0.015,
     coarse: int = 16,
+    tolerance: int = 0,
 ) -> VoxelHull:
     """Coarse-to-fine visual hull.
 
@@ -292,12 +295,17 @@ def visual_hull(
     coarse : int
         Cells of the first grid along the longest side of ``bounds`` (the grid is grown so that
         the finest size is exactly ``min_voxel_m``).
+    tolerance : int
+        Views a point may fall outside of and still belong to the hull (0: the strict visual
+        hull; 1 keeps a limb that one segmentation missed, at the price of a fatter hull).
     """
     masks = _check_inputs(cameras, silhouettes)
     if not (min_voxel_m > 0 and np.isfinite(min_voxel_m)):
         raise ValueError(f"min_voxel_m must be > 0, got {min_voxel_m}")
     if int(coarse) < 1:
         raise ValueError(f"coarse must be >= 1, got {coarse}")
+    if not 0 <= int(tolerance) < len(cameras):
+        raise ValueError(f"tolerance must be in [0, {len(cameras) - 1}] for {len(cameras)} cameras, got {tolerance}")
     box = common_view_bounds(cameras) if bounds is None else np.asarray(bounds, dtype=float).reshape(2, 3)
     if not np.all(box[1] > box[0]):
         raise ValueError(f"bounds must be [lower, upper] with upper > lower, got {box.tolist()}")
@@ -315,12 +323,12 @@ def visual_hull(
             break
         if level == levels:  # finest level: a cube is kept when its centre is on every silhouette
             centre = lower + 0.5 * size
-            on = _centres_inside(centre, cameras, masks)
+            on = _centres_inside(centre, cameras, masks, int(tolerance))
             kept_c.append(centre[on])
             kept_s.append(np.full(int(on.sum()), size))
             kept_f.append(np.zeros(int(on.sum()), bool))
             break
-        empty, full = _classify(lower, size, cameras, integrals)
+        empty, full = _classify(lower, size, cameras, integrals, int(tolerance))
         kept_c.append(lower[full] + 0.5 * size)
         kept_s.append(np.full(int(full.sum()), size))
         kept_f.append(np.ones(int(full.sum()), bool))
