@@ -155,6 +155,9 @@ def test_rows_select_points(case):
         contour_jacobian(model, pose, CAMERAS, ct, rows=ct.valid[:-1])
     with pytest.raises(ValueError, match="cameras"):
         contour_jacobian(model, pose, CAMERAS[:3], ct)
+    other = load_model("knossow54" if model.name == "knossow40" else "knossow40")
+    with pytest.raises(ValueError, match="pose"):
+        contour_jacobian(model, forward(other, other.zero()), CAMERAS, ct)
 
 
 def test_camera_inside_a_cone_gives_finite_jacobians_without_warnings():

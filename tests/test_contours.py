@@ -183,6 +183,9 @@ def test_bad_arguments_are_named(model):
         extremal_contours(model, pose, ring(1), n_samples=0)
     with pytest.raises(ValueError, match="cameras"):
         extremal_contours(model, pose, [])
+    other = load_model("knossow54" if model.name == "knossow40" else "knossow40")
+    with pytest.raises(ValueError, match="pose"):
+        extremal_contours(model, forward(other, other.zero()), ring(1))
 
 
 try:

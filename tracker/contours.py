@@ -181,6 +181,8 @@ def extremal_contours(
     cameras = list(cameras)
     if not cameras:
         raise ValueError("cameras: at least one camera is needed")
+    if pose.rotation.shape[0] != model.n_parts:
+        raise ValueError(f"pose: has {pose.rotation.shape[0]} parts, model {model.name!r} has {model.n_parts}")
     n_cams, n_parts = len(cameras), model.n_parts
     C = camera_centres(cameras)  # (n_cams, 3) world
     R, t = pose.rotation, pose.translation  # part2world (n_parts, 3, 3), (n_parts, 3)

@@ -55,9 +55,11 @@ def _select(contours: Contours, rows) -> np.ndarray:
     return rows.astype(np.intp, copy=False)
 
 
-def _check(model: BodyModel, cameras: Sequence[Camera], contours: Contours) -> None:
+def _check(model: BodyModel, pose: Pose, cameras: Sequence[Camera], contours: Contours) -> None:
     if contours.n_parts != model.n_parts:
         raise ValueError(f"contours: computed for {contours.n_parts} parts, model {model.name!r} has {model.n_parts}")
+    if pose.rotation.shape[0] != model.n_parts or pose.screw_w.shape[0] != model.n_params:
+        raise ValueError(f"pose: computed for another model than {model.name!r}")
     if contours.n_cams != len(cameras):
         raise ValueError(f"cameras: {len(cameras)} given, contours were computed for {contours.n_cams}")
 
@@ -108,7 +110,7 @@ def contour_motion(
     ndarray, shape (n, 3, 6)
         ``dY = (A + B) (ω; v)``, columns ω then v (world); n = N or len(rows).
     """
-    _check(model, cameras, contours)
+    _check(model, pose, cameras, contours)
     r = _select(contours, rows)
     Y = contours.points[r]
     out = np.zeros((r.size, 3, 6))
@@ -175,7 +177,7 @@ def contour_jacobian(
     ndarray, shape (n, 2, n_params)
         Pixels per unit parameter (radians, metres); n = N or len(rows).
     """
-    _check(model, cameras, contours)
+    _check(model, pose, cameras, contours)
     r = _select(contours, rows)
     Y = contours.points[r]
     cam = contours.cam[r]
