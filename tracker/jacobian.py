@@ -21,6 +21,12 @@ for the camera centre C (world).  When the part moves with the spatial screw
   plane, which contains the line of sight, so ``J_I B`` runs along the image
   contour: it moves the matched sample along its ruling's image, never across it.
 
+Against the paper (IJCV 2008 eqs. 24, 29–31): its screw is taken about the part origin
+(``V = ṫ``, ``A = [[t - X]× I]``), ours about the world origin (``v = ṫ - ω × t``,
+``A = [-[X]× I]``; the paper's "equivalent" ``A = [[X]× I]`` has the wrong sign).  Its
+``θ̇ = (R n)^T [[C - t]× - I] (ω; V) / ((X + R^T (t - C))^T n_θ)`` is ours with ``X · n_θ = 0``:
+the denominator is ``f_θ`` and the numerator ``-(R n) · (ω × (C - t) + V)``.
+
 ``J_H`` (6 × n_params) is the part's body Jacobian (``tracker.kinematics``): the
 screws of the parameters moving it.  ``J_I`` (2×3) is
 ``Camera.project_with_jacobian`` (distortion included).  The product is formed
