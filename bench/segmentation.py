@@ -113,6 +113,15 @@ def bench_size(size, repeats: int, seed: int) -> dict:
                 if roi_label == "roi30":
                     r = _roi_30(scene.person_masks[0])
                     entry[f"{label}_{roi_label}"]["roi_fraction"] = (r[2] - r[0]) * (r[3] - r[1]) / (size[0] * size[1])
+        if cov == "diag":
+            auto = SegmentationParams(auto_roi=True)
+            per = [(_ms(lambda: model.coarse_distance(f), repeats)[0],
+                    _ms(lambda: segment_frame(model, f, params=auto), repeats)[0],
+                    _iou(segment_frame(model, f, params=auto).silhouette, p))
+                   for f, p in zip(scene.frames, scene.person_masks)]
+            entry["auto_roi"] = {"coarse_background_ms": float(np.median([x[0] for x in per])),
+                                 "total_ms": float(np.median([x[1] for x in per])),
+                                 "iou_mean": float(np.mean([x[2] for x in per]))}
         out[f"ours_{cov}"] = entry
     out["mog2"] = bench_mog2(scene, repeats)
     return out
