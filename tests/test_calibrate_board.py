@@ -268,3 +268,17 @@ def test_corner_file_errors_name_file_camera_key(tmp_path):
     outlines, hints = load_corner_file(p)
     np.testing.assert_array_equal(outlines["cam1"][3], [7, 8])
     np.testing.assert_array_equal(hints["cam2"], [9.5, 10])
+
+
+def test_read_board_frames_image_and_bad_files(tmp_path):
+    from capture.floor_board import read_board_frames
+
+    img = np.full((40, 60), 77, np.uint8)
+    cv2.imwrite(str(tmp_path / "board.png"), img)
+    frames, ids = read_board_frames(tmp_path / "board.png")
+    assert ids == [0] and np.array_equal(frames[0], img)
+    (tmp_path / "junk.avi").write_bytes(b"not a video at all")
+    with pytest.raises(ValueError, match="junk.avi"):
+        read_board_frames(tmp_path / "junk.avi")
+    with pytest.raises(FileNotFoundError, match="missing.avi"):
+        read_board_frames(tmp_path / "missing.avi")
