@@ -173,12 +173,18 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
     from capture.floor_board import calibrate_floor, load_corner_file
 
     board = _board(args)
-    first = next(iter(videos.values()))
-    known = {c.name: c for c in read_any_calibration(args.intrinsics, size=_video_size(first))}
+    sizes = {n: _video_size(p) for n, p in videos.items()}
+    known = {c.name: c for c in read_any_calibration(args.intrinsics, size=next(iter(sizes.values())))}
     missing = [n for n in videos if n not in known]
     if missing:
         raise ValueError(f"{args.intrinsics}: no intrinsics for camera(s) {missing}; it holds {sorted(known)}")
-    intr = [Intrinsics.from_camera(known[n]) for n in videos]
+    intr, size_notes = [], {}
+    for n in videos:
+        i = Intrinsics.from_camera(known[n])
+        if i.size != sizes[n]:  # formats without an image size guess it; the video is the truth
+            size_notes[n] = f"image size {i.size} in {args.intrinsics} replaced by the video's {sizes[n]}"
+            i = Intrinsics(n, i.matrix, i.distortion, sizes[n])
+        intr.append(i)
     outlines, hints = load_corner_file(args.corners_file) if args.corners_file else ({}, {})
     for cam, text in _pairs(args.corners, "--corners").items():
         outlines[cam] = _points(text, "--corners", 4)
@@ -187,7 +193,7 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
     result = calibrate_floor(intr, videos, board, outlines=outlines, origin_hints=hints,
                              n_frames=args.frames, progress=bar)
     ext = result.extrinsics
-    notes = {v.camera: v.note for v in result.views}
+    notes = {v.camera: "; ".join(x for x in (v.note, size_notes.get(v.camera, "")) if x) for v in result.views}
     report = {}
     for r in ext.reports:
         if r.used:
