@@ -7,7 +7,7 @@ distance) -> :func:`silhouette_from_distance` (hysteresis, morphology, component
 :func:`segment_frame` runs the whole chain.
 """
 
-from segmentation.background import BGR2YUV, BackgroundModel, bgr_to_yuv
+from segmentation.background import BGR2YUV, BackgroundModel, bgr_to_yuv, evenly_spaced
 from segmentation.distance import (ChamferImages, ChamferSample, chamfer_images, distance_to_mask,
                                    sample_bilinear)
 from segmentation.edges import silhouette_boundary, silhouette_edges
@@ -15,7 +15,7 @@ from segmentation.pipeline import FrameSegmentation, SegmentationParams, segment
 from segmentation.silhouette import largest_components, silhouette_from_distance
 
 __all__ = [
-    "BGR2YUV", "BackgroundModel", "bgr_to_yuv",
+    "BGR2YUV", "BackgroundModel", "bgr_to_yuv", "evenly_spaced",
     "ChamferImages", "ChamferSample", "chamfer_images", "distance_to_mask", "sample_bilinear",
     "silhouette_boundary", "silhouette_edges",
     "FrameSegmentation", "SegmentationParams", "segment_frame",

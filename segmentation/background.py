@@ -38,7 +38,7 @@ import numpy as np
 
 from segmentation.checks import check_image_bgr, check_mask, check_roi
 
-__all__ = ["BackgroundModel", "bgr_to_yuv", "BGR2YUV"]
+__all__ = ["BackgroundModel", "bgr_to_yuv", "BGR2YUV", "evenly_spaced"]
 
 # rows: Y, U - 128, V - 128 ; columns: B, G, R  (OpenCV's BGR2YUV without the +128 offsets)
 BGR2YUV = np.array(
@@ -54,6 +54,23 @@ _PERM = BGR2YUV[[1, 2, 0]].copy()
 _ONES = np.ones((1, 3), np.float32)
 _COV_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # layout of the 6 stored covariance terms
 _FORMAT_VERSION = 1
+
+
+def evenly_spaced(frames: Iterable[np.ndarray], count: int) -> list[np.ndarray]:
+    """About ``count`` items spread evenly over an iterable of unknown length, holding at most
+    ``2 * count`` at a time (for a median background from a long session)."""
+    if count < 1:
+        raise ValueError(f"count: expected >= 1, got {count!r}")
+    kept, stride = [], 1
+    for i, frame in enumerate(frames):
+        if i % stride == 0:
+            kept.append(frame)
+        if len(kept) >= 2 * count:
+            kept, stride = kept[::2], stride * 2
+    if len(kept) <= count:
+        return kept
+    pick = np.unique(np.linspace(0, len(kept) - 1, count).round().astype(int))
+    return [kept[i] for i in pick]
 
 
 def _downsample(image: np.ndarray) -> np.ndarray:

@@ -5,8 +5,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from segmentation import BackgroundModel, SegmentationParams, bgr_to_yuv, largest_components, segment_frame
+from segmentation import (BackgroundModel, SegmentationParams, bgr_to_yuv, evenly_spaced, largest_components,
+                          segment_frame)
 from segmentation.synthetic import synthetic_scene
 from tests.fixtures_segmentation import frame_count, iou, read_frames
 
@@ -176,3 +179,14 @@ def test_real_uu_studio_background_and_person(shared_data):
             area = frame.shape[0] * frame.shape[1]
             assert 0.015 * area < first < 0.10 * area, (cam, first)  # a seated person at 4-9 m
             assert second < 0.35 * first, (cam, first, second)
+
+
+@given(st.integers(0, 500), st.integers(1, 40))
+def test_evenly_spaced_bounded_and_spread(n, count):
+    picked = evenly_spaced(iter(range(n)), count)
+    assert len(picked) == min(n, count) or (n > count and count // 2 < len(picked) <= count)
+    assert picked == sorted(set(picked))
+    if n:
+        assert picked[0] == 0
+    if n > 2 * count and count >= 2:  # spread over the whole sequence, not just its start
+        assert picked[-1] >= n // 2

@@ -125,7 +125,7 @@ def learn_background(session, name: str, *, background_frames: int, median_frame
     """``(BackgroundModel, how)`` for one camera: from background media, else a session median."""
     from capture.replay import read_frames
     from capture.session import SessionError
-    from segmentation import BackgroundModel, bgr_to_yuv
+    from segmentation import BackgroundModel, bgr_to_yuv, evenly_spaced
 
     cam = session.camera(name)
     if cam.background is not None:
@@ -141,17 +141,11 @@ def learn_background(session, name: str, *, background_frames: int, median_frame
         if not images:
             raise SessionError(f"{cam.background}: camera {name!r}: background media has no frames")
         return BackgroundModel.from_frames(images, covariance=covariance), f"background media ({len(images)} frames)"
-    images, stride = [], 1
-    for i, f in enumerate(read_frames(session, name, frames=frames)):  # strided subset, bounded memory
-        if i % stride == 0:
-            images.append(f.image)
-        if len(images) >= 2 * median_frames:
-            images, stride = images[::2], stride * 2
+    images = evenly_spaced((f.image for f in read_frames(session, name, frames=frames)), median_frames)
     if len(images) < 3:
         raise SessionError(f"{session.root}: camera {name!r} has no background media and only "
                            f"{len(images)} frame(s), too few for a median background")
-    pick = np.unique(np.linspace(0, len(images) - 1, min(median_frames, len(images))).round().astype(int))
-    return BackgroundModel.from_median([images[i] for i in pick]), f"median of {len(pick)} session frames"
+    return BackgroundModel.from_median(images), f"median of {len(images)} session frames"
 
 
 def _full_distance_png(chamfer, which: np.ndarray) -> np.ndarray:
