@@ -3,9 +3,11 @@
 Per frame: keep the cameras that sent chamfer images, predict (last pose, or constant velocity),
 fit with Levenberg–Marquardt on the chamfer cost (``tracker.cost``) with a small prior towards the
 prediction, measure quality (RMS residual, fraction of predicted contour points inside the
-silhouettes) and emit the record.  Initialisation and re-initialisation after a lost frame are
-delegated to ``tracker.initialise.initialise`` when that module is present; otherwise the caller
-passes ``initial_params``.
+silhouettes) and emit the record.  A frame whose quality is below the thresholds is reported
+``ok: false`` ("poor fit"); after ``patience`` such frames in a row (``tracker.recovery.LossMonitor``)
+the pose is searched again from the silhouettes, seeded by the last good pose
+(``tracker.initialise.initialise(hint=...)``).  Without ``initial_params`` the first frame is
+initialised from the silhouettes.
 
 Never raises on data: a frame that cannot be solved (no camera, all silhouettes empty, no
 initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``.
@@ -13,7 +15,6 @@ initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``
 
 from __future__ import annotations
 
-import importlib
 import time
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
@@ -23,7 +24,9 @@ import numpy as np
 from capture.camera import Camera
 from tracker.cost import ChamferCost
 from tracker.kinematics import joint_centre_array
+from tracker.initialise import initialise
 from tracker.model import ROOT_TRANSLATION, BodyModel
+from tracker.recovery import LossMonitor
 from tracker.solver import SolverResult, least_squares_fd, levenberg_marquardt
 
 __all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
@@ -105,14 +108,22 @@ class Tracker:
     sliding : use the sliding term of the contour Jacobian
     solver : ``"lm"`` (analytic Jacobian) or ``"lsq"`` (scipy, finite differences)
     initial_params : (n_params,) start pose; without it the first frame is initialised by
-        ``tracker.initialise.initialise`` (needs ``silhouettes``)
+        ``tracker.initialise.initialise`` (the frame must bring ``silhouettes``)
     options : TrackerOptions
+    recover : re-initialise (``tracker.recovery``, seeded by the last good pose) once
+        ``patience`` consecutive frames were bad and the frame brings ``silhouettes``
     clock : callable returning seconds (latency measurement), default ``time.perf_counter``
+
+    Attributes
+    ----------
+    params : (n_params,) the last fitted pose (None before initialisation)
+    last_good : (n_params,) the last pose of a good frame
+    last_result : SolverResult of the last fit
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
-                 initial_params=None, options: TrackerOptions = TrackerOptions(),
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 initial_params=None, options: TrackerOptions = TrackerOptions(), recover: bool = True,
+                 patience: int = 3, clock: Callable[[], float] = time.perf_counter) -> None:
         if solver not in ("lm", "lsq"):
             raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
         self.model = model
@@ -122,18 +133,21 @@ class Tracker:
         self.sliding = bool(sliding)
         self.solver = solver
         self.options = options
+        self.recover = bool(recover)
         self.clock = clock
+        self.monitor = LossMonitor(max_rms_px=options.max_rms_px, min_inside_fraction=options.min_inside_fraction,
+                                   patience=patience)
         self.params: np.ndarray | None = None
         self.previous: np.ndarray | None = None
+        self.last_good: np.ndarray | None = None
         if initial_params is not None:
             p = np.asarray(initial_params, dtype=float)
             if p.shape != (model.n_params,) or not np.all(np.isfinite(p)):
                 raise ValueError(f"initial_params: expected a finite array of shape ({model.n_params},)")
             self.params = model.clamp(p)
-        self.lost = False
         self.last_result: SolverResult | None = None
+        self.n_initialisations = 0
 
-    # -- prediction / (re)initialisation -------------------------------------------------
     def predict(self) -> np.ndarray | None:
         """Start pose for the next frame (n_params,) or None before initialisation."""
         if self.params is None:
@@ -142,73 +156,87 @@ class Tracker:
             return self.model.clamp(2.0 * self.params - self.previous)
         return self.params
 
-    def _initialise(self, cams, chamfer, silhouettes, hint):
-        try:
-            init = importlib.import_module("tracker.initialise")
-        except ImportError:
-            return None, "no initial pose: pass initial_params (tracker.initialise is not available)"
-        if silhouettes is None:
-            return None, "no initial pose: initialisation needs silhouettes"
-        try:
-            p = init.initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
-                                {c.name: chamfer[c.name] for c in cams}, hint=hint)
-        except Exception as exc:  # noqa: BLE001 - a failed initialisation is a lost frame, not a crash
-            return None, f"initialisation failed: {exc}"
-        return np.asarray(p, dtype=float), None
+    def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
+        """Initialisation (hint None) or recovery from silhouettes; raises ValueError on failure."""
+        self.n_initialisations += 1
+        res = initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
+                         {c.name: chamfer[c.name] for c in cams}, hint=hint)
+        return self.model.clamp(np.asarray(res.params, dtype=float))
 
-    # -- one frame ------------------------------------------------------------------------
+    def _fit(self, cams, chs, start):
+        res, cost = fit_frame(self.model, cams, chs, start, prediction=start, sliding=self.sliding,
+                              solver=self.solver, options=self.options)
+        terms = cost.evaluate(np.asarray(res.params))
+        return res, terms, terms.rms_px(), terms.inside_fraction()
+
+    def _bad(self, rms: float, inside: float) -> bool:
+        o = self.options
+        return not (np.isfinite(rms) and rms <= o.max_rms_px and np.isfinite(inside) and inside >= o.min_inside_fraction)
+
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
-        """Fit one frame set and return its pose record (a JSON-ready dict)."""
+        """Fit one frame set and return its pose record (a JSON-ready dict).
+
+        ``chamfer``: camera name -> ChamferImages (a camera absent this frame is left out);
+        ``silhouettes``: camera name -> (h, w) mask, needed for (re)initialisation only.
+        """
         t0 = self.clock()
         record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
-        unknown = [name for name in chamfer if name not in self.cameras]
-        names = [n for n in self.cameras if n in chamfer
-                 and not _silhouette_empty(chamfer[n], None if silhouettes is None else silhouettes.get(n))]
+        unknown = sorted(name for name in chamfer if name not in self.cameras)
+        sils = silhouettes if silhouettes is not None else {}
+        names = [n for n in self.cameras if n in chamfer and not _silhouette_empty(chamfer[n], sils.get(n))]
         record["cameras"] = len(names)
 
         def fail(reason: str) -> dict:
             record.update(ok=False, reason=reason, latency_ms=1e3 * (self.clock() - t0))
-            self.lost = True
+            self.monitor.update({"ok": False, "reason": reason})
             return record
 
         if unknown:
-            return fail(f"unknown camera(s) {sorted(unknown)}")
+            return fail(f"unknown camera(s) {unknown}")
         if not names:
             return fail("no camera with a non-empty silhouette")
         cams = [self.cameras[n] for n in names]
         chs = [chamfer[n] for n in names]
+        can_search = silhouettes is not None and all(n in silhouettes for n in names)
         start = self.predict()
-        if start is None or (self.lost and silhouettes is not None):
-            p, why = self._initialise(cams, chamfer, silhouettes, hint=self.params)
-            if p is None and start is None:
-                return fail(why)
-            if p is not None:
-                start, self.previous = self.model.clamp(p), None
-        res, cost = fit_frame(self.model, cams, chs, start, prediction=start, sliding=self.sliding,
-                              solver=self.solver, options=self.options)
+        if start is None:
+            if not can_search:
+                return fail("no initial pose: pass initial_params, or silhouettes for automatic initialisation")
+            try:
+                start = self._search(cams, chamfer, silhouettes, None)
+            except ValueError as exc:
+                return fail(f"initialisation failed: {exc}")
+        res, terms, rms, inside = self._fit(cams, chs, start)
+        bad = self._bad(rms, inside)
+        state = self.monitor.update({"rms_px": rms, "inside_fraction": inside})
+        if bad and state.lost and self.recover and can_search and self.last_good is not None:
+            try:
+                res2, terms2, rms2, inside2 = self._fit(cams, chs, self._search(cams, chamfer, silhouettes,
+                                                                                 self.last_good))
+            except ValueError:
+                pass
+            else:
+                if not self._bad(rms2, inside2) or rms2 < rms:
+                    res, terms, rms, inside = res2, terms2, rms2, inside2
+                    bad = self._bad(rms, inside)
+                    if not bad:
+                        self.monitor.reset()
+                    self.previous = None  # no velocity across a re-initialisation
         self.last_result = res
-        terms = cost.evaluate(np.asarray(res.params))
-        inside = terms.inside_fraction()
-        rms = terms.rms_px()
-        pose = terms.pose
-        joints = joint_centre_array(self.model, pose)
+        joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=True, params=[float(v) for v in res.params],
+            ok=not bad, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
         )
-        bad = (not np.isfinite(rms) or rms > self.options.max_rms_px or not np.isfinite(inside)
-               or inside < self.options.min_inside_fraction)
         if bad:
-            record.update(ok=False, reason=f"lost: rms {rms:.2f} px, {100 * inside:.0f}% of contour inside "
-                                           f"silhouettes")
-            self.lost = True
-            # keep the fit only as a start: the previous good pose stays the velocity reference
-            self.params = np.array(res.params)
+            record["reason"] = f"poor fit: rms {rms:.2f} px, {100 * inside:.0f}% of contour on the silhouettes"
+            self.params = np.array(res.params)  # next start; the velocity reference is dropped
+            self.previous = None
         else:
             self.previous, self.params = self.params, np.array(res.params)
-            self.lost = False
+            self.last_good = self.params
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record
 

@@ -1,0 +1,124 @@
+"""``contourcap track SESSION --out poses.jsonl``: track a recorded session offline."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from capture.session import SessionError, load_session
+from tracker.model import ModelError, available_models
+from tracker.offline import background_models, session_model, summarise, track_session
+
+HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("session", type=Path, help="session directory (session.toml + calibration.toml)")
+    parser.add_argument("--out", type=Path, required=True, help="output pose records, JSON lines")
+    parser.add_argument("--model", default="knossow40", choices=available_models(), help="body model")
+    parser.add_argument("--no-sliding", action="store_true", help="drop the sliding term of the contour Jacobian")
+    parser.add_argument("--solver", choices=("lm", "lsq"), default="lm",
+                        help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
+    parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
+    parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
+    parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
+                        help="start from the params of the first record of this pose file (else automatic)")
+
+
+def parse_frames(text: str | None) -> range | None:
+    """``"A:B"`` -> ``range(A, B)``; ``"A:"`` -> from A on; ``":B"`` -> up to B."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        a = int(parts[0]) if parts[0] else 0
+        b = int(parts[1]) if parts[1] else 2**62
+    except ValueError:
+        raise ValueError(f"--frames: expected A:B (frame ids), got {text!r}") from None
+    if a < 0 or b <= a:
+        raise ValueError(f"--frames: expected 0 <= A < B, got {text!r}")
+    return range(a, b)
+
+
+def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if line.strip():
+                    rec = json.loads(line)
+                    p = np.asarray(rec["params"], dtype=float)
+                    break
+            else:
+                raise ValueError("no record")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"--initial-pose {path}: cannot read the first record's params ({exc})") from None
+    if p.shape != (n_params,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"--initial-pose {path}: params has {p.size} values, the model needs {n_params}")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        session = load_session(args.session)
+        frames = parse_frames(args.frames)
+        cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
+        model = session_model(session, args.model)
+        init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
+        names = list(session.camera_names if cameras is None else cameras)
+        t_bg = time.perf_counter()
+        backgrounds, how = background_models(session, names, frames=frames)
+        print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
+              f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+        total = _frame_count(session, frames)
+        records = []
+        t0 = time.perf_counter()
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        with open(args.out, "w", encoding="utf-8") as out:
+            for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
+                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+                out.write(json.dumps(rec) + "\n")
+                records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
+                _progress(len(records), total, time.perf_counter() - t0, rec)
+    except (SessionError, ModelError, ValueError, OSError) as exc:
+        print(f"contourcap track: error: {exc}", file=sys.stderr)
+        return 2
+    summary = summarise(records, time.perf_counter() - t0).as_dict()
+    print(file=sys.stderr)
+    print("summary: " + json.dumps(summary), file=sys.stderr)
+    return 0 if summary["frames"] else 1
+
+
+def _frame_count(session, frames: range | None) -> int | None:
+    """Frames to expect (for the ETA) from camera 0's timestamps/images count; None if unknown."""
+    try:
+        import cv2
+
+        cam = session.cameras[0]
+        if cam.video is None:
+            return None
+        cap = cv2.VideoCapture(str(cam.video))
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        cap.release()
+    except Exception:  # noqa: BLE001 - the ETA is optional
+        return None
+    if n <= 0:
+        return None
+    if frames is not None:
+        n = max(0, min(n, frames.stop) - frames.start)
+    return n
+
+
+def _progress(done: int, total: int | None, elapsed_s: float, rec: dict) -> None:
+    rate = done / elapsed_s if elapsed_s > 0 else 0.0
+    eta = f", ETA {(total - done) / rate:.0f} s" if total and rate > 0 else ""
+    of = f"/{total}" if total else ""
+    state = "ok" if rec.get("ok") else f"LOST ({rec.get('reason', '')})"
+    print(f"\rframe {rec['frame']} ({done}{of}) {rate:.1f} fps{eta} {state}".ljust(100)[:160], end="",
+          file=sys.stderr, flush=True)
