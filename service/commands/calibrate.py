@@ -34,7 +34,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         ("extrinsics", "camera poses from a board lying on the floor (world Z up, board corner = origin)")):
         p = sub.add_parser(name, help=help_, description=help_)
         p.add_argument("--video", action="append", default=[], metavar="CAM=PATH", required=True,
-                       help="board video, image, or image sequence (cam0/%%04d.png) of a camera (repeat per camera)")
+                       help="board video, image, image folder or sequence (cam0/%%04d.png) of a camera (repeat per camera)")
         p.add_argument("--board", metavar="COLSxROWS", help="checkerboard inner corners, e.g. 8x6")
         p.add_argument("--square", type=float, metavar="M", help="square size in metres")
         p.add_argument("--board-file", type=Path, metavar="XML",
@@ -129,7 +129,17 @@ def _video_size(path: Path) -> tuple[int, int]:
     return int(frame.shape[1]), int(frame.shape[0])
 
 
+_IMAGES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
+
+
 def _read_frames(path: Path, every: int) -> list[np.ndarray]:
+    """Grey frames of a video, an image, a printf image pattern or a folder of images (every ``every``-th)."""
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGES)
+        frames = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in files[::every]]
+        if not frames or any(f is None for f in frames):
+            raise ValueError(f"{path}: no readable images in this folder")
+        return frames
     cap = cv2.VideoCapture(str(path))
     frames, k = [], 0
     while True:
@@ -213,7 +223,7 @@ def run(args) -> int:
     try:
         videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
         for cam, p in videos.items():
-            if not p.is_file() and "%" not in p.name:  # a printf pattern names an image sequence
+            if not p.exists() and "%" not in p.name:  # a printf pattern names an image sequence
                 raise ValueError(f"--video {cam}={p}: file not found")
         step = _run_intrinsics if args.calib_step == "intrinsics" else _run_extrinsics
         cams, report = step(args, videos, bar)
