@@ -1,0 +1,146 @@
+"""Tracker benchmark on a synthetic session (hop, CMU 131_03): iterations, accuracy, speed.
+
+A session is rendered with ``tracker.synth.make_synthetic_session`` (6 ring cameras, 800x600,
+textured room, shadows, pixel noise; FFV1 video) into a temporary folder (or ``--session``), each
+frame is segmented once (``segmentation.pipeline.segment_frame`` against a background model from
+the session's background videos) and the same chamfer images are then tracked three ways:
+
+- LM with the sliding term (the tracker), from the ground-truth pose of the first frame
+  (``--auto-init``: from ``tracker.initialise`` instead);
+- LM without the sliding term (iterations only);
+- scipy ``least_squares`` with a finite-difference Jacobian (the baseline) on the first
+  ``--lsq-frames`` frames, warm-started from the same ground-truth poses as the LM run on them.
+
+Timings are the tracker's per-frame latency (fit only, segmentation excluded) on one core:
+BLAS/OpenMP threads are limited to 1 before numpy is imported.
+
+    python bench/tracker.py [--json] [--frames 120] [--model knossow40] [--lsq-frames 8]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from capture.replay import iter_frame_sets  # noqa: E402
+from capture.session import load_session  # noqa: E402
+from segmentation.pipeline import segment_frame  # noqa: E402
+from tracker.offline import background_models, session_model  # noqa: E402
+from tracker.synth import bundled_motion, make_synthetic_session  # noqa: E402
+from tracker.tracking import Tracker  # noqa: E402
+
+
+def segment_session(session, frames: int):
+    """Chamfer images and silhouettes per frame: list of (frame_id, ts, {cam: chamfer}, {cam: sil})."""
+    names = list(session.camera_names)
+    bgs, _ = background_models(session, names)
+    out, ms = [], []
+    for fid, group in iter_frame_sets(session, frames=range(0, frames)):
+        t0 = time.perf_counter()
+        segs = {n: segment_frame(bgs[n], f.image) for n, f in group.items()}
+        ms.append(1e3 * (time.perf_counter() - t0) / max(len(group), 1))
+        ts = next(iter(group.values())).timestamp_ns
+        out.append((fid, ts, {n: s.chamfer for n, s in segs.items()}, {n: s.silhouette for n, s in segs.items()}))
+    return out, float(np.median(ms))
+
+
+def track(model, cameras, frames, *, initial, sliding=True, solver="lm"):
+    tr = Tracker(model, cameras, sliding=sliding, solver=solver, initial_params=initial)
+    return [tr.step(fid, ts, ch, silhouettes=sil) for fid, ts, ch, sil in frames]
+
+
+def mpjpe_mm(records, truth) -> float:
+    errs = []
+    for rec in records:
+        if not rec.get("joints"):
+            continue
+        g = truth[rec["frame"]]["joints"]
+        errs.append(np.mean([np.linalg.norm(np.subtract(rec["joints"][k], g[k])) for k in g]))
+    return 1e3 * float(np.mean(errs)) if errs else float("nan")
+
+
+def median(records, key) -> float:
+    vals = [r[key] for r in records if r.get("ok") and r.get(key) is not None]
+    return float(np.median(vals)) if vals else float("nan")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--frames", type=int, default=120)
+    ap.add_argument("--model", default="knossow40")
+    ap.add_argument("--cameras", type=int, default=6)
+    ap.add_argument("--size", default="800x600")
+    ap.add_argument("--lsq-frames", type=int, default=8)
+    ap.add_argument("--session", type=Path, default=None, help="reuse (or write) the session here")
+    ap.add_argument("--auto-init", action="store_true", help="initialise from the silhouettes, not the truth")
+    args = ap.parse_args(argv)
+    cv2.setNumThreads(1)
+    w, h = (int(v) for v in args.size.lower().split("x"))
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.session or Path(tmp) / "hop"
+        t0 = time.perf_counter()
+        if not (root / "session.toml").is_file():
+            make_synthetic_session(bundled_motion("scaled_131_03"), root, cameras=args.cameras, size=(w, h),
+                                   frames=args.frames, model=args.model, seed=0)
+        synth_s = time.perf_counter() - t0
+        session = load_session(root)
+        truth = [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+        model = session_model(session, args.model)
+        cameras = list(session.calibration)
+        frames, seg_ms = segment_session(session, args.frames)
+        initial = None if args.auto_init else np.asarray(truth[0]["params"])
+        main_run = track(model, cameras, frames, initial=initial)
+        no_slide = track(model, cameras, frames, initial=initial, sliding=False)
+        k = min(args.lsq_frames, len(frames))
+        lm_sub = [track(model, cameras, frames[i:i + 1], initial=np.asarray(truth[max(i - 1, 0)]["params"]))[0]
+                  for i in range(k)]
+        lsq_sub = [track(model, cameras, frames[i:i + 1], initial=np.asarray(truth[max(i - 1, 0)]["params"]),
+                         solver="lsq")[0] for i in range(k)]
+    lost = sum(not r["ok"] for r in main_run)
+    lm_ms = median(lm_sub, "latency_ms")
+    lsq_ms = median(lsq_sub, "latency_ms")
+    result = {
+        "model": model.name, "dof": model.n_params, "frames": len(main_run), "cameras": len(cameras),
+        "size": [w, h], "init": "auto" if args.auto_init else "ground_truth_frame0",
+        "iterations_median": median(main_run, "iterations"),
+        "iterations_no_sliding_median": median(no_slide, "iterations"),
+        "rms_px_median": median(main_run, "rms_px"),
+        "mpjpe_mm": mpjpe_mm(main_run, truth),
+        "mpjpe_no_sliding_mm": mpjpe_mm(no_slide, truth),
+        "lost_frames": lost,
+        "ms_per_frame_median": median(main_run, "latency_ms"),
+        "ms_per_frame_no_sliding_median": median(no_slide, "latency_ms"),
+        "lsq_frames": k,
+        "ms_per_frame_lm_subset_median": lm_ms,
+        "ms_per_frame_lsq_median": lsq_ms,
+        "lsq_speedup": lsq_ms / lm_ms if lm_ms > 0 else float("nan"),
+        "lsq_mpjpe_mm": mpjpe_mm(lsq_sub, truth),
+        "lsq_iterations_median": median(lsq_sub, "iterations"),
+        "segmentation_ms_per_camera_median": seg_ms,
+        "synthesis_s": synth_s,
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, val in result.items():
+            print(f"{key:34s} {val:.3f}" if isinstance(val, float) else f"{key:34s} {val}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
