@@ -7,7 +7,6 @@ from capture.calib_formats import (
     decompose_projection_matrix,
     read_any_calibration,
     read_opencv_camera,
-    read_projection_matrix,
     write_calibration_as,
 )
 from capture.calibration import CalibrationError, load_calibration, toml_flavour
