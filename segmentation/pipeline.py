@@ -25,6 +25,8 @@ class SegmentationParams:
     min_area_fraction : components below this fraction of ``person_area_px`` are dropped.
     max_hole_fraction : holes below this fraction of their component's area are filled.
     open_px, close_px : radii of the morphological opening / closing.
+    max_components : keep only the largest N components (None: all that pass; 1 suits one person in
+        a cluttered studio and keeps the chamfer crop small).
     canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
     auto_roi, auto_roi_margin_px : when no ``roi`` is given, find one with a half-resolution pass
         (:meth:`BackgroundModel.coarse_distance` + clean-up) and process only the box around what it
@@ -41,6 +43,7 @@ class SegmentationParams:
     max_hole_fraction: float = 0.05
     open_px: int = 1
     close_px: int = 1
+    max_components: int | None = None
     canny_low: float = 30.0
     canny_high: float = 90.0
     edge_dilate_px: int = 3
@@ -92,7 +95,7 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     d = model.distance(image_bgr, roi=box)
     sil_roi = silhouette_from_distance(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
                                        max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
-                                       close_px=params.close_px)
+                                       close_px=params.close_px, max_components=params.max_components)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,
                                  blur_sigma=params.blur_sigma)

@@ -30,12 +30,14 @@ def _disk(radius_px: int) -> np.ndarray:
 
 def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: float = 64.0,
                              min_area_px: float = 400.0, max_hole_fraction: float = 0.05,
-                             open_px: int = 1, close_px: int = 2, roi=None) -> np.ndarray:
+                             open_px: int = 1, close_px: int = 2, max_components: int | None = None,
+                             roi=None) -> np.ndarray:
     """Clean binary silhouette ``(h, w)`` uint8 (0 / 255) of a distance image ``(h, w)`` float32.
 
     ``roi = (x0, y0, x1, y1)`` (pixels of ``distance``): only that box is processed, the rest
     of the output is 0.  ``open_px`` / ``close_px`` are the radii of the morphological opening
-    and closing (0 skips).
+    and closing (0 skips).  ``max_components``: keep only that many of the largest components
+    (e.g. 1 for one person in a cluttered studio; None keeps all that pass).
     """
     if not isinstance(distance, np.ndarray) or distance.ndim != 2:
         raise ValueError(f"distance: expected a 2-D array, got {getattr(distance, 'shape', type(distance))}")
@@ -53,12 +55,12 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
         weak = cv2.morphologyEx(weak, cv2.MORPH_CLOSE, _disk(close_px))
     out = np.zeros((h, w), np.uint8)
     out[y0:y1, x0:x1] = _keep_components(weak, d, high=float(high), min_area_px=float(min_area_px),
-                                         max_hole_fraction=float(max_hole_fraction))
+                                         max_hole_fraction=float(max_hole_fraction), max_components=max_components)
     return out
 
 
 def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_px: float,
-                     max_hole_fraction: float) -> np.ndarray:
+                     max_hole_fraction: float, max_components: int | None) -> np.ndarray:
     """Components of ``weak`` big enough and holding a pixel with ``d > high``; holes smaller than
     ``max_hole_fraction`` of their component's area filled; islands inside kept holes kept."""
     contours, hierarchy = cv2.findContours(weak, cv2.RETR_TREE, cv2.CHAIN_APPROX_SIMPLE)
@@ -66,6 +68,7 @@ def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_p
     if not contours:
         return out
     hier = hierarchy[0]  # (n, 4): next, previous, first child, parent
+    kept = []
     for i in np.flatnonzero(hier[:, 3] < 0):  # loop over components (few after the opening), not pixels
         area = cv2.contourArea(contours[i])
         if area < min_area_px:
@@ -75,7 +78,10 @@ def _keep_components(weak: np.ndarray, d: np.ndarray, *, high: float, min_area_p
         cv2.drawContours(comp, contours, int(i), 255, thickness=cv2.FILLED, offset=(-x, -y))
         if cv2.minMaxLoc(d[y:y + bh, x:x + bw], mask=comp)[1] <= high:
             continue  # hysteresis: no strong pixel in this component
-        _draw_component(out, contours, hier, int(i), area * max_hole_fraction)
+        kept.append((area, int(i)))
+    kept.sort(reverse=True)
+    for area, i in kept[:max_components]:
+        _draw_component(out, contours, hier, i, area * max_hole_fraction)
     return out
 
 

@@ -71,3 +71,18 @@ def test_segment_command_names_bad_camera_and_roi(session_dir, tmp_path, capsys)
     assert "--roi" in capsys.readouterr().err
     assert main(["segment", str(tmp_path / "missing"), str(tmp_path / "o"), "--no-progress"]) == 2
     assert "missing" in capsys.readouterr().err
+    assert main(["segment", str(root), str(tmp_path / "o"), "--max-components", "0", "--no-progress"]) == 2
+    assert "--max-components" in capsys.readouterr().err
+
+
+def test_segment_command_options_reach_the_pipeline(session_dir, tmp_path, capsys):
+    root, scene = session_dir
+    out = tmp_path / "opts"
+    rc = main(["segment", str(root), str(out), "--cameras", "cam0", "--frames", "1:3", "--every", "0",
+               "--auto-roi", "--max-components", "1", "--no-progress", "--json"])
+    assert rc == 0
+    stats = json.loads(capsys.readouterr().out)
+    assert list(stats["cameras"]) == ["cam0"] and stats["cameras"]["cam0"]["frames"] == 2
+    assert not list((out / "cam0").glob("*.png"))
+    true_fraction = scene.person_masks[1:3].mean()
+    assert abs(stats["cameras"]["cam0"]["foreground_fraction_mean"] - true_fraction) < 0.1 * true_fraction

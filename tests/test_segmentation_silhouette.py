@@ -32,6 +32,16 @@ def test_hysteresis_holes_and_small_components():
     assert (sil[45:115, 65:155] == 255).all()
 
 
+def test_max_components_keeps_the_largest():
+    d = np.zeros((100, 200), np.float32)
+    cv2.rectangle(d, (10, 10), (60, 90), 100.0, -1)  # 51 x 81
+    cv2.rectangle(d, (120, 20), (160, 60), 100.0, -1)  # 41 x 41
+    both = silhouette_from_distance(d, min_area_px=100)
+    one = silhouette_from_distance(d, min_area_px=100, max_components=1)
+    assert both[40, 140] == 255 and both[50, 30] == 255
+    assert one[40, 140] == 0 and one[50, 30] == 255
+
+
 def test_roi_restricts_processing():
     d = _distance_image()
     roi = (50, 30, 170, 190)

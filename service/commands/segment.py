@@ -41,6 +41,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--median-frames", type=int, default=25,
                         help="session frames for a median background when there is no background media")
     parser.add_argument("--covariance", choices=("diag", "full"), default="diag")
+    parser.add_argument("--max-components", type=int, default=None,
+                        help="keep only the N largest foreground components (e.g. 1 for one person)")
+    parser.add_argument("--auto-roi", action="store_true",
+                        help="find the person at half resolution first and process only its box")
     parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1, as a worker runs)")
     parser.add_argument("--save-models", action="store_true", help="write OUT/<camera>/background.npz")
     parser.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
@@ -67,6 +71,14 @@ def _roi(text: str | None):
     if len(vals) != 4:
         raise ValueError(f"--roi: expected x0,y0,x1,y1, got {text!r}")
     return vals
+
+
+def _params(args):
+    from segmentation import SegmentationParams
+
+    if args.max_components is not None and args.max_components < 1:
+        raise ValueError(f"--max-components: expected >= 1, got {args.max_components}")
+    return SegmentationParams(max_components=args.max_components, auto_roi=bool(args.auto_roi))
 
 
 class Progress:
@@ -159,7 +171,7 @@ def _full_distance_png(chamfer, which: np.ndarray) -> np.ndarray:
 
 def segment_session(session, out: Path, *, cameras=None, frames: range | None = None, every: int = 1,
                     roi=None, background_frames: int = 50, median_frames: int = 25, covariance: str = "diag",
-                    save_models: bool = False, progress: Progress | None = None,
+                    save_models: bool = False, params=None, progress: Progress | None = None,
                     clock=time.perf_counter) -> dict:
     """Segment the cameras of ``session`` into ``out``; returns the statistics dict (also in stats.json)."""
     from capture.replay import read_frames
@@ -185,7 +197,7 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
         chamfer = None
         for k, frame in enumerate(read_frames(session, name, frames=frames)):
             t = clock()
-            seg = segment_frame(model, frame.image, roi=roi)
+            seg = segment_frame(model, frame.image, roi=roi, params=params)
             ms.append((clock() - t) * 1e3)
             fractions.append(seg.foreground_fraction)
             chamfer = seg.chamfer
@@ -230,7 +242,8 @@ def run(args) -> int:
             stats = segment_session(session, Path(args.out), cameras=names, frames=frames, every=args.every,
                                     roi=roi, background_frames=args.background_frames,
                                     median_frames=args.median_frames, covariance=args.covariance,
-                                    save_models=args.save_models, progress=progress)
+                                    save_models=args.save_models, progress=progress,
+                                    params=_params(args))
         finally:
             progress.close()
     except (SessionError, SourceError, ValueError, OSError) as exc:
