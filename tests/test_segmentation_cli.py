@@ -79,7 +79,7 @@ def test_segment_command_options_reach_the_pipeline(session_dir, tmp_path, capsy
     root, scene = session_dir
     out = tmp_path / "opts"
     rc = main(["segment", str(root), str(out), "--cameras", "cam0", "--frames", "1:3", "--every", "0",
-               "--auto-roi", "--max-components", "1", "--no-progress", "--json"])
+               "--no-auto-roi", "--max-components", "1", "--no-progress", "--json"])
     assert rc == 0
     stats = json.loads(capsys.readouterr().out)
     assert list(stats["cameras"]) == ["cam0"] and stats["cameras"]["cam0"]["frames"] == 2

@@ -43,8 +43,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--covariance", choices=("diag", "full"), default="diag")
     parser.add_argument("--max-components", type=int, default=None,
                         help="keep only the N largest foreground components (e.g. 1 for one person)")
-    parser.add_argument("--auto-roi", action="store_true",
-                        help="find the person at half resolution first and process only its box")
+    parser.add_argument("--no-auto-roi", action="store_true",
+                        help="process the whole image (default: find the foreground at half resolution "
+                             "first and process only its box)")
     parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1, as a worker runs)")
     parser.add_argument("--save-models", action="store_true", help="write OUT/<camera>/background.npz")
     parser.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
@@ -78,7 +79,7 @@ def _params(args):
 
     if args.max_components is not None and args.max_components < 1:
         raise ValueError(f"--max-components: expected >= 1, got {args.max_components}")
-    return SegmentationParams(max_components=args.max_components, auto_roi=bool(args.auto_roi))
+    return SegmentationParams(max_components=args.max_components, auto_roi=not args.no_auto_roi)
 
 
 class Progress:
