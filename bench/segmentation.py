@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from segmentation import (BackgroundModel, SegmentationParams, distance_to_mask,  # noqa: E402
+from segmentation import (BackgroundModel, SegmentationParams, clean_silhouette, distance_to_mask,  # noqa: E402
                           segment_frame, silhouette_edges, silhouette_from_distance)
 from segmentation.distance import content_box, quantise  # noqa: E402
 from segmentation.synthetic import synthetic_scene  # noqa: E402
@@ -68,10 +68,10 @@ def stage_times(model, frame, params: SegmentationParams, roi, repeats: int) -> 
     x0, y0, x1, y1 = box
     t = {}
     t["background_ms"], d = _ms(lambda: model.distance(frame, roi=box), repeats)
-    t["cleanup_ms"], sil = _ms(lambda: silhouette_from_distance(
+    t["cleanup_ms"], sil = _ms(lambda: clean_silhouette(
         d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
-        max_hole_fraction=params.max_hole_fraction,
-        open_px=params.open_px, close_px=params.close_px), repeats)
+        max_hole_fraction=params.max_hole_fraction, open_px=params.open_px, close_px=params.close_px,
+        max_components=params.max_components), repeats)
     t["edges_ms"], edges = _ms(lambda: silhouette_edges(
         frame[y0:y1, x0:x1], sil, low=params.canny_low, high=params.canny_high,
         dilate_px=params.edge_dilate_px, blur_sigma=params.blur_sigma), repeats)

@@ -12,12 +12,12 @@ from segmentation.distance import (ChamferImages, ChamferSample, chamfer_images,
                                    sample_bilinear)
 from segmentation.edges import silhouette_boundary, silhouette_edges
 from segmentation.pipeline import FrameSegmentation, SegmentationParams, segment_frame
-from segmentation.silhouette import largest_components, silhouette_from_distance
+from segmentation.silhouette import clean_silhouette, largest_components, silhouette_from_distance
 
 __all__ = [
     "BGR2YUV", "BackgroundModel", "bgr_to_yuv", "evenly_spaced",
     "ChamferImages", "ChamferSample", "chamfer_images", "distance_to_mask", "sample_bilinear",
     "silhouette_boundary", "silhouette_edges",
     "FrameSegmentation", "SegmentationParams", "segment_frame",
-    "largest_components", "silhouette_from_distance",
+    "clean_silhouette", "largest_components", "silhouette_from_distance",
 ]

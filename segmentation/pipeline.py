@@ -11,7 +11,7 @@ from segmentation.background import BackgroundModel
 from segmentation.checks import check_image_bgr, check_roi
 from segmentation.distance import ChamferImages, chamfer_images
 from segmentation.edges import silhouette_edges
-from segmentation.silhouette import silhouette_from_distance
+from segmentation.silhouette import clean_silhouette
 
 __all__ = ["FrameSegmentation", "SegmentationParams", "segment_frame"]
 
@@ -94,9 +94,9 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
             return _empty(params, (w, h))
         x0, y0, x1, y1 = box = found
     d = model.distance(image_bgr, roi=box)
-    sil_roi = silhouette_from_distance(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
-                                       max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
-                                       close_px=params.close_px, max_components=params.max_components)
+    sil_roi = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
+                               max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
+                               close_px=params.close_px, max_components=params.max_components)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,
                                  blur_sigma=params.blur_sigma)
@@ -116,9 +116,9 @@ def _auto_roi(model: BackgroundModel, image_bgr: np.ndarray, params: Segmentatio
     """Box ``(x0, y0, x1, y1)`` around the foreground found at half resolution, or None."""
     w, h = model.size
     d_small = model.coarse_distance(image_bgr)
-    sil = silhouette_from_distance(d_small, low=params.low, high=params.high,
-                                   min_area_px=params.min_area_px((w, h)) / 4.0,
-                                   max_hole_fraction=1.0, open_px=0, close_px=1)
+    sil = clean_silhouette(d_small, low=params.low, high=params.high,
+                           min_area_px=params.min_area_px((w, h)) / 4.0, max_hole_fraction=1.0,
+                           open_px=0, close_px=1, max_components=params.max_components)
     bx, by, bw, bh = cv2.boundingRect(sil)
     if bw == 0 or bh == 0:
         return None

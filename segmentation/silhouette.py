@@ -43,6 +43,18 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
         raise ValueError(f"distance: expected a 2-D array, got {getattr(distance, 'shape', type(distance))}")
     if distance.dtype != np.float32:
         raise TypeError(f"distance: expected dtype float32, got {distance.dtype}")
+    if not np.isfinite(cv2.sumElems(distance)[0]):  # one pass: NaN / inf make the sum non-finite
+        raise ValueError("distance: contains NaN or inf")
+    return clean_silhouette(distance, low=low, high=high, min_area_px=min_area_px,
+                            max_hole_fraction=max_hole_fraction, open_px=open_px, close_px=close_px,
+                            max_components=max_components, roi=roi)
+
+
+def clean_silhouette(distance: np.ndarray, *, low: float, high: float, min_area_px: float,
+                     max_hole_fraction: float, open_px: int, close_px: int, max_components: int | None,
+                     roi=None) -> np.ndarray:
+    """:func:`silhouette_from_distance` without the finiteness pass over ``distance`` (for callers
+    whose distance is known finite, e.g. :meth:`BackgroundModel.distance` output)."""
     if not (0 <= low <= high) or not np.isfinite(high):
         raise ValueError(f"low, high: expected 0 <= low <= high < inf, got {low!r}, {high!r}")
     h, w = distance.shape

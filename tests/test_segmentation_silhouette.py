@@ -56,6 +56,8 @@ def test_roi_restricts_processing():
 def test_silhouette_bad_arguments():
     with pytest.raises(TypeError, match="distance"):
         silhouette_from_distance(np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="distance"):
+        silhouette_from_distance(np.full((4, 4), np.nan, np.float32))
     with pytest.raises(ValueError, match="low, high"):
         silhouette_from_distance(np.zeros((4, 4), np.float32), low=10, high=5)
     with pytest.raises(ValueError, match="roi"):
