@@ -102,6 +102,27 @@ def test_tolerance_keeps_a_limb_one_view_missed():
         visual_hull(cams, sils, tolerance=len(cams))
 
 
+def test_largest_component_drops_a_phantom_blob():
+    model, pose, cams, sils = _synthetic(6)
+    pelvis = pose.translation[0]
+    away = -pelvis[:2] / max(np.linalg.norm(pelvis[:2]), 1e-9)  # towards the middle of the room
+    blob = np.array([*(pelvis[:2] + 0.9 * away), 0.3])  # a ball seen by every camera, off the subject
+    assert all(c.in_image(c.project(blob), margin=-20) for c in cams)
+    marked = []
+    for cam, s in zip(cams, sils):
+        s = s.copy()
+        u, v = np.rint(cam.project(blob)).astype(int)
+        r = int(np.ceil(cam.matrix[0, 0] * 0.08 / cam.depth(blob)))
+        cv2.circle(s, (int(u), int(v)), r, 255, -1)
+        marked.append(s)
+    hull = visual_hull(cams, marked, min_voxel_m=0.03)
+    assert hull.contains(blob[None])[0]
+    body = hull.largest_component()
+    assert not body.contains(blob[None])[0]
+    assert body.contains(joint_centre_array(model, pose)).mean() > 0.9
+    assert body.volume < hull.volume and np.linalg.norm(body.centroid()[:2] - pose.translation[0, :2]) < 0.15
+
+
 def test_contains_matches_cubes(rng):
     model, pose, cams, sils = _synthetic(4)
     hull = visual_hull(cams, sils, min_voxel_m=0.03)

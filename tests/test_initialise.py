@@ -7,8 +7,8 @@ import pytest
 
 from segmentation.distance import chamfer_images
 from tracker.hull import visual_hull
-from tracker.initialise import (InitResult, ScoreViews, estimate_height, initialise, model_top_m,
-                                pose_candidates)
+from tracker.initialise import (InitResult, ScoreViews, estimate_height, feet_direction, initialise,
+                                model_top_m, pose_candidates)
 from tracker.kinematics import forward, joint_centre_array
 from tracker.model import load_model
 from tracker.render import internal_edges, render_label_images
@@ -61,7 +61,14 @@ def test_candidates_stand_on_the_hull_and_include_the_span_axis():
     sils, _ = _views(model, truth, cams)
     hull = visual_hull(cams, list(sils.values()), min_voxel_m=0.03)
     cands = pose_candidates(model, hull, n_headings=8)
-    assert len(cands) == 2 * (8 + 2)
+    assert len(cands) == 4 * (8 + 2)  # (T, A) for each arm x headings
+    # the feet point forward: only headings within 90° of them are kept, the truth among them
+    facing = feet_direction(hull)
+    assert facing is not None and facing @ forward(model, truth).rotation[0][:2, 0] > 0.5
+    kept = pose_candidates(model, hull, n_headings=8, facing=facing)
+    assert 0 < len(kept) <= len(cands) // 2 + 4
+    kept_h = np.array([psi for _, psi, _ in kept])
+    assert np.abs((kept_h - truth[5] + np.pi) % (2 * np.pi) - np.pi).min() < np.radians(8)
     headings = np.array([psi for _, psi, _ in cands])
     # a T-pose's arm span is the hull's major floor axis: one candidate heading is within 8° of the truth
     d = np.abs((headings - truth[5] + np.pi) % (2 * np.pi) - np.pi)

@@ -135,6 +135,27 @@ class VoxelHull:
         pos = np.clip(np.searchsorted(keys, qk), 0, len(keys) - 1)
         return inside & (keys[pos] == qk)
 
+    def largest_component(self) -> "VoxelHull":
+        """The hull restricted to its largest 26-connected piece by volume (drops phantom blobs
+        that segmentation noise leaves where the views happen to agree)."""
+        if self.empty:
+            return self
+        from scipy import ndimage
+
+        lo = self.extent()[0]
+        cells = np.floor((self.points() - lo) / self.min_voxel_m).astype(np.int64)
+        grid = np.zeros(cells.max(0) + 1, bool)
+        grid[tuple(cells.T)] = True
+        labels, n = ndimage.label(grid, structure=np.ones((3, 3, 3), bool))
+        if n <= 1:
+            return self
+        volume = np.bincount(labels[tuple(cells.T)], minlength=n + 1)
+        keep = np.argmax(volume[1:]) + 1
+        own = np.floor((self.centres - lo) / self.min_voxel_m).astype(np.int64)
+        own = np.clip(own, 0, np.array(grid.shape) - 1)
+        sel = labels[tuple(own.T)] == keep
+        return VoxelHull(self.centres[sel], self.sizes[sel], self.full[sel], self.bounds, self.min_voxel_m)
+
     def points(self, *, spacing_m: float | None = None) -> np.ndarray:
         """A point cloud filling the hull: each cube split into cells of ``spacing_m`` (default the
         finest voxel size), their centres, shape (m, 3)."""

@@ -8,7 +8,9 @@ then the limbs).
    hull's lowest point), height, and the principal axes of its horizontal spread.
 2. **Search** over heading × arm pose: ``n_headings`` evenly spaced headings plus the two
    headings that put the arms' span along the hull's major floor axis, each with every arm
-   abduction of ``arm_abduction_deg`` (0° = T, -45° = A).  Candidates are scored by the mean
+   abduction of ``arm_abduction_deg`` (0° = T, -45° = A); headings facing away from where the
+   feet point (``feet_direction``: the hull's sole layer lies ahead of its shanks) are dropped,
+   which breaks the front/back symmetry of the silhouettes.  Candidates are scored by the mean
    silhouette IoU of the rendered model (``tracker.render``) on down-scaled views, a symmetric
    score: a limb missing from the model costs as much as a limb the images lack.
 3. **Refinement** of the best ``keep`` candidates with bounded robust LM on the chamfer cost
@@ -33,7 +35,7 @@ from tracker.kinematics import forward
 from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 from tracker.render import body_points, cone_points
 
-__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "refine_best", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
+__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "refine_best", "feet_direction", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
            "model_top_m", "estimate_height"]
 
 #: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
@@ -141,13 +143,35 @@ def estimate_height(hull: VoxelHull, model: BodyModel) -> float:
     return float(model.height_m * hull.height() / model_top_m(model))
 
 
+def feet_direction(hull: VoxelHull, *, sole_m: float = 0.06, shank_m=(0.15, 0.40),
+                   min_offset_m: float = 0.04) -> np.ndarray | None:
+    """Horizontal unit vector (2,) the feet point to, or None when unclear.
+
+    Feet reach forward of the ankles (toes ~20 cm ahead, heels ~5 cm behind), so in a standing
+    subject's hull the volume within ``sole_m`` of the floor is centred ahead of the shanks
+    (heights ``shank_m``).  This breaks the front/back symmetry of a T- or A-pose silhouette.
+    """
+    pts = hull.points()
+    z = pts[:, 2] - hull.extent()[0, 2]
+    sole, shank = pts[z < sole_m], pts[(z > shank_m[0]) & (z < shank_m[1])]
+    if len(sole) == 0 or len(shank) == 0:
+        return None
+    f = sole[:, :2].mean(0) - shank[:, :2].mean(0)
+    n = float(np.linalg.norm(f))
+    return f / n if n >= min_offset_m else None
+
+
 def _index(model: BodyModel, names: Sequence[str]) -> np.ndarray:
     return np.array([model.param_names.index(n) for n in names if n in model.param_names], dtype=int)
 
 
 def pose_candidates(model: BodyModel, hull: VoxelHull, *, n_headings: int = 12,
-                    arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, hint: np.ndarray | None = None):
-    """Start poses ``[(label, heading_rad, params (n_params,)), ...]`` placed on the hull."""
+                    arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, hint: np.ndarray | None = None,
+                    facing: np.ndarray | None = None):
+    """Start poses ``[(label, heading_rad, params (n_params,)), ...]`` placed on the hull.
+
+    ``facing`` (2,), e.g. ``feet_direction(hull)``: keep only headings within 90° of it.
+    """
     centroid = hull.centroid()
     floor = hull.extent()[0, 2]
     root_t = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
@@ -158,13 +182,17 @@ def pose_candidates(model: BodyModel, hull: VoxelHull, *, n_headings: int = 12,
     span = np.arctan2(axes[1, 0], axes[0, 0])  # major floor axis: the arms in a T-pose (model +y)
     headings = list(2 * np.pi * np.arange(n_headings) / max(n_headings, 1))
     headings += [span - np.pi / 2, span + np.pi / 2]
+    if facing is not None:
+        headings = [h for h in headings if np.cos(h) * facing[0] + np.sin(h) * facing[1] > 0.0]
     abd = _index(model, ["left_upper_arm.abduction", "right_upper_arm.abduction"])
-    arms = [(("T" if a == 0 else "A" if a == -45 else f"arms{a:+.0f}"), np.radians(a)) for a in arm_abduction_deg]
+    names = {0.0: "T", -45.0: "A"}
+    arms = [(names.get(float(a), f"{a:+.0f}"), np.radians(a)) for a in arm_abduction_deg]
     shapes = []
-    for label, a in arms:
-        p = model.zero()
-        p[abd] = a
-        shapes.append((label, p))
+    for left_label, left in arms:  # each arm on its own (one may be missed by a segmentation)
+        for right_label, right in arms:
+            p = model.zero()
+            p[abd] = [left, right]
+            shapes.append((left_label if left_label == right_label else f"{left_label}/{right_label}", p))
     if hint is not None:
         h = model.clamp(np.asarray(hint, dtype=float))
         p = model.zero()
@@ -278,8 +306,9 @@ def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Map
 
 def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
                chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
-               arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 2, min_voxel_m: float = 0.03,
-               score_scale: float = 0.5, max_iterations: int = 10) -> InitResult:
+               arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
+               score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
+               use_feet: bool = True) -> InitResult:
     """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
 
     Parameters
@@ -295,18 +324,21 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
     n_headings : evenly spaced headings searched (plus the two from the hull's floor axes)
     arm_abduction_deg : arm poses searched (0 = T, -45 = A)
     keep : candidates refined with LM
-    min_voxel_m : hull resolution
+    min_voxel_m, hull_tolerance : hull resolution and views a hull point may miss (``visual_hull``)
+    use_feet : search only headings the feet point to (``feet_direction``), when they are clear
     score_scale : image scale of the IoU scoring views
     """
     if hint is not None:  # a previous pose: the any-pose search of tracker.recovery
         from tracker.recovery import recover
 
         return recover(model, cameras, silhouettes, chamfer, hint, n_headings=n_headings, keep=keep,
-                       min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations)
+                       min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations,
+                       hull_tolerance=hull_tolerance)
     cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
-    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m)
+    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m, tolerance=hull_tolerance).largest_component()
     if hull.empty:
         raise ValueError("initialise: the silhouettes share no volume (empty visual hull)")
     views = ScoreViews(model, cameras, sils, scale=score_scale)
-    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg)
+    facing = feet_direction(hull) if use_feet else None
+    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg, facing=facing)
     return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations)

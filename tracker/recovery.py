@@ -32,7 +32,8 @@ from tracker.kinematics import forward, so3_exp
 from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 from tracker.render import body_points
 
-__all__ = ["LossMonitor", "LossState", "recover", "limb_chains", "turn_about_vertical"]
+__all__ = ["LossMonitor", "LossState", "recover", "limb_chains", "limb_search", "turn_about_vertical",
+           "ARM_POSES_DEG", "LEG_POSES_DEG"]
 
 OK, SUSPECT, LOST = "ok", "suspect", "lost"
 
@@ -164,9 +165,9 @@ LEG_POSES_DEG = ({"thigh.flexion": 30}, {"thigh.flexion": -15}, {"thigh.abductio
                  {"thigh.flexion": 45, "shank.flexion": 60}, {"shank.flexion": 45})
 
 
-def _canonical(model: BodyModel, chain: str, idx: np.ndarray) -> list[np.ndarray]:
+def _canonical(model: BodyModel, chain: str, idx: np.ndarray, arm_poses, leg_poses) -> list[np.ndarray]:
     side = chain.split("_")[0]
-    table = ARM_POSES_DEG if chain.endswith("arm") else LEG_POSES_DEG if chain.endswith("leg") else ()
+    table = arm_poses if chain.endswith("arm") else leg_poses if chain.endswith("leg") else ()
     out = []
     for pose in table:
         vals = np.zeros(idx.size)
@@ -178,15 +179,17 @@ def _canonical(model: BodyModel, chain: str, idx: np.ndarray) -> list[np.ndarray
     return out
 
 
-def _limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: float) -> tuple[np.ndarray, float]:
+def limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: float, *,
+                arm_poses=ARM_POSES_DEG, leg_poses=LEG_POSES_DEG) -> tuple[np.ndarray, float]:
     """Greedy per-chain search, scored by IoU with the rest fixed: the chain's current angles
-    halved, zeroed, mirrored from the other side, and the canonical poses; returns (params, score)."""
+    halved, zeroed, mirrored from the other side, and the canonical ``arm_poses`` / ``leg_poses``
+    (see ``ARM_POSES_DEG``); ``score`` is the IoU of ``params``.  Returns (params, score)."""
     mirror = _mirror_pairs(model)
     x = params.copy()
     for chain, idx in limb_chains(model).items():
         if idx.size == 0:
             continue
-        options = [np.zeros(idx.size), 0.5 * x[idx]] + _canonical(model, chain, idx)
+        options = [np.zeros(idx.size), 0.5 * x[idx]] + _canonical(model, chain, idx, arm_poses, leg_poses)
         if all(i in mirror for i in idx):
             options.append(x[[mirror[i] for i in idx]])
         for vals in options:
@@ -201,7 +204,7 @@ def _limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score:
 
 def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
             chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 2,
-            min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 10,
+            min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
             prior_rad: float = 50.0) -> InitResult:
     """Re-initialise a lost track from the hull, seeded from ``last_good_params`` (n_params,).
 
@@ -212,7 +215,7 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
     if last.shape != (model.n_params,) or not np.all(np.isfinite(last)):
         raise ValueError(f"last_good_params: expected a finite array of shape ({model.n_params},)")
     last = model.clamp(last)
-    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m)
+    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m, tolerance=hull_tolerance).largest_component()
     if hull.empty:
         raise ValueError("recover: the silhouettes share no volume (empty visual hull)")
     views = ScoreViews(model, cameras, sils, scale=score_scale)
@@ -228,4 +231,4 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
     cands += pose_candidates(model, hull, n_headings=n_headings, hint=last)
     # 2. greedy limb search on the best hypotheses, 3. staged LM (weaker prior: any pose)
     return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations,
-                       prepare=lambda p, s: _limb_search(model, views, p, s), prior_rad=prior_rad)
+                       prepare=lambda p, s: limb_search(model, views, p, s), prior_rad=prior_rad)
