@@ -257,10 +257,11 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
 
 def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, views: ScoreViews, hull: VoxelHull,
                 candidates: Sequence, *, keep: int = 2, max_iterations: int = 10, prepare=None,
-                prior_rad: float = 500.0) -> InitResult:
+                prior_rad: float = 500.0, polish: bool = False) -> InitResult:
     """Score ``candidates`` ``[(label, heading, params)]`` by IoU, refine the best ``keep`` with
     ``refine`` (after ``prepare(params, score) -> (params, score)`` if given) and return the
-    refined one with the best IoU."""
+    refined one with the best IoU.  ``polish``: run ``prepare`` once more on the refined winner
+    and refine again if that raised its IoU (a limb the first pass left behind)."""
     scores = np.array([views.score(p) for _, _, p in candidates])
     best = None
     for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
@@ -272,6 +273,13 @@ def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, 
         if best is None or s > best[0]:
             best = (s, p, terms, label, psi)
     s, p, terms, label, psi = best
+    if polish and prepare is not None:
+        p2, s2 = prepare(p, s)
+        if s2 > s:
+            p2, terms2 = refine(model, cameras, chamfer, p2, max_iterations=max_iterations, prior_rad=prior_rad)
+            s2 = views.score(p2)
+            if s2 > s:
+                s, p, terms = s2, p2, terms2
     return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
                       heading_rad=psi, label=label, height_m=estimate_height(hull, model),
                       candidates=views.n_scored, hull=hull)

@@ -231,4 +231,4 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
     cands += pose_candidates(model, hull, n_headings=n_headings, hint=last)
     # 2. greedy limb search on the best hypotheses, 3. staged LM (weaker prior: any pose)
     return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations,
-                       prepare=lambda p, s: limb_search(model, views, p, s), prior_rad=prior_rad)
+                       prepare=lambda p, s: limb_search(model, views, p, s), prior_rad=prior_rad, polish=True)
