@@ -41,6 +41,7 @@ class DemoOptions:
     cache_dir: Path = Path.home() / ".cache" / "contourcap"
     image_every: int = 5
     timeout_s: float = 1800.0
+    live_start_delay_s: float = 8.0
     segment_plugin: str | None = None
     fit_plugin: str | None = None
 
@@ -153,14 +154,15 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     bridge = RerunBridge(rec, cameras=list(session.calibration), image_every=opts.image_every)
     taps = [(Inbox(hub, keys.frame("*"), FrameMessage.from_bytes, depth=2 * opts.cameras), bridge.on_frame),
             (Inbox(hub, keys.chamfer("*"), ChamferMessage.from_bytes, depth=2 * opts.cameras), bridge.on_chamfer)]
-    epoch = time.time_ns() + int(3e9) if opts.delivery == "live" else None
+    # live: session time 0 is due once the workers are up (frames already late at a camera are skipped)
+    epoch = time.time_ns() + int(opts.live_start_delay_s * 1e9) if opts.delivery == "live" else None
     specs = plan_host(cfg, str(cfg_path), HOST, hub=f"tcp/127.0.0.1:{port}", epoch_ns=epoch, idle_exit_s=5.0,
                       segment_plugin=opts.segment_plugin, fit_plugin=opts.fit_plugin)
     sup = Supervisor(specs, backoff_s=0.5, max_backoff_s=2.0)
     poses: list[PoseRecord] = []
     last_status: StatusMessage | None = None
     t0 = time.monotonic()
-    first_pose_t = last_pose_t = None
+    first_pose_t = last_pose_t = cams_done_t = None
     progress(f"starting {len(specs)} worker processes ({opts.delivery}), zenoh hub tcp/127.0.0.1:{port}")
     sup.start()
     try:
@@ -187,8 +189,13 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
                          + (f", latency {np.median(lat):.0f} ms" if lat else ""))
             if opts.delivery == "lossless" and len(poses) >= n_total:
                 break
+            cams_done = all(c.finished for c in sup.children if c.spec.name.startswith("camera-"))
+            if cams_done and time.monotonic() - (last_pose_t or cams_done_t or time.monotonic()) > 3.0:
+                break  # live: the replay ended and nothing more comes
+            cams_done_t = cams_done_t or (time.monotonic() if cams_done else None)
     finally:
         sup.stop()
+        time.sleep(0.2)  # the workers' last status messages
         for item in status_in.drain():
             last_status = item.message
         for inbox, _ in taps + [(poses_in, None), (status_in, None)]:

@@ -209,6 +209,11 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     status = StatusReporter(session, keys, component, clock=clock)
     sent: dict[int, int] = {}
     done = 0
+
+    def gauges() -> dict:
+        return {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,
+                "dropped": inbox.dropped, "cameras": len(asm.present(clock()))}
+
     last_input = None  # idle time counts from the first input
     try:
         while not stop.is_set() and (max_frames is None or done < max_frames):
@@ -259,11 +264,10 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
                 done += 1
             for fid in [f for f in sent if f <= asm.last_released]:
                 del sent[fid]
-            status.tick(queue_depth=len(inbox), stale_sets=asm.stale, late=asm.late, bad=inbox.bad,
-                        dropped=inbox.dropped, cameras=len(asm.present(clock())))
+            status.tick(**gauges())
         return {**status.counters, "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,
                 "dropped": inbox.dropped}
     finally:
-        status.tick(state="finished", force=True)
+        status.tick(state="finished", force=True, **gauges())
         inbox.close()
         status.close()
