@@ -40,3 +40,19 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
     assert summary.latency_ms_p50 is not None and summary.latency_ms_p99 >= summary.latency_ms_p50 > 0
     assert summary.mean_joint_error_m is not None and np.isfinite(summary.mean_joint_error_m)
     assert (tmp_path / "out" / "demo.rrd").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_demo_lossless_real_tracker_equals_offline(tmp_path):
+    """The contract of DESIGN.md: lossless replay over zenoh gives the same poses as `contourcap track`."""
+    from tracker.offline import track_session
+
+    opts = DemoOptions(cameras=3, size=(200, 150), frames=4, fps=30.0, out_dir=tmp_path / "out",
+                       cache_dir=tmp_path / "cache", timeout_s=300.0)
+    summary = run_demo(opts, progress=lambda m: None)
+    live = [json.loads(line) for line in (tmp_path / "out" / "poses.jsonl").read_text().splitlines()]
+    offline = list(track_session(load_session(summary.session)))
+    assert [p["frame"] for p in live] == [o["frame"] for o in offline] == [0, 1, 2, 3]
+    assert [p["ok"] for p in live] == [o["ok"] for o in offline]
+    assert [p.get("params") for p in live] == [o.get("params") for o in offline]
+    assert [p.get("joints") for p in live] == [o.get("joints") for o in offline]
