@@ -72,9 +72,47 @@ def _session(cfg: StudioConfig):
     return load_session(cfg.session)
 
 
-def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, paced: bool = False) -> dict:
+def needs_trigger(cfg: StudioConfig, cameras) -> bool:
+    """Whether these cameras take their frame ids from the USB trigger box."""
+    return cfg.trigger.backend == "usb" and any(cfg.camera(c).backend == "opencv" for c in cameras)
+
+
+def start_trigger(cfg: StudioConfig, stop: threading.Event, *, resync_s: float = 2.0, backend=None,
+                  clock: Callable[[], int] | None = None):
+    """Open the USB trigger box, run it at ``[trigger] fps`` and re-anchor its clock every ``resync_s``
+    in a daemon thread (a trigger failure sets ``stop``).  ``backend``: a pyusb backend (tests)."""
+    import time
+
+    from capture.trigger import TriggerBox, TriggerError
+
+    kw = {"clock": clock} if clock is not None else {}
+    try:
+        box = TriggerBox.find(backend=backend, **kw)
+        box.set_rate(cfg.trigger.fps)
+        box.start()
+        time.sleep(2.0 / cfg.trigger.fps)
+        box.refresh()
+    except TriggerError as exc:
+        raise ConfigError(f"{cfg.path}: trigger: {exc}") from None
+
+    def resync() -> None:
+        while not stop.wait(resync_s):
+            try:
+                box.refresh()
+            except TriggerError as exc:
+                log.error("trigger box lost: %s", exc)
+                stop.set()
+                return
+
+    threading.Thread(target=resync, name="trigger-resync", daemon=True).start()
+    return box
+
+
+def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, paced: bool = False,
+                  frame_id_at: Callable[[int], int] | None = None) -> dict:
     """Open camera sources: replay (realtime pacing live, as fast as credits allow lossless, or
-    ``paced`` externally by an EpochPacer) or OpenCV."""
+    ``paced`` externally by an EpochPacer) or OpenCV (frame ids from ``frame_id_at``, the trigger
+    box's, when given)."""
     out = {}
     for name in cameras:
         cam = cfg.camera(name)
@@ -86,7 +124,7 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
             from capture.opencv_source import OpenCVSource
 
             device = int(cam.source) if cam.source.isdigit() else cam.source
-            src = OpenCVSource(device, name=name, fps=cfg.trigger.fps)
+            src = OpenCVSource(device, name=name, fps=cfg.trigger.fps, frame_id_at=frame_id_at)
         src.open()
         out[name] = src
     return out

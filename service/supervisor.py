@@ -6,8 +6,9 @@ exit (crash, kill) is restarted after a back-off that doubles from ``backoff_s``
 SIGTERM to every child, waits ``grace_s``, then SIGKILLs what is left.
 
 Processes of a host (:func:`plan_host`): the router (if ``[router] host`` is this host), one camera
-worker per camera (a crashed camera does not take the others down), one segment worker for all the
-host's cameras, and the tracker (if ``[tracker] host`` is this host).
+worker per camera (a crashed camera does not take the others down) — or one for all the host's
+cameras when they take frame ids from the USB trigger box, which a single process must own — one
+segment worker for all the host's cameras, and the tracker (if ``[tracker] host`` is this host).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 from service.config import StudioConfig
+from service.runtime import needs_trigger
 
 log = logging.getLogger("contourcap.supervisor")
 
@@ -56,9 +58,12 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
     if cfg.router_host == host:
         specs.append(ProcessSpec("router", (python, "-m", "service.commands.router", "--config", str(config_path))))
     cams = [c.name for c in cfg.cameras_on(host)]
-    for cam in cams:
-        extra = ("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()
-        specs.append(ProcessSpec(f"camera-{cam}", worker + ("camera", "--cameras", cam) + common + extra))
+    extra = ("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()
+    if needs_trigger(cfg, cams):  # one process owns the USB trigger box and all the host's cameras
+        specs.append(ProcessSpec("camera", worker + ("camera", "--cameras", ",".join(cams)) + common + extra))
+    else:
+        for cam in cams:
+            specs.append(ProcessSpec(f"camera-{cam}", worker + ("camera", "--cameras", cam) + common + extra))
     idle = ("--idle-exit-s", str(idle_exit_s)) if idle_exit_s is not None else ()
     if cams:
         plug = ("--plugin", segment_plugin) if segment_plugin else ()

@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
 
     from service.bus import BusError, Keys, open_session
     from service.config import ConfigError, load_config
-    from service.runtime import build_fitter, build_segmenters, build_sources, stop_on_signals, worker_settings
+    from service.runtime import (build_fitter, build_segmenters, build_sources, needs_trigger, start_trigger,
+                                 stop_on_signals, worker_settings)
 
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format=f"%(asctime)s {args.role} %(levelname)s %(message)s")
@@ -67,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
             from service.workers import EpochPacer, run_camera_worker
 
             paced = args.epoch_ns is not None and cfg.delivery == "live"
-            sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced)
+            box = start_trigger(cfg, stop) if needs_trigger(cfg, cams) else None
+            sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced,
+                                    frame_id_at=None if box is None else box.frame_id_at)
             try:
                 stats = run_camera_worker(session, keys, sources, mode=cfg.delivery, stop=stop,
                                           encodings={c: cfg.camera(c).encoding for c in cams},
@@ -76,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
             finally:
                 for src in sources.values():
                     src.close()
+                if box is not None:
+                    box.stop()
+                    box.close()
         elif args.role == "segment":
             from service.workers import run_segment_worker
 
