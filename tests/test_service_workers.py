@@ -168,3 +168,54 @@ def test_assembler_lossless_in_order():
     assert [fs.frame_id for fs in asm.pop_ready(0.0)] == [1, 2]
     asm.add("b", 3, "b3", 0.1)
     assert [(fs.frame_id, fs.missing) for fs in asm.pop_ready(0.1)] == [(3, ())]
+
+
+def _garbage(keys, rng):
+    """(key, payload) pairs: random bytes, truncations, wrong versions, oversized, hostile JSON."""
+    img = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    frame = bytearray(FrameMessage.from_image("cam0", 0, 0, img).to_bytes())
+    old = bytes(frame[:5]) + b"\x02" + bytes(frame[6:])  # version 2
+    out = []
+    for key in (keys.frame("cam0"), keys.chamfer("cam0"), keys.pose, keys.credit("track"), keys.status("x")):
+        out += [(key, rng.bytes(64)), (key, bytes(frame[:40])), (key, old), (key, b'{"v": 1, "frame_id": NaN}'),
+                (key, b"[" * 10_000), (key, b'{"consumer": "track", "frame_id": -5, "v": 1}')]
+    out.append((keys.pose, b" " * (2 * 1024 * 1024)))  # over the pose size limit
+    return out
+
+
+def test_garbage_on_every_key_is_counted_and_workers_live_on(tmp_path, rng, studio):
+    session = make_session(tmp_path / "s", rng, n_frames=8)
+    keys, poses = studio.keys, []
+    rogue = studio.session(listen=True)
+    pubs = {}
+    stop_rogue = threading.Event()
+
+    def inject():
+        garbage = _garbage(keys, np.random.default_rng(7))
+        while not stop_rogue.is_set():
+            for key, payload in garbage:
+                pubs.setdefault(key, rogue.declare_publisher(key)).put(payload)
+            time.sleep(0.01)
+
+    studio.start("track", run_track_worker, studio.session(), keys, CAMS, fitter, mode="lossless",
+                 stop=studio.stop, max_frames=8, on_pose=poses.append)
+    studio.start("segment", run_segment_worker, studio.session(), keys, {c: segmenter for c in CAMS},
+                 mode="lossless", stop=studio.stop)
+    injector = threading.Thread(target=inject, daemon=True)
+    injector.start()
+    sources = {c: ReplaySource(session, c) for c in CAMS}
+    for s in sources.values():
+        s.open()
+    try:
+        run_camera_worker(studio.session(), keys, sources, mode="lossless", window=2, stop=studio.stop,
+                          credit_timeout_s=10.0, startup_timeout_s=10.0)
+        studio.threads[0].join(10.0)
+    finally:
+        stop_rogue.set()
+        injector.join(5)
+        studio.stop.set()
+        studio.threads[1].join(5)
+    assert [p.frame for p in poses] == list(range(8))  # every frame, in order, despite the garbage
+    track, segment = studio.results["track"], studio.results["segment"]
+    assert track["bad"] > 0 and segment["bad"] > 0
+    assert track["processed"] == 8 and segment["processed"] == 3 * 8
