@@ -115,3 +115,38 @@ def test_backoff_doubles_and_finished_is_not_restarted():
     assert sup.children[1].finished and sup.children[1].history == [0]
     assert sup.children[0].restarts == 4
     sup.stop()
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    pids = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                if text in (proc / "cmdline").read_bytes().decode(errors="replace"):
+                    pids.append(int(proc.name))
+            except OSError:
+                pass
+    return pids
+
+
+def test_run_command_streams_and_stops_everything_on_sigterm(tmp_path, rng):
+    port = free_port()
+    path = make_studio(tmp_path, rng, n_frames=200, delivery="live", port=port, studio="runcli")
+    proc = subprocess.Popen([sys.executable, "-m", "service.commands.run", "--config", str(path), "--host", "h1",
+                             "--start-delay-s", "2", "--segment-plugin", f"{PLUGINS}:segmenter_factory",
+                             "--fit-plugin", f"{PLUGINS}:fitter_factory"], cwd=str(REPO), stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        client = open_session(ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), listen=("tcp/127.0.0.1:0",),
+                                            connect_timeout_s=10.0))
+        inbox = Inbox(client, Keys("runcli").pose, PoseRecord.from_bytes, mode="lossless", depth=1000)
+        got = [inbox.recv(10.0) for _ in range(5)]
+        client.close()
+        assert all(g is not None for g in got), "no poses from `contourcap run`"
+        assert len(_processes_mentioning(str(path))) >= 6  # run + 3 cameras + segment + track
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err[-2000:]
+    time.sleep(0.2)
+    assert _processes_mentioning(str(path)) == [], "workers left running after SIGTERM"

@@ -68,3 +68,14 @@ def run(args: argparse.Namespace) -> int:
             hub_session.close()
     failed = [c.spec.name for c in sup.children if c.history and c.history[-1] not in (0, -15)]
     return 1 if failed and args.until_finished else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m service.commands.run``: this command alone (fast start-up)."""
+    parser = argparse.ArgumentParser(prog="contourcap run", description=HELP)
+    add_args(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
