@@ -159,3 +159,39 @@ def test_bad_input_names_the_argument():
     with pytest.raises(ValueError, match="bounds"):
         visual_hull(cams, good, bounds=[[0, 0, 0], [1, -1, 1]])
     assert isinstance(visual_hull(cams, good, min_voxel_m=0.1), VoxelHull)
+
+
+def _box_silhouettes(cams, lo, hi):
+    """Exact masks of an axis-aligned box: a convex solid projects onto the hull of its corners."""
+    corners = lo + (hi - lo) * np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], float)
+    out = []
+    for c in cams:
+        m = np.zeros((c.height, c.width), np.uint8)
+        uv = np.round(c.project(corners) * 16).astype(np.int32)
+        cv2.fillConvexPoly(m, cv2.convexHull(uv), 255, shift=4)
+        out.append(m)
+    return out
+
+
+try:
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+except ImportError:  # pragma: no cover
+    given = None
+
+if given is not None:
+
+    @settings(max_examples=15, deadline=None)
+    @given(centre=st.tuples(st.floats(-0.8, 0.8), st.floats(-0.8, 0.8), st.floats(0.3, 1.5)),
+           half=st.tuples(st.floats(0.05, 0.4), st.floats(0.05, 0.4), st.floats(0.05, 0.3)))
+    def test_box_hull_encloses_the_box_and_not_much_more(centre, half):
+        cams = ring_cameras(6)
+        lo, hi = np.array(centre) - half, np.array(centre) + half
+        hull = visual_hull(cams, _box_silhouettes(cams, lo, hi), min_voxel_m=0.03)
+        g = np.stack(np.meshgrid(*(np.linspace(0.1, 0.9, 5),) * 3, indexing="ij"), -1).reshape(-1, 3)
+        inner = lo + 0.5 * 0.03 + (hi - lo - 0.03) * g  # grid inside the box, half a voxel from its faces
+        assert hull.contains(inner).all()
+        # a box seen from 6 directions around it: the hull adds at most the corner wedges + a voxel layer
+        grown = np.prod(hi - lo + 2 * 0.03)
+        assert np.prod(hi - lo) * 0.7 < hull.volume < 1.6 * grown
+        assert np.all(hull.extent()[0] > lo - 0.35) and np.all(hull.extent()[1] < hi + 0.35)
