@@ -150,7 +150,7 @@ def test_png_codec_and_cli(tmp_path, capsys):
     img = cv2.imread(str(out / "cam1" / "000001.png"))
     assert img.shape == (120, 160, 3)
     assert len(read_video(out / "background" / "cam0.avi")) == 3
-    assert "frame 2/2" in capsys.readouterr().err
+    assert "2/2 frames" in capsys.readouterr().err
 
 
 def test_cli_errors(tmp_path, capsys):

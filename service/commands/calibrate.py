@@ -25,6 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from service.progress import Progress
+
 HELP = "calibrate cameras: intrinsics from board videos, extrinsics from a board lying on the floor"
 
 
@@ -57,28 +59,6 @@ def add_args(parser: argparse.ArgumentParser) -> None:
             p.add_argument("--origin", action="append", default=[], metavar="CAM=X,Y",
                            help="pixel near the board corner that is the world origin, in a camera")
             p.add_argument("--frames", type=int, default=3, help="frames sampled per video (default 3; the board is static)")
-
-
-class ProgressBar:
-    """A one-line progress bar on stderr; ``close()`` ends the line."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled and sys.stderr is not None
-        self.open = False
-
-    def __call__(self, done: int, total: int, what: str) -> None:
-        if not self.enabled:
-            return
-        n = 30
-        fill = int(n * min(done, total) / max(total, 1))
-        sys.stderr.write(f"\r[{'#' * fill}{'.' * (n - fill)}] {done}/{total} {what[:40]:<40}")
-        sys.stderr.flush()
-        self.open = True
-
-    def close(self) -> None:
-        if self.open:
-            sys.stderr.write("\n")
-            self.open = False
 
 
 def _pairs(items, option: str) -> dict[str, str]:
@@ -219,7 +199,7 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
 def run(args) -> int:
     from capture.calibration import save_calibration
 
-    bar = ProgressBar(not args.quiet)
+    bar = Progress(unit="steps", enabled=not args.quiet)
     try:
         videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
         for cam, p in videos.items():

@@ -29,9 +29,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from capture.uu_studio import CORNERS_FILE, UUImportError, import_uu_studio
-    from service.commands.calibrate import ProgressBar
+    from service.progress import Progress
 
-    bar = ProgressBar(not args.quiet)
+    bar = Progress(unit="steps", enabled=not args.quiet)
     try:
         res = import_uu_studio(args.src, args.out, corners_file=args.corners_file or CORNERS_FILE, copy=args.copy,
                                name=args.name, overwrite=args.force, progress=bar)

@@ -26,6 +26,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from service.progress import Progress
+
 HELP = "segment a session: silhouettes, edges and distance images (PNG) plus per-camera statistics"
 
 
@@ -80,40 +82,6 @@ def _params(args):
     if args.max_components is not None and args.max_components < 1:
         raise ValueError(f"--max-components: expected >= 1, got {args.max_components}")
     return SegmentationParams(max_components=args.max_components, auto_roi=not args.no_auto_roi)
-
-
-class Progress:
-    """A one-line progress bar with rate and ETA on a text stream; ``clock`` is injected."""
-
-    def __init__(self, total: int | None, *, stream=sys.stderr, clock=time.monotonic, enabled: bool = True,
-                 width: int = 30) -> None:
-        self.total, self.stream, self.clock, self.enabled, self.width = total, stream, clock, enabled, width
-        self.done = 0
-        self.start = clock()
-        self._last = -1.0
-
-    def advance(self, n: int = 1, *, label: str = "") -> None:
-        self.done += n
-        now = self.clock()
-        if not self.enabled or (now - self._last < 0.2 and self.done != self.total):
-            return
-        self._last = now
-        rate = self.done / max(now - self.start, 1e-9)
-        if self.total:
-            frac = min(self.done / self.total, 1.0)
-            bar = "#" * int(frac * self.width) + "." * (self.width - int(frac * self.width))
-            eta = max(self.total - self.done, 0) / rate if rate > 0 else float("inf")
-            eta_txt = time.strftime("%M:%S", time.gmtime(eta)) if np.isfinite(eta) else "--:--"
-            line = f"\r[{bar}] {self.done}/{self.total} frames {rate:5.1f} fps ETA {eta_txt} {label}"
-        else:
-            line = f"\r{self.done} frames {rate:5.1f} fps {label}"
-        self.stream.write(line.ljust(100)[:100])
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _frame_count(session, name: str, frames: range | None) -> int | None:

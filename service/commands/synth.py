@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 HELP = "render a synthetic session (videos, calibration, ground truth) from BVH motion"
 
@@ -43,14 +42,9 @@ def run(args: argparse.Namespace) -> int:
     from tracker.model import ModelError
     from tracker.synth import bundled_motion, make_synthetic_session
 
-    t0 = time.monotonic()
+    from service.progress import Progress
 
-    def progress(done: int, total: int) -> None:
-        if done == total or done % 10 == 0:
-            print(f"\rcontourcap synth: frame {done}/{total} ({time.monotonic() - t0:.0f} s)", end="",
-                  file=sys.stderr, flush=True)  # fmt: skip
-            if done == total:
-                print(file=sys.stderr)
+    progress = Progress(enabled=not getattr(args, "quiet", False))
 
     try:
         bvh = bundled_motion(args.bvh.split(":", 1)[1]) if args.bvh.startswith("bundled:") else args.bvh
@@ -63,5 +57,6 @@ def run(args: argparse.Namespace) -> int:
     except (BvhError, ModelError, ValueError, FileNotFoundError, OSError, RuntimeError) as exc:
         print(f"contourcap synth: {exc}", file=sys.stderr)
         return 2
+    progress.close()
     print(f"wrote {out}")
     return 0
