@@ -35,7 +35,6 @@ from typing import Sequence
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from capture.camera import Camera
 from tracker.contours import Contours, extremal_contours
@@ -195,7 +194,10 @@ class ChamferCost:
             rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
             if len(y) and rows.size:
                 x = contours.uv[rows]
-                dist, j = cKDTree(x).query(y)
+                # squared distances by the expansion |y|² − 2 y·x + |x|² (one small matrix product)
+                d2 = (y * y).sum(1)[:, None] - 2.0 * (y @ x.T) + (x * x).sum(1)[None, :]
+                j = np.argmin(d2, axis=1)
+                dist = np.linalg.norm(y - x[j], axis=1)
                 diff = y - x[j]
                 far = dist > self.reverse_min_px
                 r[k0:k1] = np.where(far, dist - self.reverse_min_px, 0.0)

@@ -203,19 +203,21 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
                 break
         if not accepted:
             break
-        r, J = fun(x, True)
+        # stop before linearising again when converged (or out of iterations): saves a Jacobian
+        if rel < ftol or moved < rtol or small_step or it >= max_iterations:
+            r = r_new
+            status = (CONVERGED_COST if rel < ftol or moved < rtol else
+                      CONVERGED_STEP if small_step else MAX_ITERATIONS)
+            break
+        r_lin, J_lin = fun(x, True)
         n_eval += 1
-        if not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
+        if not np.all(np.isfinite(r_lin)) or J_lin is None or not np.all(np.isfinite(J_lin)):
+            r = r_new
             status = STALLED
             break
+        r, J = r_lin, J_lin
         # the residual set may be refreshed at a new linearisation point (e.g. occlusion)
         cost = total_cost(r, x)
-        if rel < ftol or moved < rtol:
-            status = CONVERGED_COST
-            break
-        if small_step:
-            status = CONVERGED_STEP
-            break
     else:
         status = MAX_ITERATIONS
     if status == STALLED and cost < np.inf:

@@ -43,18 +43,18 @@ class TrackerOptions:
     max_rms_px, min_inside_fraction : below these a frame is reported lost.
     """
 
-    n_samples: int = 12
+    n_samples: int = 8
     max_iterations: int = 12
-    ftol: float = 1e-2
+    ftol: float = 3e-2
     xtol: float = 1e-4
-    rtol: float = 0.3
+    rtol: float = 1.0
     loss: str = "huber"
-    f_scale: float = 10.0
+    f_scale: float = 3.0
     truncate_px: float = 30.0
     prior_m: float = 200.0
     prior_rad: float = 30.0
     reverse_weight: float = 1.0
-    reverse_samples: int = 200
+    reverse_samples: int = 150
     reverse_min_px: float = 8.0
     damping: float = 1e-3
     diagonal_floor: float = 0.0
