@@ -20,7 +20,8 @@ def _reference(model, rng, arms_deg):
     p = model.zero()
     p[:2] = rng.uniform(-1.0, 1.0, 2)
     p[5] = rng.uniform(-np.pi, np.pi)
-    p[[model.param_index("left_upper_arm.abduction"), model.param_index("right_upper_arm.abduction")]] = np.radians(arms_deg)
+    arms = [model.param_index("left_upper_arm.abduction"), model.param_index("right_upper_arm.abduction")]
+    p[arms] = np.radians(arms_deg)
     return p
 
 

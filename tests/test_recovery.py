@@ -72,7 +72,8 @@ def test_wrong_warm_start_is_flagged_lost_and_recovered():
     # the tracker's own fit from the warm start ends far off and is flagged, three frames running
     fit, _ = fit_frame(model, cams, chamfer, last_good)
     terms = cost.evaluate(fit.params)
-    warm_err = np.linalg.norm(joint_centre_array(model, terms.pose) - joint_centre_array(model, forward(model, truth)), axis=1)
+    truth_joints = joint_centre_array(model, forward(model, truth))
+    warm_err = np.linalg.norm(joint_centre_array(model, terms.pose) - truth_joints, axis=1)
     assert warm_err.mean() > 0.1
     states = [mon.update(terms) for _ in range(3)]
     assert [s.state for s in states] == ["suspect", "suspect", "lost"]

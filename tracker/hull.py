@@ -172,7 +172,8 @@ class VoxelHull:
         return np.concatenate(out) if out else np.zeros((0, 3))
 
 
-def common_view_bounds(cameras: Sequence[Camera], *, z_range=(0.0, 2.5), step_m: float = 0.2, margin_m: float = 0.2) -> np.ndarray:
+def common_view_bounds(cameras: Sequence[Camera], *, z_range=(0.0, 2.5), step_m: float = 0.2,
+                       margin_m: float = 0.2) -> np.ndarray:
     """Box ``(2, 3)`` around the floor region every camera sees (heights in ``z_range``).
 
     Samples a grid over the cameras' horizontal footprint (their centres' box grown by half its
@@ -206,7 +207,8 @@ def _check_inputs(cameras, silhouettes) -> list[np.ndarray]:
     for cam, m in zip(cameras, silhouettes):
         m = np.asarray(m)
         if m.shape != (cam.height, cam.width):
-            raise ValueError(f"silhouettes[{cam.name!r}]: shape {m.shape} != camera size (h, w) = {(cam.height, cam.width)}")
+            raise ValueError(f"silhouettes[{cam.name!r}]: shape {m.shape} != camera size (h, w) = "
+                             f"{(cam.height, cam.width)}")
         masks.append((m > 0).astype(np.uint8))
     return masks
 
@@ -366,7 +368,8 @@ def visual_hull(
 def _pixel_rays(camera: Camera, uv: np.ndarray) -> np.ndarray:
     """World ray directions (n, 3) through pixels ``uv`` (n, 2) (distortion undone)."""
     if np.any(camera.distortion != 0):
-        xy = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), camera.matrix, camera.distortion).reshape(-1, 2)
+        pts = uv.reshape(-1, 1, 2).astype(np.float64)
+        xy = cv2.undistortPoints(pts, camera.matrix, camera.distortion).reshape(-1, 2)
         rays_c = np.column_stack([xy, np.ones(len(xy))])
     else:
         rays_c = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(camera.matrix).T

@@ -7,12 +7,13 @@ then the limbs).
 1. **Hull** (``tracker.hull``) at a coarse resolution: position (volume centroid, floor = the
    hull's lowest point), height, and the principal axes of its horizontal spread.
 2. **Search** over heading × arm pose: ``n_headings`` evenly spaced headings plus the two
-   headings that put the arms' span along the hull's major floor axis, each with every arm
-   abduction of ``arm_abduction_deg`` (0° = T, -45° = A); headings facing away from where the
-   feet point (``feet_direction``: the hull's sole layer lies ahead of its shanks) are dropped,
-   which breaks the front/back symmetry of the silhouettes.  Candidates are scored by the mean
-   silhouette IoU of the rendered model (``tracker.render``) on down-scaled views, a symmetric
-   score: a limb missing from the model costs as much as a limb the images lack.
+   headings that put the arms' span along the hull's major floor axis, each arm at every
+   abduction of ``arm_abduction_deg`` (0° = T, -45° = A; the arms independently, as a
+   segmentation may lose one); headings facing away from where the feet point
+   (``feet_direction``: the hull's sole layer lies ahead of its shanks) are dropped, which breaks
+   the front/back symmetry of the silhouettes.  Candidates are scored by the mean silhouette IoU
+   of the model (``ScoreViews``: the parts' projected convex hulls on half-size views), a
+   symmetric score: a limb missing from the model costs as much as a limb the images lack.
 3. **Refinement** of the best ``keep`` candidates with bounded robust LM on the chamfer cost
    (``tracker.cost`` / ``tracker.solver``): root only, then the joints, then everything.  The
    refined candidate with the best IoU wins (the chamfer cost is model→image only, so it cannot
@@ -30,13 +31,15 @@ import cv2
 import numpy as np
 
 from capture.camera import Camera
+from tracker.cost import ChamferCost
 from tracker.hull import VoxelHull, visual_hull
 from tracker.kinematics import forward
 from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 from tracker.render import body_points, cone_points
+from tracker.solver import levenberg_marquardt
 
-__all__ = ["InitResult", "initialise", "refine", "prepare_inputs", "refine_best", "feet_direction", "ScoreViews", "chamfer_from_silhouette", "pose_candidates",
-           "model_top_m", "estimate_height"]
+__all__ = ["InitResult", "initialise", "refine", "refine_best", "prepare_inputs", "ScoreViews", "pose_candidates",
+           "feet_direction", "chamfer_from_silhouette", "model_top_m", "estimate_height", "ARM_POSES_DEG"]
 
 #: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
 ARM_POSES_DEG = (0.0, -45.0)
@@ -49,7 +52,8 @@ class InitResult:
     params : (n_params,) the pose; score : mean silhouette IoU of that pose (1 = perfect);
     rms_px : RMS chamfer residual at ``params`` (NaN if no refinement ran);
     inside_fraction : fraction of contour points on the silhouettes; heading_rad : the search
-    heading it came from; label : which hypothesis won (``"T"``, ``"A"``, ``"hint"``, ...);
+    heading it came from; label : which hypothesis won (``"T"``, ``"A"``, ``"T/A"`` = left T,
+    right A, ``"hint"``, ``"last"``);
     height_m : the subject height the hull suggests; candidates : poses scored;
     hull : the visual hull used.  ``np.asarray(result)`` gives ``params``.
     """
@@ -70,11 +74,12 @@ class InitResult:
 
 # ----------------------------------------------------------------------------- scoring
 class ScoreViews:
-    """Silhouettes and cameras down-scaled by ``scale`` for fast overlap scoring.
+    """Silhouettes and cameras down-scaled by ``scale`` for fast overlap scoring of poses.
 
     Parameters
     ----------
-    cameras : sequence of Camera; silhouettes : sequence of (h, w) masks (non-zero = body)
+    model : BodyModel; cameras : sequence of Camera; silhouettes : sequence of (h, w) masks
+    (non-zero = body), one per camera; scale : image scale of the scoring views
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray], *,
@@ -238,9 +243,6 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
 
     Returns ``(params (n_params,), CostTerms at params)``.
     """
-    from tracker.cost import ChamferCost
-    from tracker.solver import levenberg_marquardt
-
     cost = ChamferCost(model, cameras, chamfer, n_samples=n_samples, truncate_px=truncate_px)
     fun = cost.residual_fn(compact=True)
     x = model.clamp(np.asarray(params, dtype=float))
@@ -249,7 +251,8 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
     for idx in _stages(model) if stages is None else stages:
         idx = np.asarray(idx, dtype=int)
         res = levenberg_marquardt(_subset_fun(fun, x, idx), x[idx], lower=model.lower[idx], upper=model.upper[idx],
-                                  prior=x0[idx], prior_weight=weight[idx], loss="huber", f_scale=f_scale, max_iterations=max_iterations, ftol=1e-3)
+                                  prior=x0[idx], prior_weight=weight[idx], loss="huber", f_scale=f_scale,
+                                  max_iterations=max_iterations, ftol=1e-3)
         x = x.copy()
         x[idx] = res.params
     return x, cost.evaluate(x)
