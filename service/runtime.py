@@ -109,17 +109,18 @@ def start_trigger(cfg: StudioConfig, stop: threading.Event, *, resync_s: float =
 
 
 def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, paced: bool = False,
-                  frame_id_at: Callable[[int], int] | None = None) -> dict:
+                  frame_id_at: Callable[[int], int] | None = None, loop: bool = False) -> dict:
     """Open camera sources: replay (realtime pacing live, as fast as credits allow lossless, or
     ``paced`` externally by an EpochPacer) or OpenCV (frame ids from ``frame_id_at``, the trigger
-    box's, when given)."""
+    box's, when given).  ``loop``: replays restart at the end with increasing frame ids."""
     out = {}
     for name in cameras:
         cam = cfg.camera(name)
         if cam.backend == "replay":
             from capture.replay import ReplaySource
 
-            src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast")
+            src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast",
+                               loop=loop)
         else:
             from capture.opencv_source import OpenCVSource
 

@@ -50,7 +50,8 @@ class _Child:
 
 def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None = None,
               epoch_ns: int | None = None, idle_exit_s: float | None = None, segment_plugin: str | None = None,
-              fit_plugin: str | None = None, python: str = sys.executable) -> list[ProcessSpec]:
+              fit_plugin: str | None = None, loop_replay: bool = False,
+              python: str = sys.executable) -> list[ProcessSpec]:
     """The processes ``contourcap run`` starts on ``host``."""
     worker = (python, "-m", "service.commands.worker")  # skips loading every other sub-command
     common = ("--config", str(config_path), "--host", host) + (("--hub", hub) if hub else ())
@@ -58,7 +59,7 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
     if cfg.router_host == host:
         specs.append(ProcessSpec("router", (python, "-m", "service.commands.router", "--config", str(config_path))))
     cams = [c.name for c in cfg.cameras_on(host)]
-    extra = ("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()
+    extra = (("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()) + (("--loop",) if loop_replay else ())
     if needs_trigger(cfg, cams):  # one process owns the USB trigger box and all the host's cameras
         specs.append(ProcessSpec("camera", worker + ("camera", "--cameras", ",".join(cams)) + common + extra))
     else:

@@ -26,6 +26,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-frames", type=int, default=None, help="track: exit after this many poses")
     parser.add_argument("--epoch-ns", type=int, default=None,
                         help="camera, live replay: wall-clock ns at which session time 0 is due (set by run)")
+    parser.add_argument("--loop", action="store_true", help="camera, replay: loop the session forever")
     parser.add_argument("--log-level", default="INFO")
 
 
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 
             paced = args.epoch_ns is not None and cfg.delivery == "live"
             box = start_trigger(cfg, stop) if needs_trigger(cfg, cams) else None
-            sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced,
+            sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced, loop=args.loop,
                                     frame_id_at=None if box is None else box.frame_id_at)
             try:
                 stats = run_camera_worker(session, keys, sources, mode=cfg.delivery, stop=stop,
