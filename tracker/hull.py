@@ -209,7 +209,7 @@ def _check_inputs(cameras, silhouettes) -> list[np.ndarray]:
         if m.shape != (cam.height, cam.width):
             raise ValueError(f"silhouettes[{cam.name!r}]: shape {m.shape} != camera size (h, w) = "
                              f"{(cam.height, cam.width)}")
-        masks.append((m > 0).astype(np.uint8))
+        masks.append(cv2.threshold(m, 0, 1, cv2.THRESH_BINARY)[1] if m.dtype == np.uint8 else (m > 0).astype(np.uint8))
     return masks
 
 
@@ -339,7 +339,7 @@ def visual_hull(
     origin = box[0].copy()  # grid anchored at the lower corner (the floor stays a voxel face)
     idx = np.stack(np.meshgrid(*(np.arange(c) for c in counts), indexing="ij"), -1).reshape(-1, 3)
     lower = origin + idx * size
-    integrals = [cv2.integral(m).astype(np.int64) for m in masks]
+    integrals = [cv2.integral(m, sdepth=cv2.CV_32S) for m in masks]  # (h+1, w+1) counts; int32 holds any image
     kept_c, kept_s, kept_f = [], [], []
     for level in range(levels + 1):
         if len(lower) == 0:
