@@ -75,3 +75,23 @@ def test_track_bad_input_is_one_clear_error(session, tmp_path, capsys):
     bad.write_text('{"params": [1, 2]}\n')
     assert main(["track", str(session), "--out", str(out), "--initial-pose", str(bad)]) == 2
     assert "--initial-pose" in capsys.readouterr().err
+
+
+def test_background_from_temporal_median_when_no_background_video(session, tmp_path):
+    """Without background videos the model is the temporal median of the session's frames."""
+    import shutil
+
+    from capture.session import load_session
+    from tracker.offline import background_models
+
+    copy = tmp_path / "nobg"
+    shutil.copytree(session, copy, ignore=shutil.ignore_patterns("background"))
+    toml = copy / "session.toml"
+    toml.write_text("\n".join(ln for ln in toml.read_text().splitlines() if not ln.startswith("background")))
+    sess = load_session(copy)
+    models, how = background_models(sess, ["cam0", "cam1"], median_frames=5)
+    assert how == {"cam0": "median", "cam1": "median"}
+    ref, _ = background_models(load_session(session), ["cam0"])
+    # the person moves little in 8 frames, so compare away from them: the image's top rows (room)
+    diff = np.abs(models["cam0"].mean_yuv[:60] - ref["cam0"].mean_yuv[:60])
+    assert float(np.median(diff)) < 2.0
