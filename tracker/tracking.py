@@ -34,13 +34,20 @@ __all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
 
 @dataclass(frozen=True)
 class TrackerOptions:
-    """Fitting options.
+    """Fitting options (defaults tuned on the synthetic hop session, see bench/tracker.py).
 
     n_samples : contour points per side of a part; max_iterations : LM trial steps per frame;
+    ftol, xtol, rtol : LM stopping rules (relative cost change, step size, largest linearised
+    residual change in px; ``tracker.solver.levenberg_marquardt``);
     loss, f_scale : robust loss on the pixel residuals; truncate_px : distance truncation;
     prior_m, prior_rad : prior weights per m² (root translation) and per rad² (rotations), in
-    units of px² residual; constant_velocity : predict ``2 p_t − p_{t−1}``;
-    max_rms_px, min_inside_fraction : below these a frame is reported lost.
+    units of px² residual, towards the prediction;
+    reverse_weight, reverse_samples, reverse_min_px : the reverse (silhouette → model) term of
+    ``tracker.cost`` (weight 0 turns it off);
+    damping, diagonal_floor : LM initial damping and damping-diagonal floor;
+    constant_velocity : predict ``2 p_t − p_{t−1}`` (fewer iterations on fast motion, but it
+    measured less accurate on the hop session);
+    max_rms_px, min_inside_fraction : a frame worse than these is reported ``ok: false``.
     """
 
     n_samples: int = 8
