@@ -164,10 +164,12 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                 with lock:
                     status.count("processed")
         finally:
-            with lock:
-                status.count("bad", inbox.bad)
-                status.count("dropped", inbox.dropped)
             inbox.close()
+
+    def gauges() -> dict:
+        inboxes = [w[0] for w in wires.values()]
+        return {"bad": sum(i.bad for i in inboxes), "dropped": sum(i.dropped for i in inboxes),
+                "queue_depth": sum(len(i) for i in inboxes)}
 
     threads = [threading.Thread(target=loop, args=item, name=f"segment-{item[0]}", daemon=True)
                for item in segmenters.items()]
@@ -178,17 +180,18 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
             if idle_exit_s is not None and last_frame[0] is not None and time.monotonic() - last_frame[0] > idle_exit_s:
                 break
             with lock:
-                status.tick()
+                status.tick(**gauges())
             stop.wait(0.1)
     finally:
         stop.set()
         for t in threads:
             t.join(2.0)
-        status.tick(state="finished", force=True)
+        with lock:
+            status.tick(state="finished", force=True, **gauges())
         status.close()
         for token in tokens:
             token.undeclare()
-    return dict(status.counters)
+    return {**status.counters, **gauges()}
 
 
 def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
