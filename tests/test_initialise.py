@@ -8,7 +8,7 @@ import pytest
 from segmentation.distance import chamfer_images
 from tracker.hull import visual_hull
 from tracker.initialise import (InitResult, ScoreViews, estimate_height, feet_direction, initialise,
-                                model_top_m, pose_candidates)
+                                model_top_m, pose_candidates, sized_model)
 from tracker.kinematics import forward, joint_centre_array
 from tracker.model import load_model
 from tracker.render import internal_edges, render_label_images
@@ -84,6 +84,20 @@ def test_candidates_stand_on_the_hull_and_include_the_span_axis():
     assert views.score(truth) > 0.9 > views.score(turned) + 0.1
     assert abs(estimate_height(hull, model) - model.height_m) < 0.06
     assert model_top_m(model) == pytest.approx(model.height_m, abs=0.01)
+
+
+@pytest.mark.parametrize("height_m, arms_deg", [(1.58, 0.0), (1.90, -45.0)])
+def test_unknown_height_is_measured_from_the_hull(height_m, arms_deg):
+    subject = load_model("knossow40", height_m=height_m)
+    cams = ring_cameras(6)
+    truth = _reference(subject, np.random.default_rng(int(100 * height_m)), arms_deg)
+    sils, _ = _views(subject, truth, cams)
+    model = sized_model(load_model("knossow40"), cams, sils)  # starts from the default 1.75 m
+    assert abs(model.height_m - height_m) < 0.03
+    res = initialise(model, cams, sils)
+    err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
+                         - joint_centre_array(subject, forward(subject, truth)), axis=1)
+    assert err.mean() < 0.030
 
 
 def test_bad_input_names_the_camera():

@@ -39,7 +39,7 @@ from tracker.render import body_points, cone_points
 from tracker.solver import levenberg_marquardt
 
 __all__ = ["InitResult", "initialise", "refine", "refine_best", "prepare_inputs", "ScoreViews", "pose_candidates",
-           "feet_direction", "chamfer_from_silhouette", "model_top_m", "estimate_height", "ARM_POSES_DEG"]
+           "feet_direction", "chamfer_from_silhouette", "model_top_m", "estimate_height", "sized_model", "ARM_POSES_DEG"]
 
 #: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
 ARM_POSES_DEG = (0.0, -45.0)
@@ -146,6 +146,17 @@ def model_top_m(model: BodyModel, params: np.ndarray | None = None) -> float:
 def estimate_height(hull: VoxelHull, model: BodyModel) -> float:
     """Subject height from an upright hull: ``model.height_m`` × hull height / the model's reference height."""
     return float(model.height_m * hull.height() / model_top_m(model))
+
+
+def sized_model(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray], *,
+                min_voxel_m: float = 0.02) -> BodyModel:
+    """``model`` re-sized to the height of the person the silhouettes show (standing upright,
+    e.g. the T/A-pose of an initialisation); use it when the subject's height is not known."""
+    cameras, sils, _ = prepare_inputs(model, cameras, silhouettes, None, with_chamfer=False)
+    hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m).largest_component()
+    if hull.empty:
+        raise ValueError("sized_model: the silhouettes share no volume (empty visual hull)")
+    return model.with_height(estimate_height(hull, model))
 
 
 def feet_direction(hull: VoxelHull, *, sole_m: float = 0.06, shank_m=(0.15, 0.40),
@@ -289,9 +300,11 @@ def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, 
 
 
 # ----------------------------------------------------------------------------- entry point
-def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping, chamfer: Mapping | None):
+def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping, chamfer: Mapping | None, *,
+                   with_chamfer: bool = True):
     """Validate the views: ``(cameras list, silhouettes list, chamfer list)`` in camera order;
-    chamfer images are built from the silhouettes where ``chamfer`` is None."""
+    chamfer images are built from the silhouettes where ``chamfer`` is None (an empty list when
+    ``with_chamfer`` is False)."""
     cameras = list(cameras)
     if not cameras:
         raise ValueError("cameras: need at least one camera")
@@ -305,7 +318,9 @@ def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Map
         if s.shape != (cam.height, cam.width):
             raise ValueError(f"silhouettes[{cam.name!r}]: shape {s.shape} != (h, w) = {(cam.height, cam.width)}")
         sils.append(s)
-    if chamfer is None:
+    if not with_chamfer:
+        chs = []
+    elif chamfer is None:
         chs = [chamfer_from_silhouette(s) for s in sils]
     else:
         missing = [c.name for c in cameras if c.name not in chamfer]
