@@ -11,11 +11,13 @@ poses of ``tracker.initialise`` the search starts from the last good pose:
 1. the last good pose is moved onto the hull (its volume centroid onto the hull's, horizontally)
    and turned about the vertical through it to ``n_headings`` headings; the best by silhouette
    IoU is kept together with the reference-pose hypotheses of ``pose_candidates``;
-2. a greedy limb search: for each chain (arms, legs, trunk) a few alternative angle sets (the
-   last good ones, the reference pose, the mirror of the other side, half-way) are scored by
-   IoU with the rest fixed;
+2. a greedy limb search (``limb_search``): for each chain (arms, legs, trunk) alternative angle
+   sets (the reference pose, half-way to it, the mirror of the other side, and the canonical
+   poses of ``ARM_SEARCH_DEG`` / ``LEG_SEARCH_DEG``) are scored by IoU with the rest fixed;
 3. the best ``keep`` hypotheses are refined by the staged LM of ``tracker.initialise.refine``
-   and the best IoU wins.
+   (a weaker prior than initialisation's: the hypothesis is rougher) and the best IoU wins;
+   a last limb search on the winner, refined again if it raised the IoU, catches a limb the
+   first pass left behind.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyM
 from tracker.render import body_points
 
 __all__ = ["LossMonitor", "LossState", "recover", "limb_chains", "limb_search", "turn_about_vertical",
-           "ARM_POSES_DEG", "LEG_POSES_DEG"]
+           "ARM_SEARCH_DEG", "LEG_SEARCH_DEG"]
 
 OK, SUSPECT, LOST = "ok", "suspect", "lost"
 
@@ -158,10 +160,10 @@ def _centroid(model: BodyModel, params: np.ndarray) -> np.ndarray:
 
 #: Canonical limb poses tried by the limb search, degrees, per DOF name suffix (other DOF of the
 #: chain 0).  The models mirror the right side's axes, so one table serves both sides.
-ARM_POSES_DEG = tuple({"upper_arm.abduction": a, "upper_arm.flexion": f}
+ARM_SEARCH_DEG = tuple({"upper_arm.abduction": a, "upper_arm.flexion": f}
                       for a in (-80, -45, 0, 35, 70) for f in (-40, 0, 50) if (a, f) != (0, 0)) + (
                  {"upper_arm.abduction": -45, "forearm.flexion": 70}, {"upper_arm.flexion": 60, "forearm.flexion": 70})
-LEG_POSES_DEG = ({"thigh.flexion": 30}, {"thigh.flexion": -15}, {"thigh.abduction": 20},
+LEG_SEARCH_DEG = ({"thigh.flexion": 30}, {"thigh.flexion": -15}, {"thigh.abduction": 20},
                  {"thigh.flexion": 45, "shank.flexion": 60}, {"shank.flexion": 45})
 
 
@@ -180,10 +182,10 @@ def _canonical(model: BodyModel, chain: str, idx: np.ndarray, arm_poses, leg_pos
 
 
 def limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: float, *,
-                arm_poses=ARM_POSES_DEG, leg_poses=LEG_POSES_DEG) -> tuple[np.ndarray, float]:
+                arm_poses=ARM_SEARCH_DEG, leg_poses=LEG_SEARCH_DEG) -> tuple[np.ndarray, float]:
     """Greedy per-chain search, scored by IoU with the rest fixed: the chain's current angles
     halved, zeroed, mirrored from the other side, and the canonical ``arm_poses`` / ``leg_poses``
-    (see ``ARM_POSES_DEG``); ``score`` is the IoU of ``params``.  Returns (params, score)."""
+    (see ``ARM_SEARCH_DEG``); ``score`` is the IoU of ``params``.  Returns (params, score)."""
     mirror = _mirror_pairs(model)
     x = params.copy()
     for chain, idx in limb_chains(model).items():
