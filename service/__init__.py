@@ -1,13 +1,14 @@
 """Service: wire messages, zenoh wiring, workers, CLI, rerun bridge, config.
 
-Modules (imported on demand so that the CLI starts fast):
-
-- ``messages``: binary wire records (``FrameMessage``, ``ChamferMessage``) and ``MessageError``
-- ``records``: JSON wire records (``PoseRecord``, ``StatusMessage``, ``CreditMessage``)
-- ``bus``: key names, zenoh settings/sessions, bounded inboxes, credits, liveliness and status
-- ``config``: the studio TOML (``load_config``)
-- ``assembler``: frame sets by frame id (live newest-wins, lossless in order)
-- ``workers``: the camera, segment and track loops; ``components``: adapters to segmentation/tracker
-- ``runtime``: building a worker's parts from the config; ``supervisor``: ``contourcap run``
-- ``viewer``: rerun bridge; ``export``: JSONL/BVH; ``demo``: the synthetic end-to-end demo
+Importing this package first (every ``contourcap`` command and ``python -m service.commands.*``
+worker does) pins BLAS to one thread per process unless the environment says otherwise: the
+tracker's small matrix products stall on thread wake-ups with more (bench/jacobian.py measured
+3.5 ms single-threaded vs 33 ms with 2 threads), and the workers are separate processes that
+already share the cores.
 """
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+del _var

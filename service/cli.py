@@ -7,18 +7,10 @@ work itself is done by library functions that never see argparse.
 
 from __future__ import annotations
 
-import os
-
-# One BLAS thread per process, set before numpy loads: the tracker's small matrix products stall on
-# thread wake-ups with more (bench/jacobian.py: 3.5 ms single-threaded vs 33 ms with 2 threads), and
-# the workers are separate processes that already share the cores.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import argparse  # noqa: E402
-import importlib  # noqa: E402
-import importlib.util  # noqa: E402
-import sys  # noqa: E402
+import argparse
+import importlib
+import importlib.util
+import sys
 
 # name -> module under service.commands (module names avoid Python keywords)
 COMMANDS = {
