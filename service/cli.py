@@ -31,23 +31,34 @@ COMMANDS = {
 }
 
 
-def _available() -> dict[str, str]:
-    out = {}
-    for name, mod in COMMANDS.items():
-        if importlib.util.find_spec(f"service.commands.{mod}") is not None:
-            out[name] = mod
-    return out
+def _command_in(argv: list[str]) -> str | None:
+    """The sub-command named in ``argv`` (the first non-option word), if it is one of ours."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The CLI parser.  With ``command``, only that sub-command's module is imported (a broken or slow
+    module never affects another command); without, every module is imported for the help listing."""
     parser = argparse.ArgumentParser(
         prog="contourcap",
         description="Live markerless multi-camera motion capture (extremal-contour tracking over zenoh).",
     )
     parser.add_argument("--version", action="version", version=f"contourcap {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, mod in _available().items():
-        module = importlib.import_module(f"service.commands.{mod}")
+    for name, mod in COMMANDS.items():
+        if command is not None and name != command:
+            sub.add_parser(name)
+            continue
+        try:
+            module = importlib.import_module(f"service.commands.{mod}")
+        except ImportError as exc:
+            if command is not None:
+                raise
+            sub.add_parser(name, help=f"(unavailable: {exc})")
+            continue
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_args(p)
         p.set_defaults(_run=module.run)
@@ -64,7 +75,8 @@ def _version() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_in(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
