@@ -76,13 +76,14 @@ def _get(table: dict, key: str, where: str):
     return table[key]
 
 
-def _array(table: dict, key: str, where: str, shape: tuple) -> np.ndarray:
+def _array(table: dict, key: str, where: str, shape: tuple | None) -> np.ndarray:
+    """``table[key]`` as a finite float array of ``shape`` (``None``: any shape, checked by the caller)."""
     value = _get(table, key, where)
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise CalibrationError(f"{where}: key {key!r} is not numeric: {exc}") from None
-    if arr.shape != shape and not (key == "distortions" and arr.shape == (4,)):
+    if shape is not None and arr.shape != shape and not (key == "distortions" and arr.shape == (4,)):
         raise CalibrationError(f"{where}: key {key!r} must have shape {shape}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise CalibrationError(f"{where}: key {key!r} has non-finite values")
@@ -114,8 +115,11 @@ def load_calibration(path) -> list[Camera]:
         raise CalibrationError(f"{path}: calibration file not found") from None
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
+    meta = data.get("metadata", {})
+    if not isinstance(meta, dict):
+        raise CalibrationError(f"{path}: key 'metadata' must be a table [metadata]")
     flavour = toml_flavour(data)
-    units = str(data.get("metadata", {}).get("units", "")).strip().lower()
+    units = str(meta.get("units", "")).strip().lower()
     if flavour == "pose2sim":
         units = "m"
     elif flavour == "freemocap":
@@ -135,7 +139,7 @@ def load_calibration(path) -> list[Camera]:
         size = _array(table, "size", where, (2,))
         K = _array(table, "matrix", where, (3, 3))
         dist = _array(table, "distortions", where, (5,))
-        rot = np.asarray(_get(table, "rotation", where), dtype=float)
+        rot = _array(table, "rotation", where, None)
         if rot.shape == (3,):
             R = rodrigues_to_matrix(rot)
         elif rot.shape == (3, 3):
@@ -151,4 +155,8 @@ def load_calibration(path) -> list[Camera]:
             cams.append(Camera(name, K, dist, R, t, (int(size[0]), int(size[1]))))
         except ValueError as exc:
             raise CalibrationError(f"{where}: {exc}") from None
+    names = [c.name for c in cams]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise CalibrationError(f"{path}: camera names must be unique, repeated: {repeated}")
     return cams

@@ -369,8 +369,8 @@ def load_capture_config(path) -> CaptureConfig:
         data = load_file(path)
     except FileNotFoundError:
         raise RecorderError(f"{path}: studio config not found") from None
-    except (ValueError, OSError) as exc:
-        raise RecorderError(f"{path}: {exc}") from None
+    except (ValueError, OSError) as exc:  # load_file's message names the file
+        raise RecorderError(str(exc)) from None
     base = path.resolve().parent
     studio = data.get("studio", {})
     trigger = data.get("trigger", {})

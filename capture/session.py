@@ -282,8 +282,8 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
         raise SessionError(f"{toml_path}: session file not found")
     try:
         data = load_file(toml_path)
-    except (ValueError, OSError) as exc:
-        raise SessionError(f"{toml_path}: {exc}") from None
+    except (ValueError, OSError) as exc:  # load_file's message names the file
+        raise SessionError(str(exc)) from None
     sess = data.get("session")
     if not isinstance(sess, dict):
         raise SessionError(f"{toml_path}: missing table [session]")

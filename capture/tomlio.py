@@ -87,9 +87,19 @@ def loads(text: str) -> dict:
 
 
 def load_file(path) -> dict:
-    """Parse a TOML file; a syntax error names the file."""
-    with open(path, "rb") as fh:
-        try:
+    """Parse a TOML file.
+
+    Raises ``FileNotFoundError`` when it is absent, and ``ValueError`` naming the file for anything
+    else: a syntax error, bytes that are not UTF-8, a folder or an unreadable file.
+    """
+    try:
+        with open(path, "rb") as fh:
             return tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: invalid TOML: {exc}") from exc
+    except FileNotFoundError:
+        raise
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: invalid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: invalid TOML: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None

@@ -23,3 +23,30 @@ def test_missing_key_named(tmp_path):
     p.write_text('[cam_00]\nname = "c"\nsize = [10, 10]\nmatrix = [[1,0,0],[0,1,0],[0,0,1]]\ndistortions = [0,0,0,0]\nrotation = [0,0,0]\n')
     with pytest.raises(CalibrationError, match=r"bad.toml \[cam_00\].*translation"):
         load_calibration(p)
+
+
+_CAM = ('[cam_00]\nname = "{name}"\nsize = [10, 10]\nmatrix = [[1,0,5],[0,1,5],[0,0,1]]\n'
+        'distortions = [0,0,0,0]\nrotation = {rotation}\ntranslation = [0,0,1]\n')
+
+
+@pytest.mark.parametrize("text, match", [
+    (_CAM.format(name="c", rotation='["a", 0, 0]'), r"bad.toml \[cam_00\]: key 'rotation' is not numeric"),
+    (_CAM.format(name="c", rotation="[0, 0]"), r"bad.toml \[cam_00\]: key 'rotation' must be"),
+    ("metadata = 5\n" + _CAM.format(name="c", rotation="[0, 0, 0]"), r"bad.toml: key 'metadata' must be a table"),
+    (_CAM.format(name="c", rotation="[0, 0, 0]") + _CAM.replace("cam_00", "cam_01").format(name="c", rotation="[0, 0, 0]"),
+     r"bad.toml: camera names must be unique, repeated: \['c'\]"),
+])  # fmt: skip
+def test_malformed_calibration_is_named(tmp_path, text, match):
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises(CalibrationError, match=match):
+        load_calibration(p)
+
+
+def test_unreadable_calibration_file_is_named(tmp_path):
+    (tmp_path / "binary.toml").write_bytes(b"\x00\xff\xfe garbage \xc3\x28")
+    with pytest.raises(CalibrationError, match=r"binary.toml: invalid TOML: not UTF-8"):
+        load_calibration(tmp_path / "binary.toml")
+    (tmp_path / "folder.toml").mkdir()
+    with pytest.raises(CalibrationError, match=r"folder.toml: cannot read"):
+        load_calibration(tmp_path / "folder.toml")
