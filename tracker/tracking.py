@@ -36,7 +36,8 @@ __all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
 class TrackerOptions:
     """Fitting options (defaults tuned on the synthetic hop session, see bench/tracker.py).
 
-    n_samples : contour points per side of a part; max_iterations : LM trial steps per frame;
+    n_samples : contour points per side of a part; visibility : when occlusion is recomputed
+    (``tracker.cost.ChamferCost``); max_iterations : LM trial steps per frame;
     ftol, xtol, rtol : LM stopping rules (relative cost change, step size, largest linearised
     residual change in px; ``tracker.solver.levenberg_marquardt``);
     loss, f_scale : robust loss on the pixel residuals; truncate_px : distance truncation;
@@ -51,6 +52,7 @@ class TrackerOptions:
     """
 
     n_samples: int = 8
+    visibility: str = "step"
     max_iterations: int = 12
     ftol: float = 3e-2
     xtol: float = 1e-4
@@ -80,8 +82,9 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, st
               options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
     """Fit one frame from ``start`` (n_params,); returns the solver result and the cost object."""
     cost = ChamferCost(model, cameras, chamfer, sliding=sliding, n_samples=options.n_samples,
-                       truncate_px=options.truncate_px, reverse_weight=options.reverse_weight,
-                       reverse_samples=options.reverse_samples, reverse_min_px=options.reverse_min_px)
+                       visibility=options.visibility, truncate_px=options.truncate_px,
+                       reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
+                       reverse_min_px=options.reverse_min_px)
     prior = start if prediction is None else prediction
     kw = dict(lower=model.lower, upper=model.upper, prior=model.clamp(prior),
               prior_weight=prior_weights(model, options), loss=options.loss, f_scale=options.f_scale,
@@ -178,7 +181,8 @@ class Tracker:
 
     def _bad(self, rms: float, inside: float) -> bool:
         o = self.options
-        return not (np.isfinite(rms) and rms <= o.max_rms_px and np.isfinite(inside) and inside >= o.min_inside_fraction)
+        good_rms = np.isfinite(rms) and rms <= o.max_rms_px
+        return not (good_rms and np.isfinite(inside) and inside >= o.min_inside_fraction)
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
