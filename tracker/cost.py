@@ -101,14 +101,15 @@ class CostTerms:
 
 
 class ChamferCost:
-    """The tracker's data term for one frame set.
+    """The tracker's data term for one frame set (the tracker's tuned option values are in
+    ``tracker.tracking.TrackerOptions``; the defaults here are the plain chamfer cost).
 
     Parameters
     ----------
     model : BodyModel
     cameras : sequence of Camera, length n_cams (only the cameras with an image this frame)
     chamfer : sequence, length n_cams, of objects with ``sample(uv)`` (see module docstring)
-    sliding : use the sliding term B of the contour Jacobian (IJCV eq. 38)
+    sliding : use the sliding term B of the contour Jacobian (IJCV 2008 §5, ``tracker.jacobian``)
     n_samples : contour points per side of each part
     truncate_px : distances above it are clipped (zero gradient); None keeps the images' own
     edge_weight : scale of the edge residual relative to the silhouette residual
