@@ -32,6 +32,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from capture.calib_formats import open_storage
+
 __all__ = [
     "Checkerboard",
     "CharucoBoard",
@@ -91,7 +93,7 @@ class Checkerboard:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: board file not found")
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        fs = open_storage(path, what="board file")
         vals = {}
         for key in ("CheckerBoardWidth", "CheckerBoardHeight", "CheckerBoardSquareSize"):
             node = fs.getNode(key)

@@ -57,13 +57,16 @@ _MM_UNITS = ("mm", "millimeter", "millimeters", "millimetre", "millimetres")
 _M_UNITS = ("m", "meter", "meters", "metre", "metres")
 
 
-def _open_storage(path: Path) -> cv2.FileStorage:
+def open_storage(path: Path, *, what: str = "calibration file") -> cv2.FileStorage:
+    """Open an OpenCV FileStorage XML/YAML file for reading; ``CalibrationError`` naming it otherwise."""
     if not path.is_file():
-        raise CalibrationError(f"{path}: calibration file not found")
+        raise CalibrationError(f"{path}: {what} not found")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError) as exc:
+    except cv2.error as exc:
         raise CalibrationError(f"{path}: not a readable OpenCV FileStorage file: {str(exc).splitlines()[-1]}") from None
+    except SystemError:  # what OpenCV's parser raises on text that is not XML/YAML at all
+        raise CalibrationError(f"{path}: not a readable OpenCV FileStorage file (XML or YAML)") from None
     if not fs.isOpened():
         raise CalibrationError(f"{path}: not a readable OpenCV FileStorage file")
     return fs
@@ -122,7 +125,7 @@ def read_opencv_camera(path, *, name: str | None = None, size: tuple[int, int] |
     files (``cam1/config.xml`` -> ``"cam1"``), else the file stem.
     """
     path = Path(path)
-    fs = _open_storage(path)
+    fs = open_storage(path)
     where = f"{path} [root]"
     K = _node_matrix(fs, _first_key(fs, _K_KEYS, where, "camera matrix"), where, (9,))
     dist = _node_matrix(fs, _first_key(fs, _D_KEYS, where, "distortion"), where, (4, 5, 8, 12, 14))
@@ -170,7 +173,7 @@ def write_opencv_camera(path, camera: Camera) -> Path:
 def read_easymocap(intri_path, extri_path) -> list[Camera]:
     """Read EasyMocap ``intri.yml`` + ``extri.yml`` (translations in metres)."""
     intri_path, extri_path = Path(intri_path), Path(extri_path)
-    fi, fe = _open_storage(intri_path), _open_storage(extri_path)
+    fi, fe = open_storage(intri_path), open_storage(extri_path)
     node = fi.getNode("names")
     if node.empty() or not node.isSeq():
         raise CalibrationError(f"{intri_path} [root]: missing key 'names' (list of camera names)")

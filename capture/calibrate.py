@@ -118,6 +118,8 @@ def intrinsics_from_frames(
 
     if not frames:
         raise ValueError(f"camera {name!r}: no frames to calibrate from")
+    if max_views < 3:
+        raise ValueError(f"max_views: need at least 3 board views, got {max_views}")
     size = (int(frames[0].shape[1]), int(frames[0].shape[0]))
     found = []
     for k, f in enumerate(frames):

@@ -163,7 +163,10 @@ def _parse_point_list(value, where: str, n: int) -> np.ndarray:
 def load_corner_file(path) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Read a corner file (module doc) -> (outlines {camera: (4, 2)}, origin hints {camera: (2,)})."""
     path = Path(path)
-    data = load_file(path)
+    try:
+        data = load_file(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: corner file not found") from None
     outlines, hints = {}, {}
     for cam, table in data.items():
         if not isinstance(table, dict):
@@ -193,6 +196,8 @@ def calibrate_floor(
     progress: Progress | None = None,
 ) -> FloorCalibration:
     """Extrinsics of every camera from its video of the board lying on the floor (see module doc)."""
+    if n_frames < 1:
+        raise ValueError(f"n_frames: need at least 1 frame per video, got {n_frames}")
     outlines, origin_hints = dict(outlines or {}), dict(origin_hints or {})
     names = [i.name for i in intrinsics]
     for key in list(outlines) + list(origin_hints) + list(videos):

@@ -75,17 +75,28 @@ def _points(text: str, option: str, n: int) -> np.ndarray:
     try:
         pts = np.array([[float(v) for v in p.split(",")] for p in text.split(";") if p.strip()])
     except ValueError:
-        raise ValueError(f"{option} {text!r}: expected numbers as X,Y;X,Y...") from None
+        raise ValueError(f"{option}{text!r}: expected numbers as X,Y;X,Y...") from None
     if pts.shape != (n, 2):
-        raise ValueError(f"{option} {text!r}: expected {n} X,Y pairs separated by ';'")
+        raise ValueError(f"{option}{text!r}: expected {n} X,Y pairs separated by ';'")
     return pts
+
+
+def _grid(text: str, option: str) -> tuple[int, int]:
+    """``"8x6"`` -> ``(8, 6)``; ``ValueError`` naming ``option`` otherwise."""
+    parts = text.lower().split("x")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        return int(parts[0]), int(parts[1])
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: expected COLSxROWS, two whole numbers such as 8x6") from None
 
 
 def _board(args):
     from capture.board import CharucoBoard, Checkerboard
 
     if getattr(args, "charuco", None):
-        sx, sy = (int(v) for v in args.charuco.lower().split("x"))
+        sx, sy = _grid(args.charuco, "--charuco")
         if args.square is None or args.marker is None:
             raise ValueError("--charuco needs --square and --marker (metres)")
         return CharucoBoard(sx, sy, args.square, args.marker, args.dictionary)
@@ -93,7 +104,7 @@ def _board(args):
         return Checkerboard.from_opencv_xml(args.board_file)
     if not args.board or args.square is None:
         raise ValueError("give --board COLSxROWS and --square METRES (or --board-file)")
-    c, r = (int(v) for v in args.board.lower().split("x"))
+    c, r = _grid(args.board, "--board")
     return Checkerboard(max(c, r), min(c, r), args.square)
 
 
@@ -177,9 +188,9 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
         intr.append(i)
     outlines, hints = load_corner_file(args.corners_file) if args.corners_file else ({}, {})
     for cam, text in _pairs(args.corners, "--corners").items():
-        outlines[cam] = _points(text, "--corners", 4)
+        outlines[cam] = _points(text, f"--corners {cam}=", 4)
     for cam, text in _pairs(args.origin, "--origin").items():
-        hints[cam] = _points(text, "--origin", 1)[0]
+        hints[cam] = _points(text, f"--origin {cam}=", 1)[0]
     result = calibrate_floor(intr, videos, board, outlines=outlines, origin_hints=hints,
                              n_frames=args.frames, progress=bar)
     ext = result.extrinsics
@@ -205,6 +216,10 @@ def run(args) -> int:
         for cam, p in videos.items():
             if not p.exists() and "%" not in p.name:  # a printf pattern names an image sequence
                 raise ValueError(f"--video {cam}={p}: file not found")
+        if args.calib_step == "intrinsics" and (args.every < 1 or args.max_views < 3):
+            raise ValueError(f"--every (>= 1) / --max-views (>= 3): got {args.every} / {args.max_views}")
+        if args.calib_step == "extrinsics" and args.frames < 1:
+            raise ValueError(f"--frames: expected >= 1, got {args.frames}")
         step = _run_intrinsics if args.calib_step == "intrinsics" else _run_extrinsics
         cams, report = step(args, videos, bar)
     except (ValueError, FileNotFoundError) as exc:
