@@ -35,7 +35,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("session", help="session directory (with session.toml)")
     parser.add_argument("out", help="output directory (created)")
     parser.add_argument("--cameras", default=None, help="comma-separated camera names (default: all)")
-    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded)")
+    parser.add_argument("--frames", default=None, help="frame-id range START:STOP (STOP excluded; either may be empty)")
     parser.add_argument("--every", type=int, default=1, help="write PNGs every N-th frame (0: none)")
     parser.add_argument("--roi", default=None, help="process only x0,y0,x1,y1 (pixels) of every camera")
     parser.add_argument("--background-frames", type=int, default=50,
@@ -52,16 +52,6 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-models", action="store_true", help="write OUT/<camera>/background.npz")
     parser.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-
-
-def _range(text: str | None) -> range | None:
-    if not text:
-        return None
-    try:
-        start, stop = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise ValueError(f"--frames: expected START:STOP, got {text!r}") from None
-    return range(start, stop)
 
 
 def _roi(text: str | None):
@@ -108,6 +98,8 @@ def learn_background(session, name: str, *, background_frames: int, median_frame
     from capture.session import SessionError
     from segmentation import BackgroundModel, bgr_to_yuv, evenly_spaced
 
+    if background_frames < 1:
+        raise ValueError(f"background_frames: expected >= 1, got {background_frames}")
     cam = session.camera(name)
     if cam.background is not None:
         images = []
@@ -193,13 +185,17 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
 
 
 def run(args) -> int:
+    from capture.replay import parse_frame_range
     from capture.session import SessionError, load_session
     from capture.sources import SourceError
 
     try:
-        frames, roi = _range(args.frames), _roi(args.roi)
+        frames, roi = parse_frame_range(args.frames), _roi(args.roi)
         if args.every < 0:
             raise ValueError(f"--every: expected >= 0, got {args.every}")
+        if args.background_frames < 1 or args.median_frames < 3:
+            raise ValueError(f"--background-frames (>= 1) / --median-frames (>= 3): "
+                             f"got {args.background_frames} / {args.median_frames}")
         cv2.setNumThreads(max(int(args.threads), 1))
         session = load_session(args.session, require_calibration=False)
         names = None if not args.cameras else [c.strip() for c in args.cameras.split(",") if c.strip()]
