@@ -151,6 +151,11 @@ def test_png_codec_and_cli(tmp_path, capsys):
     assert img.shape == (120, 160, 3)
     assert len(read_video(out / "background" / "cam0.avi")) == 3
     assert "2/2 frames" in capsys.readouterr().err
+    # a session already there is not overwritten without --force
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
+    assert cli_main(["synth", "bundled:scaled_131_01", str(out), "--cameras", "1", "--size", "32x32", "--frames", "1"]) == 2
+    assert f"{out}: exists and is not an empty folder" in capsys.readouterr().err
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
 
 
 def test_cli_errors(tmp_path, capsys):

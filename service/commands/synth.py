@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 HELP = "render a synthetic session (videos, calibration, ground truth) from BVH motion"
 
@@ -35,6 +36,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="give the model the BVH's limb lengths (written to session.toml)")
     parser.add_argument("--background-frames", type=int, default=50, help="frames of empty-room video (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="seed of textures, colours, light and noise")
+    parser.add_argument("--force", action="store_true", help="write into OUT even if it is not empty")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,6 +49,10 @@ def run(args: argparse.Namespace) -> int:
     progress = Progress(enabled=not getattr(args, "quiet", False))
 
     try:
+        out = Path(args.out)
+        if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.force:
+            raise ValueError(f"{out}: exists and is not an empty folder (a session is never overwritten "
+                             f"without --force)")
         bvh = bundled_motion(args.bvh.split(":", 1)[1]) if args.bvh.startswith("bundled:") else args.bvh
         out = make_synthetic_session(
             bvh, args.out, cameras=args.cameras, size=args.size, frames=args.frames, fps=args.fps,
@@ -55,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
             fit_segments=args.fit_segments, progress=progress,
         )  # fmt: skip
     except (BvhError, ModelError, ValueError, FileNotFoundError, OSError, RuntimeError) as exc:
+        progress.close()
         print(f"contourcap synth: {exc}", file=sys.stderr)
         return 2
     progress.close()
