@@ -107,6 +107,10 @@ def import_uu_studio(
     for path in [board_file] + [src / c / m for c in UU_CAMERAS for m in _MEDIA]:
         if not path.is_file():
             raise UUImportError(f"{path}: missing (expected the uu_studio layout: checkerboard.xml, camN/{{{','.join(_MEDIA)}}})")
+    if not isinstance(name, str) or not name:
+        raise UUImportError(f"name: the session name must be a non-empty string, got {name!r}")
+    if out.exists() and not out.is_dir():
+        raise UUImportError(f"{out}: exists and is not a folder")
     if (out / "session.toml").exists() and not overwrite:
         raise UUImportError(f"{out}: already holds a session (session.toml); pass overwrite=True / --force to replace it")
     infos = {c: _video_info(src / c / "video.avi") for c in UU_CAMERAS}

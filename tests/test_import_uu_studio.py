@@ -88,6 +88,14 @@ def test_import_uu_studio_gives_a_loadable_session(imported, shared_data, capsys
     # a second import into the same folder is refused without --force
     assert main(["import", "uu_studio", str(shared_data / "uu_studio"), str(out), "--quiet"]) == 2
     assert "already holds a session" in capsys.readouterr().err
+    # OUT a file, or an empty name: refused before the (slow) calibration, nothing written
+    (out.parent / "a_file").write_text("x")
+    assert main(["import", "uu_studio", str(shared_data / "uu_studio"), str(out.parent / "a_file"), "--quiet"]) == 2
+    assert "a_file: exists and is not a folder" in capsys.readouterr().err
+    assert main(["import", "uu_studio", str(shared_data / "uu_studio"), str(out.parent / "o2"), "--quiet",
+                 "--name", ""]) == 2
+    assert "session name must be a non-empty string" in capsys.readouterr().err
+    assert not (out.parent / "o2").exists()
 
 
 def test_imported_calibration_agrees_with_the_person_silhouettes(imported):

@@ -35,7 +35,7 @@ def run(args) -> int:
     try:
         res = import_uu_studio(args.src, args.out, corners_file=args.corners_file or CORNERS_FILE, copy=args.copy,
                                name=args.name, overwrite=args.force, progress=bar)
-    except (UUImportError, ValueError, FileNotFoundError) as exc:
+    except (UUImportError, ValueError, OSError) as exc:
         bar.close()
         print(f"contourcap import: error: {exc}", file=sys.stderr)
         return 2
