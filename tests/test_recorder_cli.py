@@ -40,6 +40,11 @@ def test_record_cli_round_trip(tmp_path, rng, capsys):
     # refusing to overwrite is an error exit, named
     assert main(["record", "--config", str(cfg), str(tmp_path / "out"), "--pacing", "fast"]) == 2
     assert "never overwritten" in capsys.readouterr().err
+    # options that would record nothing (or spin) are refused before the output exists
+    for option, value in (("--frames", "0"), ("--duration-s", "-1"), ("--segment-s", "0"), ("--resync-s", "0")):
+        assert main(["record", "--config", str(cfg), str(tmp_path / "out3"), option, value]) == 2
+        assert f"record: error: {option}: expected" in capsys.readouterr().err
+        assert not (tmp_path / "out3").exists()
 
 
 def test_replay_cli_reports_fps(tmp_path, rng, capsys):

@@ -26,6 +26,14 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resync-s", type=float, default=2.0, help="trigger box: re-anchor its clock this often")
 
 
+def _check_numbers(args) -> None:
+    """Options that would record nothing, or spin, are refused before anything is opened."""
+    for option, value in (("--frames", args.frames), ("--duration-s", args.duration_s),
+                          ("--segment-s", args.segment_s), ("--resync-s", args.resync_s)):
+        if value is not None and not value > 0:  # NaN too
+            raise ValueError(f"{option}: expected > 0, got {value}")
+
+
 def _select(cfg, args):
     specs = list(cfg.cameras)
     if args.host is not None:
@@ -76,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
     box = None
     try:
+        _check_numbers(args)
         cfg = load_capture_config(args.config)
         specs = _select(cfg, args)
         stop = threading.Event()
