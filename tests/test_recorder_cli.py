@@ -55,6 +55,8 @@ def test_replay_cli_reports_fps(tmp_path, rng, capsys):
     assert report["cameras"]["cam0"]["fps"] > 0
     assert main(["replay", str(src.root), "--cameras", "cam9"]) == 2
     assert "cam9" in capsys.readouterr().err
+    assert main(["replay", str(src.root), "--cameras", " , "]) == 2
+    assert "--cameras: no camera names" in capsys.readouterr().err
 
 
 def test_record_trigger_resync_thread_stops_on_unplug():

@@ -74,7 +74,7 @@ def test_segment_command_names_bad_camera_and_roi(session_dir, tmp_path, capsys)
     assert main(["segment", str(root), str(tmp_path / "o"), "--max-components", "0", "--no-progress"]) == 2
     assert "--max-components" in capsys.readouterr().err
     for option, value in (("--frames", "4:2"), ("--frames", "x:3"), ("--background-frames", "0"),
-                          ("--median-frames", "2")):
+                          ("--median-frames", "2"), ("--cameras", ",")):
         assert main(["segment", str(root), str(tmp_path / "o"), option, value, "--no-progress"]) == 2
         err = capsys.readouterr().err
         assert err.startswith("contourcap segment: --") and option in err and "Traceback" not in err

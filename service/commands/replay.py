@@ -56,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
         names = session.camera_names
         if args.cameras:
             names = tuple(n.strip() for n in args.cameras.split(",") if n.strip())
+            if not names:
+                raise ValueError(f"--cameras: no camera names in {args.cameras!r}")
             for n in names:
                 session.camera(n)
         parse_frame_range(args.frames)

@@ -199,6 +199,8 @@ def run(args) -> int:
         cv2.setNumThreads(max(int(args.threads), 1))
         session = load_session(args.session, require_calibration=False)
         names = None if not args.cameras else [c.strip() for c in args.cameras.split(",") if c.strip()]
+        if names == []:
+            raise ValueError(f"--cameras: no camera names in {args.cameras!r}")
         selected = names or list(session.camera_names)
         counts = [_frame_count(session, n, frames) for n in selected if n in session.camera_names]
         total = sum(counts) if counts and all(c is not None for c in counts) else None
