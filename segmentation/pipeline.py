@@ -56,6 +56,18 @@ class SegmentationParams:
     auto_roi: bool = True
     auto_roi_margin_px: int = 16
 
+    def __post_init__(self) -> None:
+        # the options a wrong value would turn into silently empty or unbounded output (the rest are
+        # checked where they are used: low/high, Canny, the chamfer resolution)
+        if self.max_components is not None and self.max_components < 1:
+            raise ValueError(f"max_components: expected None or >= 1, got {self.max_components!r}")
+        if self.person_area_px is not None and not self.person_area_px > 0:
+            raise ValueError(f"person_area_px: expected None or > 0, got {self.person_area_px!r}")
+        for name in ("min_area_fraction", "max_hole_fraction", "open_px", "close_px", "edge_dilate_px",
+                     "auto_roi_margin_px"):
+            if not getattr(self, name) >= 0:  # NaN too
+                raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)!r}")
+
     def min_area_px(self, image_size: tuple[int, int]) -> float:
         """Smallest component kept, in pixels, for an image of ``(w, h)``."""
         person = self.person_area_px if self.person_area_px is not None else 0.02 * image_size[0] * image_size[1]

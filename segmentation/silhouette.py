@@ -45,6 +45,8 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
         raise TypeError(f"distance: expected dtype float32, got {distance.dtype}")
     if not np.isfinite(cv2.sumElems(distance)[0]):  # one pass: NaN / inf make the sum non-finite
         raise ValueError("distance: contains NaN or inf")
+    if max_components is not None and max_components < 1:
+        raise ValueError(f"max_components: expected None or >= 1, got {max_components!r}")
     return clean_silhouette(distance, low=low, high=high, min_area_px=min_area_px,
                             max_hole_fraction=max_hole_fraction, open_px=open_px, close_px=close_px,
                             max_components=max_components, roi=roi)

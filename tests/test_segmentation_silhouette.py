@@ -62,6 +62,17 @@ def test_silhouette_bad_arguments():
         silhouette_from_distance(np.zeros((4, 4), np.float32), low=10, high=5)
     with pytest.raises(ValueError, match="roi"):
         silhouette_from_distance(np.zeros((4, 4), np.float32), roi=(0, 0, 5, 4))
+    with pytest.raises(ValueError, match="max_components"):  # 0 would silently keep nothing
+        silhouette_from_distance(np.zeros((4, 4), np.float32), max_components=0)
+
+
+@pytest.mark.parametrize("option, value", [("max_components", 0), ("person_area_px", -1.0),
+                                           ("min_area_fraction", float("nan")), ("open_px", -1)])
+def test_segmentation_params_refuse_values_that_empty_the_output(option, value):
+    from segmentation import SegmentationParams
+
+    with pytest.raises(ValueError, match=option):
+        SegmentationParams(**{option: value})
 
 
 def test_edges_inside_dilated_silhouette_plus_boundary(rng):
