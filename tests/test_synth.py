@@ -199,3 +199,16 @@ def test_fitted_segments_reach_session_toml(tmp_path):
 
     for name, xyz in joint_centres(model, joints).items():
         assert np.allclose(rec["joints"][name], xyz)  # the session alone rebuilds the ground-truth model
+
+
+def test_video_sink_check_counts_the_frames_stored(tmp_path):
+    from tracker.synth import _Sink
+
+    sink = _Sink(tmp_path, "cam0", "ffv1", 30.0, (32, 24))
+    for _ in range(3):
+        sink.write(np.full((24, 32, 3), 100, np.uint8))
+    sink.close()
+    sink.check()  # all 3 stored
+    sink.frame = 4  # as if a write had been lost
+    with pytest.raises(OSError, match=r"cam0.avi: holds 3 of the 4 frames written"):
+        sink.check()

@@ -174,7 +174,8 @@ class _Sink:
         else:
             self.rel = f"{rel}.avi"
             (root / self.rel).parent.mkdir(parents=True, exist_ok=True)
-            self.writer = cv2.VideoWriter(str(root / self.rel), cv2.VideoWriter_fourcc(*_FOURCC[codec]), fps, size)
+            self.path = root / self.rel
+            self.writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*_FOURCC[codec]), fps, size)
             if not self.writer.isOpened():
                 raise RuntimeError(f"{root / self.rel}: OpenCV cannot write {codec} video here")
 
@@ -190,6 +191,16 @@ class _Sink:
     def close(self) -> None:
         if self.writer is not None:
             self.writer.release()
+
+    def check(self) -> None:
+        """After ``close``: a video must hold every frame written (``cv2.VideoWriter`` reports no errors)."""
+        if self.writer is None:
+            return
+        cap = cv2.VideoCapture(str(self.path))
+        stored = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+        cap.release()
+        if stored != self.frame:
+            raise OSError(f"{self.path}: holds {stored} of the {self.frame} frames written (disk full?)")
 
 
 def _video_codec_available(codec: str, tmp: Path) -> bool:
@@ -289,6 +300,8 @@ def make_synthetic_session(
     finally:
         for s in bg_sinks:
             s.close()
+    for s in bg_sinks:
+        s.check()
     write_session_toml(
         out,
         name=name or Path(str(bvh_path)).stem,
@@ -310,7 +323,8 @@ def make_synthetic_session(
                 for s, img in zip(sinks, images):
                     s.write(_add_noise(img, noise, rng))
                 for d, lab in zip(mask_dirs, labels):
-                    cv2.imwrite(str(d / f"{k:06d}.png"), np.where(lab >= 0, 255, 0).astype(np.uint8))
+                    if not cv2.imwrite(str(d / f"{k:06d}.png"), np.where(lab >= 0, 255, 0).astype(np.uint8)):
+                        raise OSError(f"cannot write {d / f'{k:06d}.png'}")
                 joints = joint_centre_array(mdl, pose)
                 record = {
                     "frame": k,
@@ -327,4 +341,6 @@ def make_synthetic_session(
     finally:
         for s in sinks:
             s.close()
+    for s in sinks:
+        s.check()
     return out
