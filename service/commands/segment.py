@@ -130,6 +130,11 @@ def _full_distance_png(chamfer, which: np.ndarray) -> np.ndarray:
     return full
 
 
+def _write_png(path: Path, image: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), image):  # OpenCV returns False instead of raising
+        raise OSError(f"{path}: cannot write this PNG")
+
+
 def segment_session(session, out: Path, *, cameras=None, frames: range | None = None, every: int = 1,
                     roi=None, background_frames: int = 50, median_frames: int = 25, covariance: str = "diag",
                     save_models: bool = False, params=None, progress: Progress | None = None,
@@ -164,10 +169,10 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
             chamfer = seg.chamfer
             if every > 0 and k % every == 0:
                 fid = f"{frame.frame_id:06d}"
-                cv2.imwrite(str(cam_dir / f"silhouette_{fid}.png"), seg.silhouette)
-                cv2.imwrite(str(cam_dir / f"edges_{fid}.png"), seg.edges)
-                cv2.imwrite(str(cam_dir / f"dist_sil_{fid}.png"), _full_distance_png(chamfer, chamfer.silhouette_q))
-                cv2.imwrite(str(cam_dir / f"dist_edge_{fid}.png"), _full_distance_png(chamfer, chamfer.edges_q))
+                _write_png(cam_dir / f"silhouette_{fid}.png", seg.silhouette)
+                _write_png(cam_dir / f"edges_{fid}.png", seg.edges)
+                _write_png(cam_dir / f"dist_sil_{fid}.png", _full_distance_png(chamfer, chamfer.silhouette_q))
+                _write_png(cam_dir / f"dist_edge_{fid}.png", _full_distance_png(chamfer, chamfer.edges_q))
             if progress is not None:
                 progress.advance(label=name)
         if not ms:
