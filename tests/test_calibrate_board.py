@@ -293,13 +293,15 @@ def test_read_board_frames_image_and_bad_files(tmp_path):
     (["--board-file", "{not_xml}"], "not_xml.xml: not a readable OpenCV FileStorage file"),
     (["--board", "8x6", "--square", "0.1", "--every", "0"], "--every (>= 1) / --max-views (>= 3): got 0 / 40"),
     (["--board", "8x6", "--square", "0.1", "--max-views", "2"], "--every (>= 1) / --max-views (>= 3): got 5 / 2"),
+    (["--board", "8x6", "--square", "0.1", "--report", "{tmp}"], "is a folder; give a file name"),
+    (["--board", "8x6", "--square", "0.1", "--report", "{tmp}/no/r.json"], "/no does not exist"),
 ])  # fmt: skip
 def test_cli_intrinsics_bad_arguments_named(tmp_path, capsys, args, message):
     from service.cli import main
 
     cv2.imwrite(str(tmp_path / "blank.png"), np.full((48, 64), 128, np.uint8))
     (tmp_path / "not_xml.xml").write_text("[this is]\nnot = 'xml'\n")
-    args = [a.format(not_xml=tmp_path / "not_xml.xml") for a in args]
+    args = [a.format(not_xml=tmp_path / "not_xml.xml", tmp=tmp_path) for a in args]
     rc = main(["calibrate", "intrinsics", *args, "--video", f"cam0={tmp_path / 'blank.png'}",
                "--out", str(tmp_path / "i.toml"), "--quiet"])
     assert rc == 2

@@ -207,11 +207,23 @@ def _run_extrinsics(args, videos, bar) -> tuple[list, dict]:
     return list(ext.cameras), report
 
 
+def _check_output(path: Path | None, option: str) -> None:
+    """Refuse an output path that could not be written, before the (slow) calibration runs."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise ValueError(f"{option} {path}: is a folder; give a file name")
+    if not path.parent.is_dir():
+        raise ValueError(f"{option} {path}: folder {path.parent} does not exist")
+
+
 def run(args) -> int:
     from capture.calibration import save_calibration
 
     bar = Progress(unit="steps", enabled=not args.quiet)
     try:
+        _check_output(args.out, "--out")
+        _check_output(args.report, "--report")
         videos = {cam: Path(p) for cam, p in _pairs(args.video, "--video").items()}
         for cam, p in videos.items():
             if not p.exists() and "%" not in p.name:  # a printf pattern names an image sequence
@@ -237,11 +249,15 @@ def run(args) -> int:
             print(f"{name}: NOT CALIBRATED: {r['reason']}")
     if "_overall" in report and np.isfinite(report["_overall"]["rms_px"]):
         print(f"overall RMS reprojection error: {report['_overall']['rms_px']:.3f} px")
-    if args.report:
-        args.report.write_text(json.dumps(report, indent=2))
-    if cams:
-        save_calibration(args.out, cams)
-        print(f"wrote {args.out} ({len(cams)} camera(s))")
+    try:
+        if args.report:
+            args.report.write_text(json.dumps(report, indent=2))
+        if cams:
+            save_calibration(args.out, cams)
+            print(f"wrote {args.out} ({len(cams)} camera(s))")
+    except OSError as exc:
+        print(f"contourcap calibrate: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return 2
     failed = [n for n, r in report.items() if not n.startswith("_") and not r["used"]]
     if failed:
         print(f"left out: {', '.join(failed)}", file=sys.stderr)
