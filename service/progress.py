@@ -14,6 +14,13 @@ from typing import Callable, TextIO
 __all__ = ["Progress"]
 
 
+def _clock_text(seconds: float) -> str:
+    """``MM:SS``, or ``H:MM:SS`` from an hour on (``%M:%S`` alone wraps every hour)."""
+    m, s = divmod(int(round(max(seconds, 0.0))), 60)
+    h, m = divmod(m, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m:02d}:{s:02d}"
+
+
 class Progress:
     def __init__(self, total: int | None = None, *, unit: str = "frames", enabled: bool = True,
                  stream: TextIO | None = None, clock: Callable[[], float] = time.monotonic,
@@ -52,7 +59,7 @@ class Progress:
             frac = min(self.done / self.total, 1.0)
             fill = int(frac * self.width)
             eta = (self.total - self.done) / rate if rate > 0 else None
-            eta_txt = time.strftime("%M:%S", time.gmtime(max(eta, 0.0))) if eta is not None and eta < 360000 else "--:--"
+            eta_txt = _clock_text(eta) if eta is not None and eta < 360000 else "--:--"
             line = f"[{'#' * fill}{'.' * (self.width - fill)}] {self.done}/{self.total} {self.unit} {rate:6.1f}/s ETA {eta_txt} {label}"
         else:
             line = f"{self.done} {self.unit} {rate:6.1f}/s {label}"
