@@ -277,6 +277,14 @@ def _is_projection_file(path: Path) -> bool:
     return len(re.sub(r"<[^>]*>", " ", text).split()) == 12
 
 
+def _unique_names(folder: Path, cameras: list[Camera]) -> list[Camera]:
+    names = [c.name for c in cameras]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise CalibrationError(f"{folder}: several files describe camera(s) {repeated}")
+    return cameras
+
+
 def read_any_calibration(path, *, size: tuple[int, int] | None = None) -> list[Camera]:
     """Read cameras from any supported file or folder, sniffing the format.
 
@@ -296,11 +304,11 @@ def read_any_calibration(path, *, size: tuple[int, int] | None = None) -> list[C
             return load_calibration(path / "calibration.toml")
         configs = sorted(path.glob("*/config.xml"))
         if configs:
-            return [read_opencv_camera(p, size=size) for p in configs]
+            return _unique_names(path, [read_opencv_camera(p, size=size) for p in configs])
         files = sorted(p for p in path.iterdir() if p.suffix.lower() in (".xml", ".txt", ".yml", ".yaml"))
         if not files:
             raise CalibrationError(f"{path}: no calibration files found in this folder")
-        return [read_any_calibration(p, size=size)[0] for p in files]
+        return _unique_names(path, [read_any_calibration(p, size=size)[0] for p in files])
     if not path.exists():
         raise CalibrationError(f"{path}: calibration file not found")
     suffix = path.suffix.lower()

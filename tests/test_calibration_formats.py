@@ -158,6 +158,16 @@ def test_malformed_files_name_file_section_key(tmp_path):
         read_any_calibration(tmp_path / "missing.toml")
 
 
+def test_folder_with_two_files_for_one_camera_is_refused(tmp_path, rng):
+    cams = _studio(rng)[:2]
+    write_calibration_as(tmp_path / "calib", cams, fmt="opencv-xml")
+    assert [c.name for c in read_any_calibration(tmp_path / "calib")] == ["cam0", "cam1"]
+    # cam0.xml and cam0.yml: one of them would silently win by sort order
+    write_calibration_as(tmp_path / "calib", cams[:1], fmt="opencv-yaml")
+    with pytest.raises(CalibrationError, match=r"calib: several files describe camera\(s\) \['cam0'\]"):
+        read_any_calibration(tmp_path / "calib")
+
+
 def test_written_toml_states_metres(tmp_path, rng):
     path = write_calibration_as(tmp_path / "c.toml", _studio(rng), fmt="toml")[0]
     assert loads(path.read_text())["metadata"]["units"] == "m"
