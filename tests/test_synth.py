@@ -161,6 +161,7 @@ def test_png_codec_and_cli(tmp_path, capsys):
 def test_cli_errors(tmp_path, capsys):
     assert cli_main(["synth", str(tmp_path / "missing.bvh"), str(tmp_path / "o")]) == 2
     assert "missing.bvh" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # nothing created for a failed run
     with pytest.raises(SystemExit):
         cli_main(["synth", "x.bvh", str(tmp_path / "o"), "--size", "800by600"])
     assert "--size must be WIDTHxHEIGHT" in capsys.readouterr().err

@@ -263,6 +263,12 @@ def make_synthetic_session(
         raise ValueError(f"noise must be >= 0, got {noise}")
     if n_background < 1:
         raise ValueError(f"n_background must be >= 1, got {n_background}")
+    if isinstance(cameras, int) and cameras < 1:
+        raise ValueError(f"cameras must be >= 1, got {cameras}")
+    # the motion first: a bad BVH or option leaves no empty output folder behind
+    motion = retargeted or retarget_bvh(
+        load_bvh(bvh_path), model=model, fps=fps, frames=frames, start_s=start_s, fit_segments=fit_segments
+    )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ffv1_ok = _video_codec_available("ffv1", out)
@@ -270,14 +276,9 @@ def make_synthetic_session(
         codec = "png"
     # replay reads a background as one video or one image (not a sequence)
     bg_codec = codec if codec != "png" else ("ffv1" if ffv1_ok else "png1")
-    motion = retargeted or retarget_bvh(
-        load_bvh(bvh_path), model=model, fps=fps, frames=frames, start_s=start_s, fit_segments=fit_segments
-    )
     mdl = motion.model
     poses = [forward(mdl, p) for p in motion.params]
     if isinstance(cameras, int):
-        if cameras < 1:
-            raise ValueError(f"cameras must be >= 1, got {cameras}")
         pts = np.concatenate([body_points(mdl, pose, n_theta=8, n_z=2).reshape(-1, 3) for pose in poses])
         cams = fit_ring_cameras(pts, cameras, size=tuple(size))
     else:
