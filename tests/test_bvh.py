@@ -122,6 +122,7 @@ def test_cmu_left_knee_frame0_by_hand(cmu):
         (lambda s: s.replace("Frame Time: 0.04", "Frame Time: 0"), "frame time"),
         (lambda s: s.replace("MOTION", ""), "Frames:|MOTION"),
         (lambda s: s.replace("    OFFSET 0 2 0\n", ""), "no OFFSET"),
+        (lambda s: s.replace("OFFSET 0 2 0", "OFFSET 0 nan 0"), "OFFSET needs three"),
         (lambda s: s.rsplit("}", 1)[0], "unclosed|MOTION"),
     ],
 )

@@ -180,8 +180,8 @@ def parse_bvh(text: str, *, source: str = "<string>") -> Bvh:
                 offset[stack[-1]] = np.array([float(v) for v in tok[1:4]])
             except ValueError:
                 fail("OFFSET needs three numbers", i)
-            if len(tok) != 4:
-                fail("OFFSET needs three numbers", i)
+            if len(tok) != 4 or not np.all(np.isfinite(offset[stack[-1]])):
+                fail("OFFSET needs three (finite) numbers", i)
         elif key == "CHANNELS":
             if not stack:
                 fail("CHANNELS outside a joint", i)
