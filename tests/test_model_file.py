@@ -44,3 +44,17 @@ def test_unknown_model_and_bad_height():
         load_model("knossow99")
     with pytest.raises(ModelError, match="height_m"):
         load_model("knossow40", height_m=17.0)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("part = [1, 2]\n", r"bad.toml: \[\[part\]\] #0 must be a table"),
+    ('[[part]]\nname = "root"\njoint = "free"\ncone = { a = 0.1, b = 0.1, k = 0, z1 = 0, z2 = 1 }\n'
+     '[[part]]\nname = "arm"\nparent = "root"\ncone = { a = 0.1, b = 0.1, k = 0, z1 = 0, z2 = 1 }\ndofs = [1]\n',
+     r"part 'arm'.*'dofs' must be a list"),
+    ('[[part]]\nname = "root"\njoint = "free"\ncone = { a = 0.1, b = 0.1, k = 0, z1 = 0, z2 = 1 }\n'
+     "[joints]\npelvis = 5\n", r"\[joints\] must map joint names"),
+])  # fmt: skip
+def test_malformed_model_tables_named(tmp_path, text, match):
+    (tmp_path / "bad.toml").write_text(text)
+    with pytest.raises(ModelError, match=match):
+        load_model(tmp_path / "bad.toml")

@@ -229,6 +229,8 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
     p_names, p_kind, p_part, p_axis, lower, upper = [], [], [], [], [], []
     segments: dict[str, int] = {}
     for i, part in enumerate(parts):
+        if not isinstance(part, dict):
+            raise ModelError(f"{path}: [[part]] #{i} must be a table, got {part!r}")
         pname = str(part.get("name", f"#{i}"))
         where = f"{path}: part {pname!r}"
         if pname in names:
@@ -283,6 +285,8 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
                 p_axis.append(_AXES[ax]), lower.append(-np.inf), upper.append(np.inf)
             continue
         dofs = part.get("dofs", [])
+        if not isinstance(dofs, list) or not all(isinstance(d, dict) for d in dofs):
+            raise ModelError(f"{where}: key 'dofs' must be a list of {{name, axis, limits}} tables")
         if len(dofs) > 3:
             raise ModelError(f"{where}: a joint has at most 3 rotational DOF, got {len(dofs)}")
         for d in dofs:
@@ -316,6 +320,8 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
             anc[i] |= anc[pidx]
     affects = anc[:, param_part]
     joints = data.get("joints", {})
+    if not isinstance(joints, dict) or not all(isinstance(v, dict) for v in joints.values()):
+        raise ModelError(f"{path}: [joints] must map joint names to {{part, point}} tables")
     j_names, j_part, j_point = [], [], []
     for jn in JOINT_NAMES:
         if jn not in joints:
