@@ -73,3 +73,24 @@ def test_record_trigger_resync_thread_stops_on_unplug():
     box.unplugged_errno = errno.ENODEV
     assert stop.wait(5.0)  # the resync thread saw the unplug and stopped the recording
     assert errors and "disconnected" in errors[0]
+
+
+def test_record_trigger_start_failure_releases_the_device():
+    import threading
+
+    import pytest
+
+    from capture.trigger import TriggerError
+    from service.commands.record import _start_trigger
+
+    class Backend(FakeTriggerBackend):
+        closed = 0
+
+        def close_device(self, dev_handle):
+            Backend.closed += 1
+
+    box = FakeBox()
+    box.stall.add(0x03)  # the box refuses START
+    with pytest.raises(TriggerError):
+        _start_trigger(50.0, threading.Event(), 1.0, [], backend=Backend(box))
+    assert Backend.closed == 1

@@ -59,10 +59,14 @@ def _start_trigger(fps: float, stop: threading.Event, resync_s: float, errors: l
     from capture.trigger import TriggerBox, TriggerError
 
     box = TriggerBox.find(backend=backend)
-    box.set_rate(fps)
-    box.start()
-    time.sleep(2.0 / fps)
-    box.refresh()
+    try:
+        box.set_rate(fps)
+        box.start()
+        time.sleep(2.0 / fps)
+        box.refresh()
+    except BaseException:
+        box.close()  # the caller never sees this box: release the device here
+        raise
 
     def resync() -> None:
         while not stop.wait(resync_s):
