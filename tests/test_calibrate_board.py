@@ -308,3 +308,15 @@ def test_cli_intrinsics_bad_arguments_named(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert err.startswith("contourcap calibrate: error: ") and message in err and "Traceback" not in err
     assert not (tmp_path / "i.toml").exists()
+
+
+def test_cli_names_the_unreadable_image_of_a_folder(tmp_path, capsys):
+    from service.cli import main
+
+    (tmp_path / "cam0").mkdir()
+    cv2.imwrite(str(tmp_path / "cam0" / "00.png"), np.full((48, 64), 128, np.uint8))
+    (tmp_path / "cam0" / "01.png").write_bytes(b"not a png")
+    rc = main(["calibrate", "intrinsics", "--board", "8x6", "--square", "0.1", "--every", "1",
+               "--video", f"cam0={tmp_path / 'cam0'}", "--out", str(tmp_path / "i.toml"), "--quiet"])
+    assert rc == 1
+    assert "cam0: NOT CALIBRATED:" in (out := capsys.readouterr().out) and "unreadable image(s) ['01.png']" in out

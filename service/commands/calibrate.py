@@ -126,10 +126,13 @@ _IMAGES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 def _read_frames(path: Path, every: int) -> list[np.ndarray]:
     """Grey frames of a video, an image, a printf image pattern or a folder of images (every ``every``-th)."""
     if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGES)
-        frames = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in files[::every]]
-        if not frames or any(f is None for f in frames):
-            raise ValueError(f"{path}: no readable images in this folder")
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGES)[::every]
+        if not files:
+            raise ValueError(f"{path}: no images ({', '.join(_IMAGES)}) in this folder")
+        frames = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in files]
+        bad = [p.name for p, f in zip(files, frames) if f is None]
+        if bad:
+            raise ValueError(f"{path}: unreadable image(s) {bad[:5]}")
         return frames
     cap = cv2.VideoCapture(str(path))
     frames, k = [], 0
