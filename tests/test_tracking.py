@@ -125,3 +125,25 @@ def test_constant_velocity_prediction_and_bad_arguments(cameras):
         Tracker(model, cameras, solver="newton")
     with pytest.raises(ValueError, match="initial_params"):
         Tracker(model, cameras, initial_params=np.zeros(3))
+
+
+def test_lost_track_recovers_from_the_silhouettes(cameras):
+    """A jump the local fit cannot follow (the subject turned 90° and stepped 0.8 m between two
+    frames): bad frames are reported ``ok: false`` and, after ``patience`` of them, the pose is
+    searched again from the silhouettes (seeded by the last good pose) and tracking resumes."""
+    from tracker.recovery import turn_about_vertical
+
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
+    model, p0 = rt.model, rt.params[0]
+    p1 = turn_about_vertical(model, p0, np.pi / 2, joint_centre_array(model, forward(model, p0))[0])
+    p1[:2] += [0.6, -0.5]
+    ch0, sil0 = render_chamfer(model, p0, cameras)
+    ch1, sil1 = render_chamfer(model, p1, cameras)
+    tracker = Tracker(model, cameras, initial_params=p0, patience=2)
+    assert tracker.step(0, 0, ch0, sil0)["ok"]
+    recs = [tracker.step(k, k, ch1, sil1) for k in (1, 2, 3)]
+    assert not recs[0]["ok"] and recs[0]["reason"].startswith("poor fit")
+    assert tracker.n_initialisations >= 1
+    assert recs[-1]["ok"], [r.get("reason") for r in recs]
+    jc = joint_centre_array(model, forward(model, np.asarray(recs[-1]["params"])))
+    assert 1e3 * np.linalg.norm(jc - joint_centre_array(model, forward(model, p1)), axis=1).mean() < 30.0

@@ -73,6 +73,8 @@ class CostTerms:
     d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
     residuals : (2 N + K,) or (2 n_used + K,) when compact (K reverse residuals)
     jacobian : (len(residuals), n_params) or None
+    boundary_dist : (K,) distance in pixels from each observed boundary sample to the nearest used
+        contour point of its camera (inf where that camera has none), or None without the reverse term
     """
 
     pose: Pose
@@ -82,6 +84,7 @@ class CostTerms:
     d_edge: np.ndarray
     residuals: np.ndarray
     jacobian: np.ndarray | None
+    boundary_dist: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:
@@ -91,6 +94,14 @@ class CostTerms:
         """Fraction of used contour points within ``tol_px`` of their camera's silhouette (NaN if none)."""
         n = self.n_used
         return float(np.count_nonzero(self.d_sil[self.used] <= tol_px) / n) if n else float("nan")
+
+    def coverage(self, *, tol_px: float = 8.0) -> float:
+        """Fraction of the observed silhouette-boundary samples within ``tol_px`` of a predicted
+        contour point; NaN without the reverse term.  Low when the model misses part of the
+        silhouette (e.g. a limb tracked to the wrong place)."""
+        if self.boundary_dist is None or not self.boundary_dist.size:
+            return float("nan")
+        return float(np.count_nonzero(self.boundary_dist <= tol_px) / self.boundary_dist.size)
 
     def rms_px(self) -> float:
         """RMS of the used residuals (both terms), pixels (NaN if none)."""
@@ -183,9 +194,10 @@ class ChamferCost:
         return d, grad
 
     def _reverse(self, contours: Contours, used: np.ndarray):
-        """Reverse residuals (K,), matched contour rows (K,) and unit directions (K, 2)."""
+        """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)."""
         K = self.n_reverse
         r = np.zeros(K)
+        dist_all = np.full(K, np.inf)
         match = np.full(K, -1)
         unit = np.zeros((K, 2))
         per_cam = contours.n_points // max(len(self.cameras), 1)
@@ -200,6 +212,7 @@ class ChamferCost:
                 j = np.argmin(d2, axis=1)
                 dist = np.linalg.norm(y - x[j], axis=1)
                 diff = y - x[j]
+                dist_all[k0:k1] = dist
                 far = dist > self.reverse_min_px
                 r[k0:k1] = np.where(far, dist - self.reverse_min_px, 0.0)
                 match[k0:k1] = np.where(far, rows[j], -1)
@@ -209,7 +222,7 @@ class ChamferCost:
             over = r > self.truncate_px
             r[over] = self.truncate_px
             match[over] = -1
-        return self.reverse_weight * r, match, unit
+        return self.reverse_weight * r, match, unit, dist_all
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
         """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""
@@ -250,13 +263,13 @@ class ChamferCost:
                 J[urows] = Ju
                 J = J.reshape(-1, self.model.n_params)
             if rev is not None:
-                _, match, unit = rev
+                _, match, unit, _ = rev
                 Jr = np.zeros((self.n_reverse, self.model.n_params))
                 m = match >= 0
                 pos = np.searchsorted(urows, match[m])  # matched rows are used rows
                 Jr[m] = -self.reverse_weight * np.einsum("ki,kip->kp", unit[m], Jx[pos])
                 J = np.concatenate([J, Jr])
-        return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J)
+        return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):
         """``fun(x, jacobian) -> (r, J | None)`` for ``tracker.solver``."""

@@ -24,7 +24,7 @@ import numpy as np
 from capture.camera import Camera
 from tracker.cost import ChamferCost
 from tracker.kinematics import joint_centre_array
-from tracker.initialise import initialise
+from tracker.initialise import ScoreViews, initialise
 from tracker.model import ROOT_TRANSLATION, BodyModel
 from tracker.recovery import LossMonitor
 from tracker.solver import SolverResult, least_squares_fd, levenberg_marquardt
@@ -48,7 +48,10 @@ class TrackerOptions:
     damping, diagonal_floor : LM initial damping and damping-diagonal floor;
     constant_velocity : start from ``2 p_t − p_{t−1}`` (hop session: median 3 iterations instead
     of 5, mean joint error 9.1 mm instead of 11.6 mm);
-    max_rms_px, min_inside_fraction : a frame worse than these is reported ``ok: false``.
+    max_rms_px, min_inside_fraction, min_iou : a frame worse than these is reported ``ok: false``;
+    the IoU of the model's silhouettes with the observed ones (``tracker.initialise.ScoreViews`` at
+    half resolution) is checked when the frame brings silhouettes: a wrong pose can fit the
+    contours well locally (RMS, inside fraction) yet miss or overshoot whole limbs.
     """
 
     n_samples: int = 8
@@ -70,6 +73,7 @@ class TrackerOptions:
     constant_velocity: bool = True
     max_rms_px: float = 6.0
     min_inside_fraction: float = 0.6
+    min_iou: float = 0.75
 
 
 def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
@@ -121,8 +125,9 @@ class Tracker:
     initial_params : (n_params,) start pose; without it the first frame is initialised by
         ``tracker.initialise.initialise`` (the frame must bring ``silhouettes``)
     options : TrackerOptions
-    recover : re-initialise (``tracker.recovery``, seeded by the last good pose) once
-        ``patience`` consecutive frames were bad and the frame brings ``silhouettes``
+    recover : re-initialise once ``patience`` consecutive frames were bad and the frame brings
+        ``silhouettes`` (``tracker.recovery`` seeded by the last good pose; the T/A-pose search of
+        ``tracker.initialise`` when there was none)
     clock : callable returning seconds (latency measurement), default ``time.perf_counter``
 
     Attributes
@@ -181,10 +186,21 @@ class Tracker:
         terms = cost.evaluate(np.asarray(res.params))
         return res, terms, terms.rms_px(), terms.inside_fraction()
 
-    def _bad(self, rms: float, inside: float) -> bool:
+    def _bad(self, terms, views) -> str:
+        """Why the fit at ``terms`` is poor ("" when it is good); ``views``: ScoreViews or None."""
         o = self.options
-        good_rms = np.isfinite(rms) and rms <= o.max_rms_px
-        return not (good_rms and np.isfinite(inside) and inside >= o.min_inside_fraction)
+        rms, inside = terms.rms_px(), terms.inside_fraction()
+        why = []
+        if not (np.isfinite(rms) and rms <= o.max_rms_px):
+            why.append(f"rms {rms:.2f} px > {o.max_rms_px:g}")
+        if not (np.isfinite(inside) and inside >= o.min_inside_fraction):
+            why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
+        if views is not None:
+            iou = float(views.score(np.asarray(terms.pose.params)))
+            self._last_iou = iou
+            if not iou >= o.min_iou:
+                why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
+        return "; ".join(why)
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -221,34 +237,42 @@ class Tracker:
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
         res, terms, rms, inside = self._fit(cams, chs, start)
-        bad = self._bad(rms, inside)
-        state = self.monitor.update({"rms_px": rms, "inside_fraction": inside})
-        if bad and state.lost and self.recover and can_search and self.last_good is not None:
+        views = ScoreViews(self.model, cams, [silhouettes[n] for n in names], scale=0.5) if can_search else None
+        self._last_iou = None
+        bad = self._bad(terms, views)
+        restarted = False
+        state = self.monitor.update({"ok": False, "reason": f"poor fit: {bad}"} if bad
+                                    else {"rms_px": rms, "inside_fraction": inside})
+        if bad and state.lost and self.recover and can_search:
             try:
                 res2, terms2, rms2, inside2 = self._fit(cams, chs, self._search(cams, chamfer, silhouettes,
                                                                                  self.last_good))
             except ValueError:
                 pass
             else:
-                if not self._bad(rms2, inside2) or rms2 < rms:
-                    res, terms, rms, inside = res2, terms2, rms2, inside2
-                    bad = self._bad(rms, inside)
+                bad2 = self._bad(terms2, views)
+                if not bad2 or rms2 < rms:
+                    res, terms, rms, inside, bad = res2, terms2, rms2, inside2, bad2
                     if not bad:
                         self.monitor.reset()
-                    self.previous = None  # no velocity across a re-initialisation
+                    restarted = True  # no velocity across a re-initialisation
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
             ok=not bad, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
+            coverage=_finite(terms.coverage()),
         )
+        if self._last_iou is not None:
+            record["iou"] = self._last_iou
         if bad:
-            record["reason"] = f"poor fit: rms {rms:.2f} px, {100 * inside:.0f}% of contour on the silhouettes"
+            record["reason"] = f"poor fit: {bad}"
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
         else:
-            self.previous, self.params = self.params, np.array(res.params)
+            self.previous = None if restarted else self.params
+            self.params = np.array(res.params)
             self.last_good = self.params
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record
