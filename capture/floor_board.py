@@ -155,8 +155,10 @@ def _parse_point_list(value, where: str, n: int) -> np.ndarray:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{where}: not a list of numbers") from None
-    if arr.shape != (n, 2) or not np.all(np.isfinite(arr)):
+    if arr.shape != (n, 2):
         raise ValueError(f"{where}: expected {n} (x, y) pixel pairs, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: pixel coordinates must be finite numbers, got {arr.tolist()}")
     return arr
 
 

@@ -263,6 +263,9 @@ def test_corner_file_errors_name_file_camera_key(tmp_path):
     p.write_text("[cam2]\norigin = [1, 2, 3]\n")
     with pytest.raises(ValueError, match=r"c.toml \[cam2\] key 'origin'"):
         load_corner_file(p)
+    p.write_text("[cam2]\norigin = [nan, 2]\n")
+    with pytest.raises(ValueError, match=r"c.toml \[cam2\] key 'origin': pixel coordinates must be finite"):
+        load_corner_file(p)
     p.write_text("[cam3]\nfoo = 1\n")
     with pytest.raises(ValueError, match=r"c.toml \[cam3\]: needs key 'corners'"):
         load_corner_file(p)

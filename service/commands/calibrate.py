@@ -76,8 +76,8 @@ def _points(text: str, option: str, n: int) -> np.ndarray:
         pts = np.array([[float(v) for v in p.split(",")] for p in text.split(";") if p.strip()])
     except ValueError:
         raise ValueError(f"{option}{text!r}: expected numbers as X,Y;X,Y...") from None
-    if pts.shape != (n, 2):
-        raise ValueError(f"{option}{text!r}: expected {n} X,Y pairs separated by ';'")
+    if pts.shape != (n, 2) or not np.all(np.isfinite(pts)):
+        raise ValueError(f"{option}{text!r}: expected {n} X,Y pairs of finite numbers separated by ';'")
     return pts
 
 
