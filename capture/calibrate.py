@@ -121,6 +121,10 @@ def intrinsics_from_frames(
     if max_views < 3:
         raise ValueError(f"max_views: need at least 3 board views, got {max_views}")
     size = (int(frames[0].shape[1]), int(frames[0].shape[0]))
+    other = next((k for k, f in enumerate(frames) if f.shape[:2] != frames[0].shape[:2]), None)
+    if other is not None:  # one K cannot fit views of different image sizes
+        raise ValueError(f"camera {name!r}: frame {other} is {frames[other].shape[1]}x{frames[other].shape[0]}, "
+                         f"frame 0 is {size[0]}x{size[1]}; all views must have the same size")
     found = []
     for k, f in enumerate(frames):
         if progress:

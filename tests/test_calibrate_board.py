@@ -221,6 +221,10 @@ def test_intrinsics_needs_three_views():
     blank = [np.full((100, 120), 255, np.uint8)] * 4
     with pytest.raises(ValueError, match=r"camera 'c': board found in 0 of 4 frames"):
         intrinsics_from_frames("c", blank, BOARD)
+    with pytest.raises(ValueError, match=r"camera 'c': frame 2 is 60x50, frame 0 is 120x100"):
+        intrinsics_from_frames("c", blank[:2] + [np.zeros((50, 60), np.uint8)], BOARD)
+    with pytest.raises(ValueError, match=r"max_views: need at least 3"):
+        intrinsics_from_frames("c", blank, BOARD, max_views=2)
 
 
 def test_cli_intrinsics_from_charuco_image_sequence(rng, tmp_path, capsys):
