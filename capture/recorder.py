@@ -333,6 +333,8 @@ def record(sources: Sequence, recorder: Recorder, *, max_frames: int | None = No
             fatal.append(exc)
             errors[src.name] = f"{type(exc).__name__}: {exc}"
             stop.set()
+        except Exception as exc:  # a backend bug must not end this camera silently (a thread's error is lost)
+            errors[src.name] = f"unexpected {type(exc).__name__}: {exc}"
 
     threads = [threading.Thread(target=run, args=(s,), name=f"record-{s.name}", daemon=True) for s in sources]
     for t in threads:
