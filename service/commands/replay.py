@@ -39,6 +39,8 @@ def _replay_camera(session, name, args, out: dict) -> None:
         error = None
     except SourceError as exc:
         error = str(exc)
+    except Exception as exc:  # reported per camera: a thread's exception would otherwise be lost
+        error = f"unexpected {type(exc).__name__}: {exc}"
     elapsed = time.perf_counter() - t0
     out[name] = {
         "frames": n, "first_frame_id": first, "last_frame_id": last,
