@@ -47,6 +47,7 @@ __all__ = [
     "write_projection_matrix",
     "decompose_projection_matrix",
     "read_any_calibration",
+    "open_storage",
 ]
 
 _K_KEYS = ("CameraMatrix", "camera_matrix", "cameraMatrix", "K", "intrinsic", "M")
