@@ -91,3 +91,15 @@ def test_segment_command_options_reach_the_pipeline(session_dir, tmp_path, capsy
     assert not list((out / "cam0").glob("*.png"))
     true_fraction = scene.person_masks[1:3].mean()
     assert abs(stats["cameras"]["cam0"]["foreground_fraction_mean"] - true_fraction) < 0.1 * true_fraction
+
+
+def test_background_of_another_size_names_the_camera(tmp_path, capsys):
+    (tmp_path / "cam0").mkdir()
+    for k in range(2):
+        cv2.imwrite(str(tmp_path / "cam0" / f"{k:06d}.png"), np.full((48, 64, 3), 100, np.uint8))
+    cv2.imwrite(str(tmp_path / "bg.png"), np.full((40, 64, 3), 100, np.uint8))  # 64x40, frames 64x48
+    write_session_toml(tmp_path, name="s", fps=25.0,
+                       cameras=[{"name": "cam0", "images": "cam0/%06d.png", "background": "bg.png"}])
+    assert main(["segment", str(tmp_path), str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "camera 'cam0' frame 0" in err and "(64, 48) does not match the background model's (64, 40)" in err

@@ -163,7 +163,11 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
         chamfer = None
         for k, frame in enumerate(read_frames(session, name, frames=frames)):
             t = clock()
-            seg = segment_frame(model, frame.image, roi=roi, params=params)
+            try:
+                seg = segment_frame(model, frame.image, roi=roi, params=params)
+            except ValueError as exc:  # e.g. background media of another size than the footage
+                raise SessionError(f"{session.root}: camera {name!r} frame {frame.frame_id} "
+                                   f"(background: {how}): {exc}") from None
             ms.append((clock() - t) * 1e3)
             fractions.append(seg.foreground_fraction)
             chamfer = seg.chamfer
