@@ -22,7 +22,8 @@ the other flavours of the same layout, converting translations to metres:
 * **FreeMoCap** -- anipose-based, ``[metadata]`` holds ``charuco_*`` keys;
   translations are in millimetres (the ChArUco square size is given in mm).
 * **anipose** -- no unit stated; translations are in the board's unit,
-  normally millimetres: any camera with ``|t| > 100`` is read as mm.
+  normally millimetres: when any camera has ``|t| > 100``, every translation
+  of the file is read as mm (one decision per file, never per camera).
 
 Other formats (OpenCV XML/YAML, EasyMocap, projection matrices) live in
 ``capture.calib_formats``.
@@ -129,6 +130,9 @@ def load_calibration(path) -> list[Camera]:
     sections = [k for k, v in data.items() if isinstance(v, dict) and k != "metadata"]
     if not sections:
         raise CalibrationError(f"{path}: no camera sections found")
+    if units not in _M and units not in _MM:  # unit not stated: one decision for the whole file
+        norms = [np.linalg.norm(_array(data[s], "translation", f"{path} [{s}]", (3,))) for s in sections]
+        units = "mm" if max(norms) > 100.0 else "m"  # a camera over 100 m away: millimetres
     cams = []
     for sec in sections:
         table = data[sec]
@@ -149,8 +153,6 @@ def load_calibration(path) -> list[Camera]:
         t = _array(table, "translation", where, (3,))
         if units in _MM:
             t = t / 1000.0
-        elif units not in _M and np.linalg.norm(t) > 100.0:
-            t = t / 1000.0  # unit not stated; a camera over 100 m away is millimetres
         try:
             cams.append(Camera(name, K, dist, R, t, (int(size[0]), int(size[1]))))
         except ValueError as exc:

@@ -125,6 +125,19 @@ def test_toml_flavours_and_units(tmp_path):
         assert cam.size == (1920, 1080) and cam.name == "cam01"
 
 
+def test_anipose_units_decided_once_per_file(tmp_path):
+    """No unit stated: a camera 60 mm from the origin (a stereo partner of the origin camera) is read in
+    the same unit as its 2.8 m-away neighbour, not as 60 m."""
+    text = (_toml_camera(t="[0.0, 0.0, 0.0]").replace("cam_01", "cam_00").replace('"cam01"', '"cam00"')
+            + _toml_camera(t="[-60.0, 0.0, 0.0]").replace("cam_01", "cam_02").replace('"cam01"', '"cam02"')
+            + _toml_camera() + "\n[metadata]\nadjusted = true\n")
+    p = tmp_path / "anipose.toml"
+    p.write_text(text)
+    cams = {c.name: c for c in load_calibration(p)}
+    np.testing.assert_allclose(cams["cam02"].translation, [-0.060, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(cams["cam01"].translation, [1.2, -0.3, 2.5], atol=1e-12)
+
+
 def test_malformed_files_name_file_section_key(tmp_path):
     p = tmp_path / "fish.toml"
     p.write_text(_toml_camera("fisheye = true\n"))
