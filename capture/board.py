@@ -99,9 +99,17 @@ class Checkerboard:
             node = fs.getNode(key)
             if node.empty():
                 raise ValueError(f"{path} [root]: missing key {key!r}")
+            if not (node.isInt() or node.isReal()) or not np.isfinite(node.real()) or node.real() <= 0:
+                raise ValueError(f"{path} [root]: key {key!r} must be a positive number")  # real() of text is junk
             vals[key] = node.real()
-        w, h = int(vals["CheckerBoardWidth"]), int(vals["CheckerBoardHeight"])
-        return cls(max(w, h), min(w, h), vals["CheckerBoardSquareSize"] / 1000.0)
+        w, h = vals["CheckerBoardWidth"], vals["CheckerBoardHeight"]
+        if w != int(w) or h != int(h):
+            raise ValueError(f"{path} [root]: CheckerBoardWidth/Height must be whole numbers of inner corners")
+        w, h = int(w), int(h)
+        try:
+            return cls(max(w, h), min(w, h), vals["CheckerBoardSquareSize"] / 1000.0)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
 
 
 @dataclass(frozen=True)

@@ -327,3 +327,18 @@ def test_cli_names_the_unreadable_image_of_a_folder(tmp_path, capsys):
                "--video", f"cam0={tmp_path / 'cam0'}", "--out", str(tmp_path / "i.toml"), "--quiet"])
     assert rc == 1
     assert "cam0: NOT CALIBRATED:" in (out := capsys.readouterr().out) and "unreadable image(s) ['01.png']" in out
+
+
+@pytest.mark.parametrize("w, h, size, match", [
+    ("8", "6", '"abc"', r"key 'CheckerBoardSquareSize' must be a positive number"),  # real() of text was 1.8e305
+    ("8", "6", "-115", r"key 'CheckerBoardSquareSize' must be a positive number"),
+    ("8.5", "6", "115", r"must be whole numbers"),
+    ("1", "6", "115", r"board.xml: board needs at least 2"),
+])  # fmt: skip
+def test_board_xml_values_checked(tmp_path, w, h, size, match):
+    p = tmp_path / "board.xml"
+    p.write_text(f'<?xml version="1.0"?>\n<opencv_storage>\n<CheckerBoardWidth>{w}</CheckerBoardWidth>\n'
+                 f"<CheckerBoardHeight>{h}</CheckerBoardHeight>\n<CheckerBoardSquareSize>{size}</CheckerBoardSquareSize>\n"
+                 "</opencv_storage>\n")
+    with pytest.raises(ValueError, match=match):
+        Checkerboard.from_opencv_xml(p)
