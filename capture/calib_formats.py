@@ -77,10 +77,13 @@ def _node_matrix(fs: cv2.FileStorage, key: str, where: str, sizes: Sequence[int]
     node = fs.getNode(key)
     if node.empty():
         raise CalibrationError(f"{where}: missing key {key!r}")
-    mat = node.mat()
+    try:
+        mat = node.mat()
+    except cv2.error:  # e.g. a text node
+        mat = None
     if mat is None:
         if node.isSeq():
-            mat = np.array([node.at(i).real() for i in range(node.size())])
+            mat = np.array([_number(node.at(i), where, key) for i in range(node.size())])
         else:
             raise CalibrationError(f"{where}: key {key!r} is not a matrix")
     arr = np.asarray(mat, dtype=float).ravel()
@@ -89,6 +92,13 @@ def _node_matrix(fs: cv2.FileStorage, key: str, where: str, sizes: Sequence[int]
     if not np.all(np.isfinite(arr)):
         raise CalibrationError(f"{where}: key {key!r} has non-finite values")
     return arr
+
+
+def _number(node, where: str, key: str) -> float:
+    """A FileStorage node's number; ``real()`` of a text node is junk (1.8e308), so it is refused."""
+    if not (node.isInt() or node.isReal()):
+        raise CalibrationError(f"{where}: key {key!r} must hold numbers")
+    return node.real()
 
 
 def _first_key(fs: cv2.FileStorage, keys: Sequence[str], where: str, what: str) -> str:
@@ -141,7 +151,7 @@ def read_opencv_camera(path, *, name: str | None = None, size: tuple[int, int] |
     if size is None:
         for wk, hk in (("image_width", "image_height"), ("ImageWidth", "ImageHeight"), ("width", "height")):
             if not fs.getNode(wk).empty() and not fs.getNode(hk).empty():
-                size = (int(fs.getNode(wk).real()), int(fs.getNode(hk).real()))
+                size = (int(_number(fs.getNode(wk), where, wk)), int(_number(fs.getNode(hk), where, hk)))
                 break
     if size is None:
         for sk in ("ImageSize", "image_size", "size"):
@@ -190,7 +200,8 @@ def read_easymocap(intri_path, extri_path) -> list[Camera]:
             rot = _node_matrix(fe, f"R_{name}", we, (3,))
         t = _node_matrix(fe, f"T_{name}", we, (3,))
         if not fi.getNode(f"W_{name}").empty() and not fi.getNode(f"H_{name}").empty():
-            size = (int(fi.getNode(f"W_{name}").real()), int(fi.getNode(f"H_{name}").real()))
+            size = (int(_number(fi.getNode(f"W_{name}"), wi, f"W_{name}")),
+                    int(_number(fi.getNode(f"H_{name}"), wi, f"H_{name}")))
         else:
             size = _size_from_center(K.reshape(3, 3))
         cams.append(_make_camera(name, K, dist, rot, t, size, we))

@@ -181,6 +181,27 @@ def test_folder_with_two_files_for_one_camera_is_refused(tmp_path, rng):
         read_any_calibration(tmp_path / "calib")
 
 
+@pytest.mark.parametrize("old, new, key", [
+    ("<image_width>644</image_width>", '<image_width>"wide"</image_width>', "image_width"),
+    ("<units>m</units>", '<units>m</units>\n<Bad>"x"</Bad>', None),
+])  # fmt: skip
+def test_opencv_text_where_numbers_belong_is_named(tmp_path, rng, old, new, key):
+    """FileStorage's real() of a text node is 1.8e308, not an error: such sizes/matrices must be refused."""
+    path = write_calibration_as(tmp_path / "c", _studio(rng)[:1], fmt="opencv-xml")[0]
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+    if key is None:  # an unrelated text key is fine
+        assert read_opencv_camera(path).size == (644, 486)
+        return
+    with pytest.raises(CalibrationError, match=rf"cam0.xml \[root\]: key '{key}' must hold numbers"):
+        read_opencv_camera(path)
+    start, stop = text.index("<Translation"), text.index("</Translation>") + len("</Translation>")
+    path.write_text(text[:start] + '<Translation>"a" "b" "c"</Translation>' + text[stop:])
+    with pytest.raises(CalibrationError, match=r"key 'Translation' must hold numbers"):
+        read_opencv_camera(path)
+
+
 def test_written_toml_states_metres(tmp_path, rng):
     path = write_calibration_as(tmp_path / "c.toml", _studio(rng), fmt="toml")[0]
     assert loads(path.read_text())["metadata"]["units"] == "m"
