@@ -211,6 +211,14 @@ def _optional_path(root: Path, table: dict, key: str, where: str) -> Path | None
     return path
 
 
+def _frame_ids(pattern: str, where: str) -> np.ndarray:
+    """``image_frame_ids`` with the session file and camera named in its error."""
+    try:
+        return image_frame_ids(pattern)
+    except SessionError as exc:
+        raise SessionError(f"{where}: {exc}") from None
+
+
 def _parse_camera(root: Path, table, index: int, where_file: Path) -> SessionCamera:
     where = f"{where_file} [[camera]] #{index}"
     if not isinstance(table, dict):
@@ -228,13 +236,13 @@ def _parse_camera(root: Path, table, index: int, where_file: Path) -> SessionCam
     if "video" in table:
         video = _resolve(root, table["video"], f"{where} key 'video'")
         if "%" in video.name:
-            if image_frame_ids(str(video)).size == 0:
+            if _frame_ids(str(video), where).size == 0:
                 raise SessionError(f"{where}: no video segment files match pattern {str(video)!r}")
         elif not video.is_file():
             raise SessionError(f"{where}: video file {video} not found")
     else:
         images = str(_resolve(root, table["images"], f"{where} key 'images'"))
-        if image_frame_ids(images).size == 0:
+        if _frame_ids(images, where).size == 0:
             raise SessionError(f"{where}: no image files match pattern {images!r}")
     background = _optional_path(root, table, "background", where)
     timestamps = _optional_path(root, table, "timestamps", where)

@@ -62,6 +62,7 @@ def test_calibration_order_follows_session(tmp_path, rng):
         (lambda t: t.replace("[session]", "[sesion]"), "[session]"),
         (lambda t: t.replace("height_m = 1.7", "height_m = 17"), "height_m"),
         (lambda t: t + "\n[[camera]\n", "invalid TOML"),
+        (lambda t: t.replace('video = "cam1.avi"', 'video = "cam%x.avi"'), "camera 'cam1': image pattern"),
     ],
 )
 def test_bad_session_named_error(tmp_path, rng, edit, needle):
