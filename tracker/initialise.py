@@ -24,7 +24,7 @@ With a ``hint`` (a previous pose) the any-pose search of ``tracker.recovery.reco
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 import cv2
@@ -246,15 +246,20 @@ def _stages(model: BodyModel) -> list[np.ndarray]:
 
 def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, params: np.ndarray, *,
            stages: Sequence[np.ndarray] | None = None, max_iterations: int = 10, n_samples: int = 6,
-           f_scale: float = 5.0, truncate_px: float = 30.0, prior_rad: float = 500.0):
+           f_scale: float = 5.0, truncate_px: float = 30.0, prior_rad: float = 500.0,
+           reverse_weight: float = 0.0, ftol: float = 1e-3):
     """Staged bounded LM on the chamfer cost from ``params``; default stages: root, joints, all.
+
+    ``reverse_weight`` > 0 adds the silhouette → model term of ``tracker.cost`` (pulls a limb back
+    onto silhouette it left uncovered); ``ftol``: LM relative cost change to stop at.
 
     ``prior_rad`` (px² per rad²) holds the joint angles weakly towards ``params``: a straight
     T-pose arm cannot tell clavicle from shoulder rotation, and the hypothesis is the better guess.
 
     Returns ``(params (n_params,), CostTerms at params)``.
     """
-    cost = ChamferCost(model, cameras, chamfer, n_samples=n_samples, truncate_px=truncate_px)
+    cost = ChamferCost(model, cameras, chamfer, n_samples=n_samples, truncate_px=truncate_px,
+                       reverse_weight=reverse_weight, reverse_samples=150, reverse_min_px=4.0)
     fun = cost.residual_fn(compact=True)
     x = model.clamp(np.asarray(params, dtype=float))
     x0 = x.copy()
@@ -263,7 +268,7 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, param
         idx = np.asarray(idx, dtype=int)
         res = levenberg_marquardt(_subset_fun(fun, x, idx), x[idx], lower=model.lower[idx], upper=model.upper[idx],
                                   prior=x0[idx], prior_weight=weight[idx], loss="huber", f_scale=f_scale,
-                                  max_iterations=max_iterations, ftol=1e-3)
+                                  max_iterations=max_iterations, ftol=ftol)
         x = x.copy()
         x[idx] = res.params
     return x, cost.evaluate(x)
@@ -334,7 +339,7 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
                chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
                arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
                score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
-               use_feet: bool = True) -> InitResult:
+               use_feet: bool = True, front_back: bool = True) -> InitResult:
     """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
 
     Parameters
@@ -351,7 +356,12 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
     arm_abduction_deg : arm poses searched (0 = T, -45 = A)
     keep : candidates refined with LM
     min_voxel_m, hull_tolerance : hull resolution and views a hull point may miss (``visual_hull``)
-    use_feet : search only headings the feet point to (``feet_direction``), when they are clear
+    use_feet : the feet cue (``feet_direction``): with ``front_back`` a term of the choice between
+        the pose and its mirror when the legs are straight; without, only the headings the feet
+        point to are searched (unreliable in a crouch, where the shanks lean forward)
+    front_back : refine the winner and its mirror (``tracker.mirror.resolve_front_back``: turned
+        180°, left and right swapped) fully and keep the better; silhouettes hardly tell front
+        from back, and the T/A search alone picks the wrong one on a crouch or at low resolution
     score_scale : image scale of the IoU scoring views
     """
     if hint is not None:  # a previous pose: the any-pose search of tracker.recovery
@@ -366,5 +376,14 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
         raise ValueError("initialise: the silhouettes share no volume (empty visual hull)")
     views = ScoreViews(model, cameras, sils, scale=score_scale)
     facing = feet_direction(hull) if use_feet else None
-    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg, facing=facing)
-    return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations)
+    cands = pose_candidates(model, hull, n_headings=n_headings, arm_abduction_deg=arm_abduction_deg,
+                            facing=None if front_back else facing)
+    best = refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations)
+    if not front_back:
+        return best
+    from tracker.mirror import resolve_front_back
+
+    res = resolve_front_back(model, cameras, silhouettes, chamfer, best.params, views=views,
+                             prepared=(cameras, sils, chs), feet_direction=facing)
+    return replace(res, label=f"{best.label}/{res.label}", height_m=best.height_m,
+                   candidates=views.n_scored, hull=hull)
