@@ -7,21 +7,15 @@ import json
 import sys
 from pathlib import Path
 
+from service.commands.synth import image_size
+
 HELP = "run the whole live pipeline over zenoh on loopback on a synthetic studio (rendered once, cached)"
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--size: expected WIDTHxHEIGHT, got {text!r}") from None
-    return w, h
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", type=int, default=4)
     parser.add_argument("--frames", type=int, default=30)
-    parser.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT of the cameras")
+    parser.add_argument("--size", type=image_size, default=(320, 240), help="WIDTHxHEIGHT of the cameras")
     parser.add_argument("--fps", type=float, default=30.0)
     parser.add_argument("--motion", default="scaled_131_03", help="bundled CMU clip (tracker/data)")
     parser.add_argument("--live", action="store_true",

@@ -9,7 +9,7 @@ from pathlib import Path
 HELP = "render a synthetic session (videos, calibration, ground truth) from BVH motion"
 
 
-def _size(text: str) -> tuple[int, int]:
+def image_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -23,7 +23,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bvh", help="BVH motion file, or 'bundled:NAME' (scaled_131_01, scaled_131_03)")
     parser.add_argument("out", help="session directory to write")
     parser.add_argument("--cameras", type=int, default=6, help="number of ring cameras (default 6)")
-    parser.add_argument("--size", type=_size, default=(800, 600), help="image size WIDTHxHEIGHT (default 800x600)")
+    parser.add_argument("--size", type=image_size, default=(800, 600), help="image size WIDTHxHEIGHT (default 800x600)")
     parser.add_argument("--frames", type=int, default=None, help="number of frames (default: the whole clip)")
     parser.add_argument("--start", type=float, default=0.0, help="start time in the BVH clip, seconds")
     parser.add_argument("--fps", type=float, default=30.0, help="output frame rate (default 30)")
