@@ -112,6 +112,12 @@ class OpenCVSource(SourceBase):
             "fps": cap.get(cv2.CAP_PROP_FPS),
             "exposure": cap.get(cv2.CAP_PROP_EXPOSURE),
         }
+        want = (self.requested["width"], self.requested["height"])
+        got = (int(self.applied["width"]), int(self.applied["height"]))
+        if any(w is not None and int(w) != g for w, g in zip(want, got)):
+            cap.release()
+            raise OpenError(f"{where}: asked for {want[0]}x{want[1]} but it delivers {got[0]}x{got[1]}; use a mode "
+                            "the camera supports (its calibration must be of the same size)")
         self._cap = cap
         self._next_id = 0
         self._ended = False

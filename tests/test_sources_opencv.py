@@ -43,3 +43,13 @@ def test_constructor_validation():
         OpenCVSource(0, name="")
     with pytest.raises(ValueError, match="device"):
         OpenCVSource(1.5, name="c")
+
+
+def test_size_other_than_asked_is_refused(tmp_path, rng):
+    images = make_images(rng, 2)
+    h, w = images[0].shape[:2]
+    path = write_video(tmp_path / "v.avi", images)
+    with OpenCVSource(str(path), name="c", width=w, height=h) as src:  # the size it delivers: fine
+        assert src.read().image.shape[:2] == (h, w)
+    with pytest.raises(OpenError, match=rf"'c'.*asked for {w * 2}x{h} but it delivers {w}x{h}"):
+        OpenCVSource(str(path), name="c", width=w * 2, height=h).open()
