@@ -31,6 +31,7 @@ eq. 47, ``Ĥ = [[ω]× v; 0 0]``, so ``Ẋ = ω × X + v``):
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,6 +115,24 @@ class Pose:
         return np.einsum("nij,nj->ni", self.rotation[part], points_part) + self.translation[part]
 
 
+_PLANS: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionary()
+
+
+def _plan(model: BodyModel) -> tuple:
+    """Per-model constants of ``forward`` (cached): per part ``(part, parent, joint params)``, and the
+    indices of the root-translation, root-rotation and joint-rotation parameters."""
+    plan = _PLANS.get(model)
+    if plan is None:
+        kind = model.param_kind
+        parts = tuple((p, int(model.parent[p]),
+                       tuple(int(k) for k in np.flatnonzero((model.param_part == p) & (kind == JOINT_ROTATION))))
+                      for p in range(model.n_parts))
+        plan = (parts, np.flatnonzero(kind == ROOT_TRANSLATION), np.flatnonzero(kind == ROOT_ROTATION),
+                np.flatnonzero(kind == JOINT_ROTATION))
+        _PLANS[model] = plan
+    return plan
+
+
 def forward(model: BodyModel, params: np.ndarray) -> Pose:
     """Forward kinematics of every part and the parameters' kinematic screws.
 
@@ -124,35 +143,36 @@ def forward(model: BodyModel, params: np.ndarray) -> Pose:
     params = np.asarray(params, dtype=float)
     if params.shape != (model.n_params,):
         raise ValueError(f"params must have shape ({model.n_params},) for model {model.name!r}, got {params.shape}")
-    kind = model.param_kind
-    n_parts = model.n_parts
+    parts, ti, ri, ji = _plan(model)
+    n_parts, n_params = model.n_parts, model.n_params
     R = np.empty((n_parts, 3, 3))
     t = np.empty((n_parts, 3))
-    w = np.zeros((model.n_params, 3))
-    v = np.zeros((model.n_params, 3))
+    R_at = np.zeros((n_params, 3, 3))  # joint frame before each joint parameter's own rotation
+    t_at = np.zeros((n_params, 3))
     # all joint-DOF rotations at once: Rot(axis, λ) for every rotational parameter
     dof_rot = so3_exp(model.param_axis * params[:, None])
-    root_t = params[kind == ROOT_TRANSLATION]
-    root_r = params[kind == ROOT_ROTATION]
+    root_t = params[ti]
+    root_r = params[ri]
     R_root = so3_exp(root_r)
-    for p in range(n_parts):
-        par = model.parent[p]
+    rest, offset = model.rest_rotation, model.offset
+    for p, par, ks in parts:
         if par < 0:
-            Rb = R_root @ model.rest_rotation[p]
-            tb = root_t + R_root @ model.offset[p]
+            Rb = R_root @ rest[p]
+            tb = root_t + R_root @ offset[p]
         else:
-            Rb = R[par] @ model.rest_rotation[p]
-            tb = R[par] @ model.offset[p] + t[par]
-        for k in np.flatnonzero((model.param_part == p) & (kind == JOINT_ROTATION)):
-            wk = Rb @ model.param_axis[k]
-            w[k] = wk
-            v[k] = np.cross(tb, wk)
+            Rb = R[par] @ rest[p]
+            tb = R[par] @ offset[p] + t[par]
+        for k in ks:
+            R_at[k] = Rb
+            t_at[k] = tb
             Rb = Rb @ dof_rot[k]
         R[p] = Rb
         t[p] = tb
+    w = np.zeros((n_params, 3))
+    v = np.zeros((n_params, 3))
+    w[ji] = np.einsum("kij,kj->ki", R_at[ji], model.param_axis[ji])
+    v[ji] = np.cross(t_at[ji], w[ji])
     # root screws
-    ti = np.flatnonzero(kind == ROOT_TRANSLATION)
-    ri = np.flatnonzero(kind == ROOT_ROTATION)
     v[ti] = np.eye(3)
     Jl = so3_left_jacobian(root_r)
     w[ri] = Jl.T  # column j of J_l is the screw of r_j
