@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from capture.sources import parse_source_specs
 from capture.tomlio import tomllib
 from service.bus import MODES, ZenohSettings
 from service.messages import ENCODINGS, check_name, MessageError
@@ -67,6 +68,10 @@ class CameraConfig:
     backend: str = "replay"
     source: str = ""
     encoding: str = "jpeg"
+    width: int | None = None       # opencv: requested capture size and exposure (capture.sources keys)
+    height: int | None = None
+    fps: float | None = None
+    exposure: float | None = None
 
 
 @dataclass(frozen=True)
@@ -197,11 +202,16 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
         p = f"camera[{i}]"
         if not isinstance(c, dict):
             raise r.err(p, "expected a table")
-        r.unknown(c, {"name", "host", "backend", "source", "encoding"}, p)
+        r.unknown(c, {"name", "host", "backend", "source", "encoding", "width", "height", "fps", "exposure"}, p)
+        try:  # the capture keys are validated as `contourcap record` does, so one studio.toml serves both
+            (spec,) = parse_source_specs([{k: v for k, v in c.items() if k != "encoding"}], where=r.where)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
         cam = CameraConfig(r.name(c, "name", p), r.name(c, "host", p),
                            r.get(c, "backend", p, (str,), "replay", choices=BACKENDS),
                            str(r.get(c, "source", p, (str, int), "")),
-                           r.get(c, "encoding", p, (str,), "jpeg", choices=ENCODINGS))
+                           r.get(c, "encoding", p, (str,), "jpeg", choices=ENCODINGS),
+                           width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure)
         if cam.name in seen:
             raise r.err(f"{p}.name", f"duplicate camera {cam.name!r}")
         seen.add(cam.name)

@@ -125,7 +125,8 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
             from capture.opencv_source import OpenCVSource
 
             device = int(cam.source) if cam.source.isdigit() else cam.source
-            src = OpenCVSource(device, name=name, fps=cfg.trigger.fps, frame_id_at=frame_id_at)
+            src = OpenCVSource(device, name=name, width=cam.width, height=cam.height,
+                               fps=cam.fps or cfg.trigger.fps, exposure=cam.exposure, frame_id_at=frame_id_at)
         src.open()
         out[name] = src
     return out

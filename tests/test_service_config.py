@@ -50,3 +50,15 @@ def test_unreadable_and_invalid_toml(tmp_path):
         load_config(tmp_path / "missing.toml")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(_write(tmp_path, "[studio\n"))
+
+
+def test_capture_keys_shared_with_record(tmp_path):
+    """One studio.toml serves `contourcap run` and `contourcap record`: the capture keys are accepted by both."""
+    from capture.recorder import load_capture_config
+
+    path = _write(tmp_path, EXAMPLE.read_text())
+    cam0 = load_config(path).camera("cam0")
+    assert (cam0.width, cam0.height, cam0.exposure) == (800, 600, -6.0)
+    assert {c.name: c.width for c in load_capture_config(path).cameras}["cam0"] == 800
+    with pytest.raises(ConfigError, match=r"camera\[0\]\.width"):
+        load_config(_write(tmp_path, EXAMPLE.read_text().replace("width = 800", "width = -800", 1)))
