@@ -30,7 +30,7 @@ residuals (K = 0 without the reverse term).  ``compact=True`` keeps only the use
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import cv2
@@ -41,6 +41,7 @@ from tracker.contours import Contours, extremal_contours
 from tracker.jacobian import contour_jacobian
 from tracker.kinematics import Pose, forward
 from tracker.model import BodyModel
+from tracker.visibility import hidden_points
 
 __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
@@ -231,8 +232,21 @@ class ChamferCost:
         if self.visibility == "step" and jacobian and not (self._cache is not None and self._cache[-1]
                                                            and np.array_equal(self._cache[0], params)):
             fresh = True  # a new linearisation point: recompute occlusion there
-        if not fresh and self._cache is not None and np.array_equal(self._cache[0], params):
+        same = self._cache is not None and np.array_equal(self._cache[0], params)
+        if not fresh and same:
             pose, contours, used, d, grad, rev = self._cache[1:-1]
+        elif fresh and same and self.visibility in ("frame", "step") and not self._cache[-1]:
+            # a trial point becomes the linearisation point: keep its contours, add the occlusion test
+            pose, contours, used_trial, d, grad, rev = self._cache[1:-1]
+            hidden = hidden_points(self.model, pose, self.cameras, contours.cam, contours.part, contours.points,
+                                   only=contours.valid)
+            contours = replace(contours, visible=contours.valid & ~hidden)
+            self._frozen_visible = contours.visible.copy()
+            used = contours.valid & self._frozen_visible
+            if not np.array_equal(used, used_trial):
+                d, grad = self._sample(contours, used)
+                rev = self._reverse(contours, used) if self.n_reverse else None
+            self._cache = (params.copy(), pose, contours, used, d, grad, rev, True)
         else:
             pose = forward(self.model, params)
             contours = extremal_contours(self.model, pose, self.cameras, n_samples=self.n_samples,
