@@ -55,14 +55,14 @@ def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
     q = getattr(chamfer, "silhouette_q", None)
     if q is None or q.size == 0 or max_points < 1:
         return np.zeros((0, 2))
-    inside = np.where(q == 0, 255, 0).astype(np.uint8)
+    inside = cv2.compare(q, 0, cv2.CMP_EQ)  # uint8, 255 inside
     border = cv2.subtract(inside, cv2.erode(inside, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=0))
-    ys, xs = np.nonzero(border)
-    if xs.size == 0:
+    xy = cv2.findNonZero(border)  # (k, 1, 2) (x, y) in raster order, None when empty
+    if xy is None:
         return np.zeros((0, 2))
-    pick = np.unique(np.linspace(0, xs.size - 1, min(max_points, xs.size)).round().astype(np.intp))
-    ox, oy = chamfer.offset_xy
-    return np.stack([xs[pick] + ox, ys[pick] + oy], axis=1).astype(float)
+    xy = xy.reshape(-1, 2)
+    pick = np.unique(np.linspace(0, len(xy) - 1, min(max_points, len(xy))).round().astype(np.intp))
+    return (xy[pick] + np.asarray(chamfer.offset_xy)).astype(float)
 
 
 @dataclass(frozen=True, eq=False)
