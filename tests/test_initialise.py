@@ -206,8 +206,9 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
     start = mirror_params(model, truth)
     assert _heading_error_deg(model, start, truth) > 170
     res, fb = resolve_front_back(model, cams, sils, chamfer, start, details=True)
-    assert res.label == "mirrored" and fb.best == 1 and np.array_equal(res.params, fb.params[1])
+    assert res.label == "mirrored" and fb.mirrored[fb.best] and np.array_equal(res.params, fb.params[fb.best])
     assert _heading_error_deg(model, res.params, truth) < 10.0
+    assert fb.params.shape == (2, model.n_params) and list(fb.mirrored) == [False, True]
     assert fb.cost[1] < fb.cost[0] - 0.5 and fb.iou[1] > fb.iou[0]
     err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
                          - joint_centre_array(model, forward(model, truth)), axis=1)

@@ -9,15 +9,20 @@ then the limbs).
 2. **Search** over heading × arm pose: ``n_headings`` evenly spaced headings plus the two
    headings that put the arms' span along the hull's major floor axis, each arm at every
    abduction of ``arm_abduction_deg`` (0° = T, -45° = A; the arms independently, as a
-   segmentation may lose one); headings facing away from where the feet point
-   (``feet_direction``: the hull's sole layer lies ahead of its shanks) are dropped, which breaks
-   the front/back symmetry of the silhouettes.  Candidates are scored by the mean silhouette IoU
+   segmentation may lose one).  Candidates are scored by the mean silhouette IoU
    of the model (``ScoreViews``: the parts' projected convex hulls on half-size views), a
    symmetric score: a limb missing from the model costs as much as a limb the images lack.
 3. **Refinement** of the best ``keep`` candidates with bounded robust LM on the chamfer cost
    (``tracker.cost`` / ``tracker.solver``): root only, then the joints, then everything.  The
    refined candidate with the best IoU wins (the chamfer cost is model→image only, so it cannot
    tell a model whose limb hides inside the body from the right one).
+4. **Front or back** (``tracker.mirror.resolve_front_back``): silhouettes hardly tell them
+   apart, so the winner and its mirror (turned 180°, left and right swapped) both get a limb
+   search (``tracker.recovery.limb_search``) and a full refinement, and the one with the lower
+   chamfer + IoU + joint-limit cost is kept; the feet cue (``feet_direction``: the hull's sole
+   layer lies ahead of its shanks) counts only when the legs are straight — in a crouch the
+   shanks lean forward and it points backwards (it used to drop the headings it disagreed
+   with, which turned the demo's hop round).
 
 With a ``hint`` (a previous pose) the any-pose search of ``tracker.recovery.recover`` runs instead.
 """
@@ -53,7 +58,8 @@ class InitResult:
     rms_px : RMS chamfer residual at ``params`` (NaN if no refinement ran);
     inside_fraction : fraction of contour points on the silhouettes; heading_rad : the search
     heading it came from; label : which hypothesis won (``"T"``, ``"A"``, ``"T/A"`` = left T,
-    right A, ``"hint"``, ``"last"``);
+    right A, ``"hint"``, ``"last"``), followed by ``"/kept"`` or ``"/mirrored"`` after the
+    front/back check (``tracker.mirror.resolve_front_back``);
     height_m : the subject height the hull suggests; candidates : poses scored;
     hull : the visual hull used.  ``np.asarray(result)`` gives ``params``.
     """
@@ -339,7 +345,8 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
                chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
                arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
                score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
-               use_feet: bool = True, front_back: bool = True) -> InitResult:
+               use_feet: bool = True, front_back: bool = True,
+               limb_search_both: bool = True) -> InitResult:
     """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
 
     Parameters
@@ -362,6 +369,7 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
     front_back : refine the winner and its mirror (``tracker.mirror.resolve_front_back``: turned
         180°, left and right swapped) fully and keep the better; silhouettes hardly tell front
         from back, and the T/A search alone picks the wrong one on a crouch or at low resolution
+    limb_search_both : run ``tracker.recovery.limb_search`` on both before refining them
     score_scale : image scale of the IoU scoring views
     """
     if hint is not None:  # a previous pose: the any-pose search of tracker.recovery
@@ -369,7 +377,7 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
 
         return recover(model, cameras, silhouettes, chamfer, hint, n_headings=n_headings, keep=keep,
                        min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations,
-                       hull_tolerance=hull_tolerance)
+                       hull_tolerance=hull_tolerance, front_back=front_back)
     cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
     hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m, tolerance=hull_tolerance).largest_component()
     if hull.empty:
@@ -382,8 +390,10 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
     if not front_back:
         return best
     from tracker.mirror import resolve_front_back
+    from tracker.recovery import limb_search
 
     res = resolve_front_back(model, cameras, silhouettes, chamfer, best.params, views=views,
-                             prepared=(cameras, sils, chs), feet_direction=facing)
+                             prepared=(cameras, sils, chs), feet_direction=facing,
+                             prepare=(lambda p, s: limb_search(model, views, p, s)) if limb_search_both else None)
     return replace(res, label=f"{best.label}/{res.label}", height_m=best.height_m,
                    candidates=views.n_scored, hull=hull)

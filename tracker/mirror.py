@@ -112,15 +112,17 @@ def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- choosing
 @dataclass(frozen=True, eq=False)
 class FrontBack:
-    """Both hypotheses after refinement.
+    """The hypotheses after refinement, k = 2 (the pose, its mirror) or up to 4 (each also after
+    the ``prepare`` limb search, where that changed it).
 
-    params : (2, n_params) the refined pose and its refined mirror; cost : (2,) ``front_back_cost``;
-    rms_px : (2,) RMS chamfer residual (silhouette and internal edges); iou : (2,) mean silhouette
-    IoU; at_limits : (2,) joint DOF within 1° of a limit; feet : (2,) feet-cue term (0 when the
-    cue is unclear); best : 0 (the pose) or 1 (its mirror).
+    params : (k, n_params) refined poses; mirrored : (k,) bool, started from the mirror;
+    cost : (k,) ``front_back_cost``; rms_px : (k,) RMS chamfer residual (silhouette and internal
+    edges); iou : (k,) mean silhouette IoU; at_limits : (k,) joint DOF within 1° of a limit;
+    feet : (k,) feet-cue term (0 when the cue is unclear); best : index of the lowest cost.
     """
 
     params: np.ndarray
+    mirrored: np.ndarray
     cost: np.ndarray
     rms_px: np.ndarray
     iou: np.ndarray
@@ -160,7 +162,8 @@ def _heading(model: BodyModel, params: np.ndarray) -> np.ndarray:
 def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
                        chamfer: Mapping[str, object] | None, params, *, max_iterations: int = 15,
                        prior_rad: float = 30.0, reverse_weight: float = 1.0, feet_direction=None,
-                       feet_weight: float = 0.5, views=None, prepared=None, details: bool = False):
+                       feet_weight: float = 0.5, views=None, prepared=None, prepare=None,
+                       details: bool = False):
     """Refine ``params`` (n_params,) and ``mirror_params(params)`` fully and keep the better one.
 
     Both run the staged LM of ``tracker.initialise.refine`` (root, joints, everything; with the
@@ -172,7 +175,10 @@ def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
 
     silhouettes : dict camera name -> (h, w) mask; chamfer : dict camera name -> ChamferImages or
     None (built from the silhouettes); views : a ``tracker.initialise.ScoreViews`` to reuse;
-    prepared : ``(cameras, silhouettes, chamfer)`` lists from ``prepare_inputs`` to reuse.
+    prepared : ``(cameras, silhouettes, chamfer)`` lists from ``prepare_inputs`` to reuse;
+    prepare : ``prepare(params, iou) -> (params, iou)``, e.g. ``tracker.recovery.limb_search``: its
+    result on each start is refined and compared as well (the mirror's limbs may sit better
+    elsewhere, and a limb search can also lead astray).
     Returns an ``InitResult`` (label ``"kept"`` or ``"mirrored"``; with ``details`` the pair
     ``(InitResult, FrontBack)``).
     """
@@ -186,8 +192,15 @@ def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
         raise ValueError(f"params: expected a finite array of shape ({model.n_params},)")
     if views is None:
         views = ScoreViews(model, cams, sils, scale=0.5)
+    starts, mirrored = [], []
+    for flag, start in ((False, model.clamp(p)), (True, model.clamp(mirror_params(model, p)))):
+        starts.append(start), mirrored.append(flag)
+        if prepare is not None:  # the limb search's start too, unless it changed nothing
+            searched, _ = prepare(start, views.score(start))
+            if not np.array_equal(searched, start):
+                starts.append(searched), mirrored.append(flag)
     outs, terms_list = [], []
-    for start in (model.clamp(p), model.clamp(mirror_params(model, p))):
+    for start in starts:
         x, terms = refine(model, cams, chs, start, max_iterations=max_iterations, prior_rad=prior_rad,
                           reverse_weight=reverse_weight, ftol=1e-4, n_samples=8)
         outs.append(x)
@@ -195,17 +208,19 @@ def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
     rms = np.array([t.rms_px() for t in terms_list])
     iou = np.array([views.score(x) for x in outs])
     lim = np.array([_at_limits(model, x) for x in outs])
-    feet = np.zeros(2)
+    feet = np.zeros(len(outs))
     if feet_direction is not None and all(_straight_legs(model, x) for x in outs):
         f = np.asarray(feet_direction, dtype=float)
         feet = np.array([feet_weight * (1.0 - float(_heading(model, x) @ f)) for x in outs])
     cost = np.array([front_back_cost(r, i, l, fe) for r, i, l, fe in zip(rms, iou, lim, feet)])
     cost = np.where(np.isfinite(cost), cost, np.inf)
     best = int(np.argmin(cost))
-    fb = FrontBack(params=np.array(outs), cost=cost, rms_px=rms, iou=iou, at_limits=lim, feet=feet, best=best)
+    fb = FrontBack(params=np.array(outs), mirrored=np.array(mirrored), cost=cost, rms_px=rms, iou=iou, at_limits=lim,
+                   feet=feet, best=best)
     t = terms_list[best]
     h = _heading(model, outs[best])
     res = InitResult(params=outs[best], score=float(iou[best]), rms_px=float(rms[best]),
                      inside_fraction=t.inside_fraction(), heading_rad=float(np.arctan2(h[1], h[0])),
-                     label=("kept", "mirrored")[best], height_m=float(model.height_m), candidates=2)
+                     label=("kept", "mirrored")[int(mirrored[best])], height_m=float(model.height_m),
+                     candidates=len(outs))
     return (res, fb) if details else res

@@ -17,12 +17,14 @@ poses of ``tracker.initialise`` the search starts from the last good pose:
 3. the best ``keep`` hypotheses are refined by the staged LM of ``tracker.initialise.refine``
    (a weaker prior than initialisation's: the hypothesis is rougher) and the best IoU wins;
    a last limb search on the winner, refined again if it raised the IoU, catches a limb the
-   first pass left behind.
+   first pass left behind;
+4. the winner and its front/back mirror (``tracker.mirror``) are both limb-searched and refined
+   fully, and the better kept.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -207,10 +209,12 @@ def limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: 
 def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
             chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 2,
             min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
-            prior_rad: float = 50.0) -> InitResult:
+            prior_rad: float = 50.0, front_back: bool = True) -> InitResult:
     """Re-initialise a lost track from the hull, seeded from ``last_good_params`` (n_params,).
 
     Parameters as in ``tracker.initialise.initialise``; the subject may be in any pose.
+    ``front_back``: finish with ``tracker.mirror.resolve_front_back`` (the winner against its
+    mirror, both after a limb search and a full refinement).
     """
     cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
     last = np.asarray(last_good_params, dtype=float)
@@ -232,5 +236,13 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
              for a in 2 * np.pi * np.arange(n_headings) / n_headings]
     cands += pose_candidates(model, hull, n_headings=n_headings, hint=last)
     # 2. greedy limb search on the best hypotheses, 3. staged LM (weaker prior: any pose)
-    return refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations,
-                       prepare=lambda p, s: limb_search(model, views, p, s), prior_rad=prior_rad, polish=True)
+    res = refine_best(model, cameras, chs, views, hull, cands, keep=keep, max_iterations=max_iterations,
+                      prepare=lambda p, s: limb_search(model, views, p, s), prior_rad=prior_rad, polish=True)
+    if not front_back:
+        return res
+    # 4. front or back: the winner and its mirror, limb search and full refinement on both
+    from tracker.mirror import resolve_front_back
+
+    fb = resolve_front_back(model, cameras, silhouettes, chamfer, res.params, views=views, prepared=(cameras, sils, chs),
+                            prepare=lambda p, s: limb_search(model, views, p, s))
+    return replace(fb, label=f"{res.label}/{fb.label}", height_m=res.height_m, candidates=views.n_scored, hull=hull)
