@@ -148,3 +148,30 @@ def test_reverse_term_jacobian_and_pull(scene, rng):
     # the reverse term alone pulls the arm back: its gradient along the abduction is positive
     k = model.param_index("left_upper_arm.abduction")
     assert r @ J[:, k] > 0.0
+
+
+def test_stacked_sampling_equals_per_camera_sampling(rng):
+    """One ``sample`` call over the stacked images of all cameras reads what each camera's own
+    ``ChamferImages.sample`` reads: inside, on and off the cropped arrays (truncation, zero
+    gradient), at integer and fractional pixels, for an empty silhouette too."""
+    from tracker.cost import _StackedChamfer
+
+    masks = []
+    for k, (cx, cy, r) in enumerate([(300, 200, 60), (500, 400, 90), (120, 500, 30)]):
+        yy, xx = np.mgrid[0:600, 0:800]
+        sil = (((xx - cx) / r) ** 2 + ((yy - cy) / (1.6 * r)) ** 2 <= 1.0).astype(np.uint8) * 255
+        edges = np.zeros_like(sil)
+        edges[cy, cx - r // 2:cx + r // 2] = 255
+        masks.append((sil, edges))
+    masks.append((np.zeros((600, 800), np.uint8), np.zeros((600, 800), np.uint8)))
+    chamfer = [chamfer_images(s, e, max_distance_px=24.0) for s, e in masks]
+    stacked = _StackedChamfer.build(chamfer)
+    assert stacked is not None
+    for c, ch in enumerate(chamfer):
+        ox, oy = ch.offset_xy
+        h, w = ch.silhouette_q.shape
+        uv = np.column_stack([rng.uniform(ox - 30, ox + w + 30, 600), rng.uniform(oy - 30, oy + h + 30, 600)])
+        uv[:100] = np.column_stack([ox + rng.integers(-3, w + 3, 100), oy + rng.integers(-3, h + 3, 100)])
+        for a, b in zip(ch.sample(uv), stacked.sample(uv, np.full(len(uv), c))):
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
+    assert _StackedChamfer.build([SmoothField((400, 300), 50.0)]) is None  # not ChamferImages: per camera

@@ -65,6 +65,56 @@ def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
     return (xy[pick] + np.asarray(chamfer.offset_xy)).astype(float)
 
 
+class _StackedChamfer:
+    """The quantised ``ChamferImages`` of all cameras stacked into one, so that one ``sample`` call
+    serves every camera (one call per evaluation instead of one per camera).
+
+    Camera c's arrays sit in a block of rows of their own, 2 pixels inside a border of the
+    truncation code; a point is clipped to 1.5 pixels outside its camera's array first, so its
+    2x2 stencil never reaches another camera's block and it reads exactly what
+    ``ChamferImages.sample`` reads (the truncation value, zero gradient, off the stored array).
+    ``build`` returns None unless every object is a ``ChamferImages`` with the same
+    resolution, truncation and dtype."""
+
+    PAD = 2
+
+    def __init__(self, images, chamfer_cls, placement) -> None:
+        self.images = images
+        self.chamfer_cls = chamfer_cls
+        self.placement = placement  # (n_cams, 6): ox, oy, w, h, block row, 0
+
+    @classmethod
+    def build(cls, chamfer: Sequence):
+        from segmentation.distance import ChamferImages
+
+        if not chamfer or not all(type(ch) is ChamferImages for ch in chamfer):
+            return None
+        first = chamfer[0]
+        if any(ch.resolution_px != first.resolution_px or ch.max_distance_px != first.max_distance_px
+               or ch.silhouette_q.dtype != first.silhouette_q.dtype for ch in chamfer):
+            return None
+        pad = cls.PAD
+        hs = [ch.silhouette_q.shape[0] for ch in chamfer]
+        ws = [ch.silhouette_q.shape[1] for ch in chamfer]
+        rows0 = np.concatenate([[0], np.cumsum([h + 2 * pad for h in hs])])
+        sil = np.full((int(rows0[-1]), max(ws) + 2 * pad), first.max_code, dtype=first.silhouette_q.dtype)
+        edge = sil.copy()
+        for ch, r0, h, w in zip(chamfer, rows0, hs, ws):
+            sil[r0 + pad:r0 + pad + h, pad:pad + w] = ch.silhouette_q
+            edge[r0 + pad:r0 + pad + h, pad:pad + w] = ch.edges_q
+        images = ChamferImages(sil, edge, (0, 0), first.resolution_px, first.max_distance_px, first.image_size)
+        placement = np.array([[ch.offset_xy[0], ch.offset_xy[1], w, h, r0] for ch, r0, h, w
+                              in zip(chamfer, rows0, hs, ws)], dtype=float)
+        return cls(images, ChamferImages, placement)
+
+    def sample(self, uv: np.ndarray, cam: np.ndarray):
+        """``ChamferImages.sample`` of camera ``cam`` (n,) at its pixels ``uv`` (n, 2)."""
+        ox, oy, w, h, r0 = self.placement[cam].T
+        x = np.clip(uv[:, 0] - ox, -1.5, w + 0.5) + self.PAD
+        y = np.clip(uv[:, 1] - oy, -1.5, h + 0.5) + (r0 + self.PAD)
+        return self.images.sample(np.stack([x, y], axis=1))
+
+
 @dataclass(frozen=True, eq=False)
 class CostTerms:
     """The cost evaluated at one pose.
@@ -164,6 +214,7 @@ class ChamferCost:
         else:
             self.boundary = [np.zeros((0, 2)) for _ in chamfer]
         self.n_reverse = sum(len(b) for b in self.boundary)
+        self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
 
@@ -177,8 +228,13 @@ class ChamferCost:
         N = contours.n_points
         d = np.zeros((N, 2))
         grad = np.zeros((N, 2, 2))
+        if self._stacked is not None:
+            rows = np.flatnonzero(used)
+            ds, gs, de, ge = self._stacked.sample(contours.uv[rows], contours.cam[rows])
+            d[rows, 0], d[rows, 1] = ds, de
+            grad[rows, 0], grad[rows, 1] = gs, ge
         per_cam = N // max(len(self.cameras), 1)
-        for c, ch in enumerate(self.chamfer):
+        for c, ch in enumerate(self.chamfer if self._stacked is None else ()):
             sl = slice(c * per_cam, (c + 1) * per_cam)
             rows = np.flatnonzero(used[sl]) + c * per_cam
             if rows.size == 0:
