@@ -224,24 +224,31 @@ class ChamferCost:
         return len(self.cameras) * self.model.n_parts * 2 * self.n_samples
 
     def _sample(self, contours: Contours, used: np.ndarray):
-        """Distances (N,) and gradients (N, 2) of both images at the used rows, per camera."""
+        """Distances (N, 2) and gradients (N, 2, 2) of both images at the used rows (0 elsewhere)."""
         N = contours.n_points
         d = np.zeros((N, 2))
         grad = np.zeros((N, 2, 2))
+        rows = np.flatnonzero(used)
+        d[rows], grad[rows] = self._sample_rows(contours, rows)
+        return d, grad
+
+    def _sample_rows(self, contours: Contours, rows: np.ndarray):
+        """Distances (n, 2) and gradients (n, 2, 2) (silhouette, edge) at contour rows ``rows`` (n,),
+        truncated and weighted."""
+        d = np.zeros((rows.size, 2))
+        grad = np.zeros((rows.size, 2, 2))
         if self._stacked is not None:
-            rows = np.flatnonzero(used)
             ds, gs, de, ge = self._stacked.sample(contours.uv[rows], contours.cam[rows])
-            d[rows, 0], d[rows, 1] = ds, de
-            grad[rows, 0], grad[rows, 1] = gs, ge
-        per_cam = N // max(len(self.cameras), 1)
-        for c, ch in enumerate(self.chamfer if self._stacked is None else ()):
-            sl = slice(c * per_cam, (c + 1) * per_cam)
-            rows = np.flatnonzero(used[sl]) + c * per_cam
-            if rows.size == 0:
-                continue
-            ds, gs, de, ge = ch.sample(contours.uv[rows])
-            d[rows, 0], d[rows, 1] = ds, de
-            grad[rows, 0], grad[rows, 1] = gs, ge
+            d[:, 0], d[:, 1] = ds, de
+            grad[:, 0], grad[:, 1] = gs, ge
+        else:
+            cam = contours.cam[rows]
+            for c, ch in enumerate(self.chamfer):
+                sel = np.flatnonzero(cam == c)
+                if sel.size:
+                    ds, gs, de, ge = ch.sample(contours.uv[rows[sel]])
+                    d[sel, 0], d[sel, 1] = ds, de
+                    grad[sel, 0], grad[sel, 1] = gs, ge
         if self.truncate_px is not None:
             over = d > self.truncate_px
             d[over] = self.truncate_px
@@ -299,8 +306,12 @@ class ChamferCost:
             contours = replace(contours, visible=contours.valid & ~hidden)
             self._frozen_visible = contours.visible.copy()
             used = contours.valid & self._frozen_visible
-            if not np.array_equal(used, used_trial):
-                d, grad = self._sample(contours, used)
+            if not np.array_equal(used, used_trial):  # sample the rows that came into use only
+                d, grad = d.copy(), grad.copy()
+                d[used_trial & ~used] = 0.0
+                grad[used_trial & ~used] = 0.0
+                added = np.flatnonzero(used & ~used_trial)
+                d[added], grad[added] = self._sample_rows(contours, added)
                 rev = self._reverse(contours, used) if self.n_reverse else None
             self._cache = (params.copy(), pose, contours, used, d, grad, rev, True)
         else:
