@@ -147,3 +147,27 @@ def test_lost_track_recovers_from_the_silhouettes(cameras):
     assert recs[-1]["ok"], [r.get("reason") for r in recs]
     jc = joint_centre_array(model, forward(model, np.asarray(recs[-1]["params"])))
     assert 1e3 * np.linalg.norm(jc - joint_centre_array(model, forward(model, p1)), axis=1).mean() < 30.0
+
+
+def test_rms_limit_follows_the_running_median_and_iou_is_checked_sparingly(cameras):
+    """The RMS limit is ``rms_ratio`` × the median RMS of the recent good frames (floored at
+    ``max_rms_px``, capped at ``max_rms_ceiling_px``); the silhouette IoU is rendered on the first
+    frame and then every ``iou_every`` frames while the cheap figures are fine (every frame with
+    ``iou_every=1``)."""
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=1.0)
+    model, truth = rt.model, rt.params[0]
+    chamfer, sils = render_chamfer(model, truth, cameras)
+    opts = TrackerOptions(max_rms_px=1.0, rms_ratio=2.5, iou_every=3)  # renders fit to ~0.5 px
+    tracker = Tracker(model, cameras, initial_params=truth, options=opts)
+    assert tracker.rms_limit() == pytest.approx(1.0)  # no good frame yet: the floor
+    recs = [tracker.step(k, k, chamfer, sils) for k in range(4)]
+    assert all(r["ok"] for r in recs), [r.get("reason") for r in recs]
+    assert 2.5 * np.median([r["rms_px"] for r in recs]) > 1.0
+    assert tracker.rms_limit() == pytest.approx(2.5 * np.median([r["rms_px"] for r in recs]))
+    assert ["iou" in r for r in recs] == [True, False, False, True]
+    assert min(r["iou"] for r in recs if "iou" in r) > 0.85
+    capped = Tracker(model, cameras, initial_params=truth,
+                     options=TrackerOptions(max_rms_px=1.0, rms_ratio=1e3, max_rms_ceiling_px=1.1, iou_every=1))
+    recs = [capped.step(k, k, chamfer, sils) for k in range(2)]
+    assert all("iou" in r for r in recs)
+    assert capped.rms_limit() == pytest.approx(1.1)
