@@ -205,7 +205,10 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
     assert truth[4] < -0.2  # the pelvis leans forward
     start = mirror_params(model, truth)
     assert _heading_error_deg(model, start, truth) > 170
-    res, fb = resolve_front_back(model, cams, sils, chamfer, start, details=True)
+    forward_dir = forward(model, truth).rotation[0][:2, 0]
+    res, fb = resolve_front_back(model, cams, sils, chamfer, start, details=True,
+                                 feet_direction=forward_dir / np.linalg.norm(forward_dir))
+    assert np.all(fb.feet == 0.0)  # bent knees: the feet cue is not trusted
     assert res.label == "mirrored" and fb.mirrored[fb.best] and np.array_equal(res.params, fb.params[fb.best])
     assert _heading_error_deg(model, res.params, truth) < 10.0
     assert fb.params.shape == (2, model.n_params) and list(fb.mirrored) == [False, True]
@@ -213,6 +216,22 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
     err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
                          - joint_centre_array(model, forward(model, truth)), axis=1)
     assert err.mean() < 0.05
+
+
+def test_feet_cue_counts_for_straight_legs():
+    """A T-pose (its mirror casts nearly the same silhouettes): the feet cue adds its full weight
+    to the hypothesis facing away from the feet, nothing to the other, and the truth is kept."""
+    from tracker.mirror import resolve_front_back
+
+    model = load_model("knossow40")
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _reference(model, np.random.default_rng(11), (0.0, 0.0))
+    sils, chamfer = _views(model, truth, cams)
+    facing = np.array([np.cos(truth[5]), np.sin(truth[5])])
+    res, fb = resolve_front_back(model, cams, sils, chamfer, truth, feet_direction=facing, feet_weight=0.5,
+                                 details=True)
+    assert res.label == "kept" and _heading_error_deg(model, res.params, truth) < 5.0
+    assert np.all(fb.feet[~fb.mirrored] < 0.05) and np.all(fb.feet[fb.mirrored] > 0.95)
 
 
 @pytest.mark.parametrize("clip, start_s", [("scaled_131_03", 0.0), ("scaled_131_01", 4.5)])
