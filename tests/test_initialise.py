@@ -161,6 +161,19 @@ def test_mirror_is_an_involution_and_a_frontal_reflection(name, rng):
         mirror_params(model, np.zeros(3))
 
 
+def test_resolve_front_back_rejects_bad_params():
+    from tracker.mirror import resolve_front_back
+
+    model = load_model("knossow40")
+    cams = ring_cameras(2, size=(160, 120))
+    sils, chamfer = _views(model, model.zero(), cams)
+    for bad in (np.zeros(3), np.full(model.n_params, np.nan)):
+        with pytest.raises(ValueError, match="params"):
+            resolve_front_back(model, cams, sils, chamfer, bad)
+    with pytest.raises(ValueError, match="cam1"):
+        resolve_front_back(model, cams, {"cam0": sils["cam0"]}, None, model.zero())
+
+
 def test_mirror_of_a_symmetric_pose_casts_the_same_silhouettes():
     from tracker.mirror import mirror_params
     from tracker.render import render_silhouettes

@@ -194,11 +194,13 @@ def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
         views = ScoreViews(model, cams, sils, scale=0.5)
     starts, mirrored = [], []
     for flag, start in ((False, model.clamp(p)), (True, model.clamp(mirror_params(model, p)))):
-        starts.append(start), mirrored.append(flag)
+        starts.append(start)
+        mirrored.append(flag)
         if prepare is not None:  # the limb search's start too, unless it changed nothing
             searched, _ = prepare(start, views.score(start))
             if not np.array_equal(searched, start):
-                starts.append(searched), mirrored.append(flag)
+                starts.append(searched)
+                mirrored.append(flag)
     outs, terms_list = [], []
     for start in starts:
         x, terms = refine(model, cams, chs, start, max_iterations=max_iterations, prior_rad=prior_rad,
