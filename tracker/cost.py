@@ -336,7 +336,7 @@ class ChamferCost:
         if jacobian:
             urows = np.flatnonzero(used)
             Jx = contour_jacobian(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            Ju = np.einsum("nkj,njp->nkp", grad[urows], Jx)  # (n_used, 2, n_params)
+            Ju = grad[urows] @ Jx  # (n_used, 2, 2) @ (n_used, 2, n_params)
             if compact:
                 J = Ju.reshape(-1, self.model.n_params)
             else:
@@ -348,7 +348,7 @@ class ChamferCost:
                 Jr = np.zeros((self.n_reverse, self.model.n_params))
                 m = match >= 0
                 pos = np.searchsorted(urows, match[m])  # matched rows are used rows
-                Jr[m] = -self.reverse_weight * np.einsum("ki,kip->kp", unit[m], Jx[pos])
+                Jr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Jx[pos])[:, 0]
                 J = np.concatenate([J, Jr])
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
