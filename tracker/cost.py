@@ -214,6 +214,8 @@ class ChamferCost:
         else:
             self.boundary = [np.zeros((0, 2)) for _ in chamfer]
         self.n_reverse = sum(len(b) for b in self.boundary)
+        self._boundary_all = np.concatenate(self.boundary) if self.n_reverse else np.zeros((0, 2))
+        self._boundary_sq = [(b * b).sum(1)[:, None] for b in self.boundary]
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
@@ -260,28 +262,26 @@ class ChamferCost:
     def _reverse(self, contours: Contours, used: np.ndarray):
         """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)."""
         K = self.n_reverse
-        r = np.zeros(K)
-        dist_all = np.full(K, np.inf)
-        match = np.full(K, -1)
-        unit = np.zeros((K, 2))
+        nearest = np.full(K, -1)  # matched contour row of each boundary sample (-1: camera has none)
         per_cam = contours.n_points // max(len(self.cameras), 1)
         k0 = 0
-        for c, y in enumerate(self.boundary):
+        for c, (y, yy) in enumerate(zip(self.boundary, self._boundary_sq)):
             k1 = k0 + len(y)
             rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
             if len(y) and rows.size:
                 x = contours.uv[rows]
                 # squared distances by the expansion |y|² − 2 y·x + |x|² (one small matrix product)
-                d2 = (y * y).sum(1)[:, None] - 2.0 * (y @ x.T) + (x * x).sum(1)[None, :]
-                j = np.argmin(d2, axis=1)
-                dist = np.linalg.norm(y - x[j], axis=1)
-                diff = y - x[j]
-                dist_all[k0:k1] = dist
-                far = dist > self.reverse_min_px
-                r[k0:k1] = np.where(far, dist - self.reverse_min_px, 0.0)
-                match[k0:k1] = np.where(far, rows[j], -1)
-                unit[k0:k1] = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
+                d2 = (x * x).sum(1) - 2.0 * (y @ x.T) + yy
+                nearest[k0:k1] = rows[np.argmin(d2, axis=1)]
             k0 = k1
+        has = nearest >= 0
+        diff = self._boundary_all - contours.uv[nearest]
+        dist = np.linalg.norm(diff, axis=1)
+        dist_all = np.where(has, dist, np.inf)
+        far = has & (dist > self.reverse_min_px)
+        r = np.where(far, dist - self.reverse_min_px, 0.0)
+        match = np.where(far, nearest, -1)
+        unit = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
         if self.truncate_px is not None:
             over = r > self.truncate_px
             r[over] = self.truncate_px
