@@ -2,8 +2,10 @@
 
 Per frame: keep the cameras that sent chamfer images, predict (constant velocity, or the last
 pose), fit with Levenberg–Marquardt on the chamfer cost (``tracker.cost``) from the prediction with
-a small prior towards the last fitted pose, measure quality (RMS residual, fraction of predicted contour points inside the
-silhouettes) and emit the record.  A frame whose quality is below the thresholds is reported
+a small prior towards the last fitted pose, measure quality (RMS residual against a limit relative
+to the recent frames' median, fraction of predicted contour points inside the silhouettes, and
+now and then or when those look suspect the silhouette IoU; ``TrackerOptions``) and emit the
+record.  A frame whose quality is below the thresholds is reported
 ``ok: false`` ("poor fit"); after ``patience`` such frames in a row (``tracker.recovery.LossMonitor``)
 the pose is searched again from the silhouettes, seeded by the last good pose
 (``tracker.initialise.initialise(hint=...)``).  Without ``initial_params`` the first frame is
