@@ -175,3 +175,29 @@ def test_stacked_sampling_equals_per_camera_sampling(rng):
         for a, b in zip(ch.sample(uv), stacked.sample(uv, np.full(len(uv), c))):
             np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
     assert _StackedChamfer.build([SmoothField((400, 300), 50.0)]) is None  # not ChamferImages: per camera
+
+
+def test_compact_drops_only_rows_that_add_nothing(scene, rng):
+    """On real chamfer images with the reverse term, the compact residuals leave out the zero
+    residuals with a zero gradient (contour points inside their silhouette, boundary samples near
+    the contour): robust cost, gradient and Gauss-Newton matrix equal the full layout's."""
+    from tracker.solver import robust_cost, robust_weights
+
+    model = load_model("knossow40")
+    p = model.random_params(rng, fraction=0.3)
+    p[:3] = [0.1, -0.1, 0.0]
+    labels = render_label_images(model, forward(model, p), scene)
+    chamfer = [chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab)) for lab in labels]
+    q = p.copy()
+    q[6:] += np.radians(5.0) * rng.choice([-1, 1], model.n_params - 6)
+    q = model.clamp(q)
+    kw = dict(n_samples=8, reverse_weight=1.0, reverse_samples=150, reverse_min_px=8.0)
+    full = ChamferCost(model, scene, chamfer, **kw).evaluate(q, jacobian=True)
+    comp = ChamferCost(model, scene, chamfer, **kw).evaluate(q, jacobian=True, compact=True)
+    assert len(comp.residuals) < 0.8 * (2 * full.n_used + len(full.boundary_dist))
+    np.testing.assert_allclose(robust_cost(comp.residuals, loss="huber", f_scale=3.0),
+                               robust_cost(full.residuals, loss="huber", f_scale=3.0), rtol=1e-12)
+    wc, wf = (robust_weights(t.residuals, loss="huber", f_scale=3.0) for t in (comp, full))
+    Jc, Jf = comp.jacobian, full.jacobian
+    np.testing.assert_allclose(Jc.T @ (wc * comp.residuals), Jf.T @ (wf * full.residuals), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(Jc.T @ (wc[:, None] * Jc), Jf.T @ (wf[:, None] * Jf), rtol=1e-9, atol=1e-6)

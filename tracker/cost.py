@@ -24,8 +24,11 @@ is ``−w u_jᵀ dx_m(j)/dΦ`` with ``u_j`` the unit vector from ``x_m(j)`` to `
 
 Residual layout: ``r`` has shape ``(2 N + K,)``: ``r[2i] = d_sil_i``, ``r[2i+1] = d_edge_i`` for
 the N contour rows, 0 for rows not used (not visible, or camera absent), then the K reverse
-residuals (K = 0 without the reverse term).  ``compact=True`` keeps only the used contour rows
-(what the LM solver takes; the scipy baseline needs the fixed length).
+residuals (K = 0 without the reverse term).  ``compact=True`` (what the LM solver takes; the scipy
+baseline needs the fixed length) keeps only the residuals of used contour rows and reverse samples
+that are non-zero or have a non-zero gradient: the others add exactly 0 to the cost and to the
+normal equations (most silhouette residuals are 0 inside the silhouette, most reverse ones 0
+within ``reverse_min_px``), so the solver's products are about 3x smaller.
 """
 
 from __future__ import annotations
@@ -122,7 +125,7 @@ class CostTerms:
     pose : Pose; contours : Contours (N rows over the cost's cameras)
     used : (N,) bool, rows that contribute
     d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
-    residuals : (2 N + K,) or (2 n_used + K,) when compact (K reverse residuals)
+    residuals : (2 N + K,), or fewer when compact (module docstring; K reverse residuals)
     jacobian : (len(residuals), n_params) or None
     boundary_dist : (K,) distance in pixels from each observed boundary sample to the nearest used
         contour point of its camera (inf where that camera has none), or None without the reverse term
@@ -328,17 +331,23 @@ class ChamferCost:
             rev = self._reverse(contours, used) if self.n_reverse else None
             self._cache = (params.copy(), pose, contours, used, d, grad, rev, fresh)
             self.n_evaluations += 1
-        rows = np.flatnonzero(used) if compact else np.arange(contours.n_points)
-        r = d[rows].ravel()
+        urows = np.flatnonzero(used)
+        if compact:
+            # a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
+            # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations
+            keep = (d[urows] != 0.0) | (grad[urows] != 0.0).any(axis=2)  # (n_used, 2)
+            r = d[urows][keep]
+        else:
+            r = d.ravel()
         if rev is not None:
-            r = np.concatenate([r, rev[0]])
+            rkeep = rev[0] != 0.0 if compact else slice(None)  # a matched sample has r > 0
+            r = np.concatenate([r, rev[0][rkeep]])
         J = None
         if jacobian:
-            urows = np.flatnonzero(used)
             Jx = contour_jacobian(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
             Ju = grad[urows] @ Jx  # (n_used, 2, 2) @ (n_used, 2, n_params)
             if compact:
-                J = Ju.reshape(-1, self.model.n_params)
+                J = Ju[keep]
             else:
                 J = np.zeros((contours.n_points, 2, self.model.n_params))
                 J[urows] = Ju
@@ -349,7 +358,7 @@ class ChamferCost:
                 m = match >= 0
                 pos = np.searchsorted(urows, match[m])  # matched rows are used rows
                 Jr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Jx[pos])[:, 0]
-                J = np.concatenate([J, Jr])
+                J = np.concatenate([J, Jr[rkeep]])
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):
