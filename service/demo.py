@@ -33,9 +33,9 @@ HOST = "demo"
 
 @dataclass(frozen=True)
 class DemoOptions:
-    cameras: int = 4
+    cameras: int = 6
     size: tuple[int, int] = (320, 240)
-    frames: int = 30
+    frames: int = 90
     fps: float = 30.0
     motion: str = "scaled_131_03"
     delivery: str = "lossless"
