@@ -58,3 +58,12 @@ def test_malformed_model_tables_named(tmp_path, text, match):
     (tmp_path / "bad.toml").write_text(text)
     with pytest.raises(ModelError, match=match):
         load_model(tmp_path / "bad.toml")
+
+
+def test_package_face_resolves_every_name():
+    import tracker
+
+    for name in tracker.__all__:
+        assert getattr(tracker, name) is not None, name
+    with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
+        tracker.nonsense  # noqa: B018

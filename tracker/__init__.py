@@ -1,1 +1,52 @@
-"""Tracker: body model, kinematics, extremal contours, Jacobians, chamfer cost, solver, initialisation, renderer."""
+"""Tracker: body model, kinematics, extremal contours, Jacobians, chamfer cost, solver, initialisation, renderer.
+
+The package face (names resolve lazily, so ``import tracker.model`` stays light)::
+
+    model = load_model("knossow40", height_m=1.75)
+    pose = forward(model, params)                                  # part2world of every part
+    contours = extremal_contours(model, pose, cameras)             # closed-form contour generators
+    J = contour_jacobian(model, pose, cameras, contours)           # dx/dΦ = J_I (A + B) J_H
+    tracker = Tracker(model, cameras)                              # warm-started LM per frame
+    record = tracker.step(frame_id, timestamp_ns, chamfer_images)  # a DESIGN.md pose record
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "tracker.model": ("BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"),
+    "tracker.kinematics": ("Pose", "forward", "body_jacobian", "point_jacobian", "joint_centres"),
+    "tracker.contours": ("Contours", "extremal_contours"),
+    "tracker.jacobian": ("contour_jacobian",),
+    "tracker.visibility": ("hidden_points",),
+    "tracker.cost": ("ChamferCost", "CostTerms"),
+    "tracker.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
+    "tracker.tracking": ("Tracker", "TrackerOptions"),
+    "tracker.hull": ("VoxelHull", "visual_hull"),
+    "tracker.initialise": ("InitResult", "initialise"),
+    "tracker.recovery": ("LossMonitor", "recover"),
+    "tracker.mirror": ("mirror_params", "resolve_front_back"),
+    "tracker.render": ("render_labels", "render_silhouettes", "internal_edges"),
+    "tracker.scene": ("ring_cameras",),
+    "tracker.bvh": ("Bvh", "BvhError", "load_bvh"),
+    "tracker.retarget": ("retarget_bvh",),
+    "tracker.synth": ("make_synthetic_session", "bundled_motion"),
+    "tracker.offline": ("track_session",),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tracker' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
