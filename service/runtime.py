@@ -113,23 +113,33 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
     """Open camera sources: replay (realtime pacing live, as fast as credits allow lossless, or
     ``paced`` externally by an EpochPacer) or OpenCV (frame ids from ``frame_id_at``, the trigger
     box's, when given).  ``loop``: replays restart at the end with increasing frame ids."""
-    out = {}
-    for name in cameras:
-        cam = cfg.camera(name)
-        if cam.backend == "replay":
-            from capture.replay import ReplaySource
-
-            src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast",
-                               loop=loop)
-        else:
-            from capture.opencv_source import OpenCVSource
-
-            device = int(cam.source) if cam.source.isdigit() else cam.source
-            src = OpenCVSource(device, name=name, width=cam.width, height=cam.height,
-                               fps=cam.fps or cfg.trigger.fps, exposure=cam.exposure, frame_id_at=frame_id_at)
-        src.open()
-        out[name] = src
+    out: dict = {}
+    try:
+        for name in cameras:
+            out[name] = _open_source(cfg, name, mode=mode, paced=paced, frame_id_at=frame_id_at, loop=loop)
+    except BaseException:  # release the cameras already opened
+        for src in out.values():
+            src.close()
+        raise
     return out
+
+
+def _open_source(cfg: StudioConfig, name: str, *, mode: str, paced: bool, frame_id_at, loop: bool):
+    """One camera source, opened."""
+    cam = cfg.camera(name)
+    if cam.backend == "replay":
+        from capture.replay import ReplaySource
+
+        src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast",
+                           loop=loop)
+    else:
+        from capture.opencv_source import OpenCVSource
+
+        device = int(cam.source) if cam.source.isdigit() else cam.source
+        src = OpenCVSource(device, name=name, width=cam.width, height=cam.height,
+                           fps=cam.fps or cfg.trigger.fps, exposure=cam.exposure, frame_id_at=frame_id_at)
+    src.open()
+    return src
 
 
 def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str | None = None) -> dict:

@@ -38,6 +38,11 @@ Fitter = Callable[[int, int, dict], dict]
 TRACK_CONSUMER = "track"
 
 
+class WorkerError(RuntimeError):
+    """A worker could not go on (camera lost, peers unreachable, no credit): its process must exit
+    non-zero so that the supervisor restarts it (a clean return means "finished", never restarted)."""
+
+
 def segment_token(camera: str) -> str:
     """Liveliness name of "camera ``camera`` is being segmented" (lossless cameras wait for it)."""
     return f"segment.{camera}"
@@ -71,8 +76,10 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
 
     Lossless: frame ``k`` is published only once the tracker acknowledged ``k - window``
     (:class:`~service.bus.CreditGate`) and only once the tracker and a segment worker for each camera
-    are alive (``startup_timeout_s``); a missing credit for ``credit_timeout_s`` ends the worker.
-    Sources must already be open (context managers entered by the caller).  ``pace(timestamp_ns)``
+    are alive (``startup_timeout_s``).  Raises :class:`WorkerError` when the consumers are not
+    reachable in time, a credit is missing for ``credit_timeout_s``, or a source fails (SourceError
+    other than a timeout or the end of its stream); returns the counters when every source ended or
+    ``stop`` was set.  Sources must already be open (context managers entered by the caller).  ``pace(timestamp_ns)``
     (e.g. :class:`EpochPacer`) may sleep and returns False to skip a frame (counted in ``skipped``).
     """
     encodings = dict(encodings or {})
@@ -86,8 +93,10 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
             ready = (wait_until_alive(session, keys, needed, timeout_s=startup_timeout_s, stop=stop)
                      and wait_until_matched(pubs.values(), timeout_s=startup_timeout_s, stop=stop))
             if not ready:
-                log.error("lossless: tracker or segment workers not reachable within %g s", startup_timeout_s)
-                return dict(status.counters)
+                if stop.is_set():
+                    return dict(status.counters)
+                raise WorkerError(f"lossless: tracker or segment workers {list(needed)} not reachable "
+                                  f"within {startup_timeout_s:g} s")
         while active and not stop.is_set():
             for name, src in list(active.items()):
                 try:
@@ -99,19 +108,18 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
                     del active[name]
                     continue
                 except SourceError as exc:
-                    log.error("camera %s: %s", name, exc)
                     status.count("errors")
-                    del active[name]
-                    continue
+                    status.tick(state="failed", force=True, cameras=len(active) - 1)
+                    raise WorkerError(f"camera {name}: {exc}") from exc
                 if pace is not None and not pace(frame.timestamp_ns):
                     status.count("skipped")
                     continue
                 if gate is not None:
                     if not gate.wait(frame.frame_id, timeout_s=credit_timeout_s, stop=stop):
-                        if not stop.is_set():
-                            log.error("camera %s: no credit for frame %d within %g s", name, frame.frame_id,
-                                      credit_timeout_s)
-                        return dict(status.counters)
+                        if stop.is_set():
+                            return dict(status.counters)
+                        raise WorkerError(f"camera {name}: no credit from the tracker for frame "
+                                          f"{frame.frame_id} within {credit_timeout_s:g} s")
                 msg = FrameMessage.from_image(name, frame.frame_id, frame.timestamp_ns, frame.image,
                                               encoding=encodings.get(name, "raw"), jpeg_quality=jpeg_quality)
                 pubs[name].put(msg.to_bytes(), attachment=attachment_ns(wall_ns()))
@@ -130,10 +138,14 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                        idle_exit_s: float | None = None) -> dict:
     """One thread per camera: newest frame (live) or every frame in order (lossless) -> chamfer.
 
+    A frame the segmenter rejects with MessageError is counted (``bad``); any other exception ends
+    the worker with :class:`WorkerError` (the supervisor restarts the process).
+
     ``idle_exit_s``: return after that long without any frame once frames came (replays); None = until stop.
     """
     lock = threading.Lock()
     last_frame: list = [None]  # idle time counts from the first frame
+    crashed: dict[str, BaseException] = {}  # camera -> what ended its thread
     wires = {name: (Inbox(session, keys.frame(name), FrameMessage.from_bytes, mode=mode,
                           depth=1 if mode == "live" else 4096),
                     declare_publisher(session, keys.chamfer(name), mode=mode)) for name in segmenters}
@@ -163,6 +175,9 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
                 pub.put(out.to_bytes(), attachment=att)
                 with lock:
                     status.count("processed")
+        except Exception as exc:  # a segmenter bug: the worker must fail loudly, not finish
+            log.exception("camera %s: segmentation thread crashed", name)
+            crashed[name] = exc
         finally:
             inbox.close()
 
@@ -191,6 +206,9 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
         status.close()
         for token in tokens:
             token.undeclare()
+    if crashed:
+        name, exc = next(iter(crashed.items()))
+        raise WorkerError(f"camera {name}: segmentation failed: {exc.__class__.__name__}: {exc}") from exc
     return {**status.counters, **gauges()}
 
 

@@ -12,14 +12,26 @@ import pytest
 from capture.calibration import save_calibration
 from capture.camera import Camera
 from capture.replay import ReplaySource, iter_frame_sets
+from capture.sources import Frame, StreamLostError
 from capture.session import load_session, write_session_toml
 from service.assembler import FrameSetAssembler
-from service.bus import Inbox, Keys, ZenohSettings, free_port, open_session
+from service.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
+                         wait_until_matched)
 from service.messages import ChamferMessage, FrameMessage
 from service.records import PoseRecord
-from service.workers import run_camera_worker, run_segment_worker, run_track_worker
+from service.workers import WorkerError, run_camera_worker, run_segment_worker, run_track_worker
 
 CAMS = ("cam0", "cam1", "cam2")
+
+
+def wait_for(condition, timeout_s=10.0):
+    """Poll ``condition()`` until true (True) or ``timeout_s`` (False)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
 
 
 def make_session(root, rng, n_frames=12, size=(40, 30)):
@@ -112,8 +124,9 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
     assert [p.to_dict()["params"] for p in poses] == [o["params"] for o in offline]
     assert [p.frame for p in poses] == [o["frame"] for o in offline]
     assert all(p.get("latency_ms") > 0 for p in poses)
-    time.sleep(0.2)
-    assert len(pose_inbox.drain()) == len(offline)
+    got = []
+    assert wait_for(lambda: got.extend(pose_inbox.drain()) or len(got) >= len(offline), 5.0)
+    assert [r.message.frame for r in got] == [o["frame"] for o in offline]
 
 
 def test_live_missing_camera_lowers_cameras(tmp_path, rng, studio):
@@ -123,12 +136,13 @@ def test_live_missing_camera_lowers_cameras(tmp_path, rng, studio):
                  set_timeout_s=0.3, stop=studio.stop, on_pose=poses.append)
     studio.start("segment", run_segment_worker, studio.session(), keys, {c: segmenter for c in CAMS},
                  mode="live", stop=studio.stop)
-    time.sleep(0.5)
+    cam_session = studio.session()
+    assert wait_until_alive(cam_session, keys, ("track", "segment"), timeout_s=10.0)
     sources = {c: ReplaySource(session, c, pacing="realtime") for c in CAMS[:2]}  # cam2 is down
     for s in sources.values():
         s.open()
-    run_camera_worker(studio.session(), keys, sources, mode="live", stop=studio.stop)
-    time.sleep(0.3)
+    run_camera_worker(cam_session, keys, sources, mode="live", stop=studio.stop)
+    assert wait_for(lambda: poses and poses[-1].frame == 9, 5.0)  # the last set, released at its timeout
     assert len(poses) >= 5
     assert all(p.to_dict()["params"][2] == -1.0 for p in poses)  # cam2 never contributed
     # the tracker kept publishing without cam2; a set of only one camera is a late frame under heavy load
@@ -219,3 +233,68 @@ def test_garbage_on_every_key_is_counted_and_workers_live_on(tmp_path, rng, stud
     track, segment = studio.results["track"], studio.results["segment"]
     assert track["bad"] > 0 and segment["bad"] > 0
     assert track["processed"] == 8 and segment["processed"] == 3 * 8
+
+
+class _UnpluggedCamera:
+    """A Source that delivers two frames, then loses its device (as a USB camera pulled out does)."""
+
+    name = "cam0"
+
+    def __init__(self):
+        self.n = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+    def read(self) -> Frame:
+        if self.n >= 2:
+            raise StreamLostError("camera cam0: device lost")
+        self.n += 1
+        return Frame("cam0", self.n, self.n * 40_000_000, np.zeros((30, 40, 3), np.uint8))
+
+
+def test_camera_worker_fails_loudly_when_a_camera_is_lost(studio):
+    """A lost camera is an error (non-zero exit: restarted), not a clean finish (exit 0: never restarted)."""
+    with pytest.raises(WorkerError, match="cam0.*device lost"):
+        run_camera_worker(studio.session(listen=True), studio.keys, {"cam0": _UnpluggedCamera()}, mode="live",
+                          stop=studio.stop)
+
+
+def test_lossless_camera_worker_fails_when_no_consumer(studio):
+    with pytest.raises(WorkerError, match="not reachable within 0.3 s"):
+        run_camera_worker(studio.session(listen=True), studio.keys, {"cam0": _UnpluggedCamera()},
+                          mode="lossless", stop=studio.stop, startup_timeout_s=0.3)
+
+
+def test_segment_worker_fails_loudly_when_its_segmenter_crashes(rng, studio):
+    def broken(frame, image):
+        raise RuntimeError("segmenter bug")
+
+    keys = studio.keys
+    sender = studio.session(listen=True)
+    pub = declare_publisher(sender, keys.frame("cam0"))
+    frame = FrameMessage.from_image("cam0", 1, 0, rng.integers(0, 256, (30, 40, 3), dtype=np.uint8))
+
+    def send():
+        if wait_until_matched([pub], timeout_s=10.0):
+            pub.put(frame.to_bytes())
+
+    threading.Thread(target=send, daemon=True).start()
+    with pytest.raises(WorkerError, match="cam0.*RuntimeError: segmenter bug"):
+        run_segment_worker(studio.session(), keys, {"cam0": broken}, mode="live", stop=threading.Event())
+
+
+def test_worker_command_missing_camera_is_one_clear_error(tmp_path, capsys):
+    from service.commands import worker
+
+    cfg = tmp_path / "studio.toml"
+    cfg.write_text(f"""[studio]\nname = "t"\n[zenoh]\nlisten = ["tcp/127.0.0.1:{free_port()}"]\n
+[[camera]]\nname = "cam0"\nhost = "h"\nbackend = "opencv"\nsource = "/dev/video-none"\n""")
+    rc = worker.main(["camera", "--config", str(cfg), "--host", "h"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert err[-1].startswith("contourcap worker camera: camera 'cam0' (/dev/video-none)")
+    assert not any("Traceback" in line for line in err)

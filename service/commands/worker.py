@@ -27,7 +27,20 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--epoch-ns", type=int, default=None,
                         help="camera, live replay: wall-clock ns at which session time 0 is due (set by run)")
     parser.add_argument("--loop", action="store_true", help="camera, replay: loop the session forever")
-    parser.add_argument("--log-level", default="INFO")
+    parser.add_argument("--log-level", default="INFO", type=str.upper,
+                        choices=("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"))
+
+
+def _setup_errors() -> tuple[type[BaseException], ...]:
+    """What bad configuration, files or devices raise while a worker is being built: one line, exit 2."""
+    from capture.calibration import CalibrationError
+    from capture.session import SessionError
+    from capture.sources import SourceError
+    from capture.trigger import TriggerError
+    from service.config import ConfigError
+    from tracker.model import ModelError
+
+    return (ConfigError, SessionError, CalibrationError, SourceError, TriggerError, ModelError)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from service.runtime import (build_fitter, build_segmenters, build_sources, needs_trigger, start_trigger,
                                  stop_on_signals, worker_settings)
 
-    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+    logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format=f"%(asctime)s {args.role} %(levelname)s %(message)s")
     log = logging.getLogger("contourcap.worker")
     cv2.setNumThreads(1)
@@ -64,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     keys = Keys(cfg.studio)
     component = "track" if args.role == "track" else f"{args.role}-{'-'.join(cams) if args.cameras else host}"
+    from service.workers import WorkerError
+
     try:
         if args.role == "camera":
             from service.workers import EpochPacer, run_camera_worker
@@ -99,9 +114,12 @@ def run(args: argparse.Namespace) -> int:
                                      max_frames=args.max_frames, idle_exit_s=idle)
         log.info("finished: %s", {k: v for k, v in sorted(stats.items())})
         return 0
-    except ConfigError as exc:
+    except _setup_errors() as exc:
         print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)
         return 2
+    except WorkerError as exc:  # non-zero: the supervisor restarts this worker
+        print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)
+        return 1
     finally:
         session.close()
 
