@@ -21,10 +21,20 @@ Jacobian); ``tests/test_camera.py`` checks it against finite differences.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Camera", "rodrigues_to_matrix", "matrix_to_rodrigues"]
+__all__ = [
+    "Camera",
+    "CameraStack",
+    "stack_cameras",
+    "project_many",
+    "project_many_with_jacobian",
+    "rodrigues_to_matrix",
+    "matrix_to_rodrigues",
+]
 
 
 def _as_distortion(dist) -> np.ndarray:
@@ -240,6 +250,148 @@ class Camera:
         f = 0.5 * w / np.tan(np.radians(fov_deg) / 2.0)
         K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
         return cls(name, K, np.asarray(distortion, dtype=float), R, -R @ eye, (w, h))
+
+
+@dataclass(frozen=True, eq=False)
+class CameraStack:
+    """The calibrations of several cameras stacked for batch projection (read-only arrays).
+
+    ``rotation (n_cams, 3, 3)`` world2cam, ``translation (n_cams, 3)``, ``intrinsics (n_cams, 5)``
+    = ``(fx, skew, cx, fy, cy)``, ``distortion (n_cams, 5)``; ``distorted`` is False when every
+    camera's distortion is exactly zero (the distortion polynomial is then skipped: it would
+    return its input unchanged), ``skewed`` likewise for the skew term.
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    intrinsics: np.ndarray
+    distortion: np.ndarray
+    distorted: bool
+    skewed: bool
+
+
+@lru_cache(maxsize=32)
+def _stack(cameras: tuple) -> CameraStack:
+    R = np.stack([c.rotation for c in cameras])
+    t = np.stack([c.translation for c in cameras])
+    K = np.stack([c.matrix[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]] for c in cameras])
+    d = np.stack([c.distortion for c in cameras])
+    for arr in (R, t, K, d):
+        arr.setflags(write=False)
+    return CameraStack(R, t, K, d, bool(np.any(d != 0.0)), bool(np.any(K[:, 1] != 0.0)))
+
+
+def stack_cameras(cameras: Sequence[Camera]) -> CameraStack:
+    """Stacked calibration arrays of ``cameras`` (cached per tuple of Camera objects)."""
+    cameras = tuple(cameras)
+    if not cameras:
+        raise ValueError("cameras: at least one camera is needed")
+    return _stack(cameras)
+
+
+def _batch_camera_frame(st: CameraStack, points_world, cam_index):
+    """Camera-frame points and the per-point parameter selector.
+
+    ``cam_index`` None: ``points_world (n_cams, n, 3)``, camera c's rows in slab c; parameters
+    are broadcast as ``(n_cams, 1)``.  Else ``points_world (n, 3)`` and ``cam_index (n,)``."""
+    X = np.asarray(points_world, dtype=float)
+    n_cams = st.rotation.shape[0]
+    if cam_index is None:
+        if X.ndim != 3 or X.shape[0] != n_cams or X.shape[2] != 3:
+            raise ValueError(f"points_world: expected shape ({n_cams}, n, 3) without cam_index, got {X.shape}")
+        Xc = np.matmul(X, st.rotation.transpose(0, 2, 1))
+        Xc += st.translation[:, None, :]
+        return Xc, (slice(None), None), st.rotation[:, None]
+    idx = np.asarray(cam_index)
+    if X.ndim != 2 or X.shape[1] != 3 or idx.shape != X.shape[:1]:
+        raise ValueError(f"points_world (n, 3) and cam_index (n,) expected, got {X.shape} and {idx.shape}")
+    if idx.size and (idx.min() < 0 or idx.max() >= n_cams):
+        raise ValueError(f"cam_index: values must lie in [0, {n_cams})")
+    R = st.rotation[idx]
+    Xc = np.matmul(R, X[:, :, None])[:, :, 0]
+    Xc += st.translation[idx]
+    return Xc, idx, R
+
+
+def _batch_project(st: CameraStack, Xc, sel, jacobian: bool, R=None):
+    K = st.intrinsics[sel]  # (n_cams, 1, 5) or (n, 5): broadcast against (..., ) below
+    fx, sk, cx, fy, cy = K[..., 0], K[..., 1], K[..., 2], K[..., 3], K[..., 4]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_z = 1.0 / Xc[..., 2]
+    x = Xc[..., 0] * inv_z
+    y = Xc[..., 1] * inv_z
+    shape = x.shape
+    uv = np.empty(shape + (2,))
+    if st.distorted:
+        d = st.distortion[sel]
+        k1, k2, p1, p2, k3 = d[..., 0], d[..., 1], d[..., 2], d[..., 3], d[..., 4]
+        xy = x * y
+        xx, yy = x * x, y * y
+        r2 = xx + yy
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xx)
+        yd = y * radial + p1 * (r2 + 2.0 * yy) + 2.0 * p2 * xy
+    else:
+        xd, yd = x, y
+    if st.skewed:
+        np.add(fx * xd + sk * yd, cx, out=uv[..., 0])
+    else:
+        np.add(fx * xd, cx, out=uv[..., 0])
+    np.add(fy * yd, cy, out=uv[..., 1])
+    if not jacobian:
+        return uv, None
+    if st.distorted:
+        drad = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        dxd_dx = radial + 2.0 * xx * drad + 2.0 * p1 * y + 6.0 * p2 * x
+        dxd_dy = 2.0 * xy * drad + 2.0 * p1 * x + 2.0 * p2 * y
+        dyd_dy = radial + 2.0 * yy * drad + 6.0 * p1 * y + 2.0 * p2 * x
+        du_dx = fx * dxd_dx + sk * dxd_dy
+        du_dy = fx * dxd_dy + sk * dyd_dy
+        dv_dx = fy * dxd_dy
+        dv_dy = fy * dyd_dy
+    else:
+        du_dx, du_dy, dv_dx, dv_dy = fx, sk, 0.0, fy
+    D = np.empty(shape + (2, 3))
+    D[..., 0, 0] = du_dx * inv_z
+    D[..., 0, 1] = du_dy * inv_z
+    D[..., 0, 2] = -(du_dx * x + du_dy * y) * inv_z
+    D[..., 1, 0] = dv_dx * inv_z
+    D[..., 1, 1] = dv_dy * inv_z
+    D[..., 1, 2] = -(dv_dx * x + dv_dy * y) * inv_z
+    return uv, np.matmul(D, R)
+
+
+def project_many(cameras: Sequence[Camera], points_world, cam_index=None) -> np.ndarray:
+    """Project points with several cameras at once (equals ``Camera.project`` per camera).
+
+    Parameters
+    ----------
+    cameras : sequence of Camera, length n_cams (stacked arrays cached per tuple)
+    points_world : ndarray, shape (n_cams, n, 3), or (n, 3) with ``cam_index``
+        World points, metres; slab c is seen by camera c.
+    cam_index : ndarray of int, shape (n,), optional
+        The camera of every point (instead of one slab per camera).
+
+    Returns
+    -------
+    ndarray, shape (n_cams, n, 2) or (n, 2)
+        Pixels; points at or behind a camera give junk (check the depth first).
+    """
+    st = stack_cameras(cameras)
+    Xc, sel, _ = _batch_camera_frame(st, points_world, cam_index)
+    with np.errstate(all="ignore"):
+        return _batch_project(st, Xc, sel, False)[0]
+
+
+def project_many_with_jacobian(cameras: Sequence[Camera], points_world, cam_index=None):
+    """``project_many`` and d(u, v)/d(X_world), shapes (..., 2) and (..., 2, 3).
+
+    Equals ``Camera.project_with_jacobian`` per camera; same layouts as ``project_many``.
+    """
+    st = stack_cameras(cameras)
+    Xc, sel, R = _batch_camera_frame(st, points_world, cam_index)
+    with np.errstate(all="ignore"):
+        return _batch_project(st, Xc, sel, True, R)
 
 
 def rodrigues_to_matrix(rvec) -> np.ndarray:

@@ -34,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera
+from capture.camera import Camera, project_many, stack_cameras
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
 from tracker.visibility import hidden_points
@@ -202,13 +202,10 @@ def extremal_contours(
     shape = (n_cams, n_parts, 2, n_samples)
     points = world.reshape(-1, 3)
     n_per_cam = n_parts * 2 * n_samples
-    cam_R = np.stack([cam.rotation for cam in cameras])  # world2cam (n_cams, 3, 3)
-    cam_t = np.stack([cam.translation for cam in cameras])
-    depth = world.reshape(n_cams, n_per_cam, 3) @ cam_R[:, 2, :, None] + cam_t[:, None, 2:3]  # (n_cams, n, 1)
-    uv = np.empty((n_cams, n_per_cam, 2))
-    with np.errstate(all="ignore"):  # points behind a camera project to junk; flagged invalid below
-        for c, cam in enumerate(cameras):
-            uv[c] = cam.project(world[c].reshape(-1, 3))
+    st = stack_cameras(cameras)  # world2cam rotations (n_cams, 3, 3), translations (n_cams, 3)
+    world_c = world.reshape(n_cams, n_per_cam, 3)
+    depth = world_c @ st.rotation[:, 2, :, None] + st.translation[:, None, 2:3]  # (n_cams, n, 1)
+    uv = project_many(cameras, world_c)  # points behind a camera project to junk; flagged invalid below
     size = np.array([cam.size for cam in cameras], dtype=float) - 1.0  # (n_cams, 2)
     with np.errstate(invalid="ignore"):  # Camera.in_image, False for NaN
         inside = (uv[..., 0] >= 0.0) & (uv[..., 1] >= 0.0)

@@ -40,7 +40,7 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera
+from capture.camera import Camera, project_many_with_jacobian
 from tracker.contours import Contours, camera_centres
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
@@ -187,18 +187,7 @@ def contour_jacobian(
     r = _select(contours, rows)
     Y = contours.points[r]
     cam = contours.cam[r]
-    JI = np.empty((r.size, 2, 3))
-    with np.errstate(all="ignore"):  # invalid rows (behind a camera) give junk, as their uv does
-        if r.size and np.all(cam[1:] >= cam[:-1]):  # rows grouped by camera: slices
-            bounds = np.searchsorted(cam, np.arange(len(cameras) + 1))
-            for c, camera in enumerate(cameras):
-                if bounds[c + 1] > bounds[c]:
-                    sl = slice(bounds[c], bounds[c + 1])
-                    JI[sl] = camera.project_with_jacobian(Y[sl])[1]
-        else:
-            for c, camera in enumerate(cameras):
-                sel = cam == c
-                JI[sel] = camera.project_with_jacobian(Y[sel])[1]
+    JI = project_many_with_jacobian(cameras, Y, cam_index=cam)[1]  # invalid rows give junk, as their uv does
     # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
     M = np.empty((r.size, 2, 6))
     j0, j1, j2 = JI[:, :, 0], JI[:, :, 1], JI[:, :, 2]
