@@ -32,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera
+from capture.camera import Camera, stack_cameras
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
 
@@ -74,8 +74,8 @@ def hidden_points(
     rows = np.arange(n) if only is None else np.flatnonzero(only)
     if rows.size == 0:
         return hidden
-    cam_R = np.stack([cm.rotation for cm in cameras])  # world2cam (n_cams, 3, 3)
-    cam_t = np.stack([cm.translation for cm in cameras])  # (n_cams, 3)
+    st = stack_cameras(cameras)
+    cam_R, cam_t = st.rotation, st.translation  # world2cam (n_cams, 3, 3), (n_cams, 3)
     centres = -np.einsum("cji,cj->ci", cam_R, cam_t)  # (n_cams, 3) world
     c, own, P = cam[rows], part[rows], points[rows]
     i, q = _candidate_pairs(model, pose, cam_R, cam_t, c, own, P)
@@ -83,30 +83,43 @@ def hidden_points(
         return hidden
     n_parts = model.n_parts
     R, t = pose.rotation, pose.translation
-    # camera centres in every part frame (n_cams, n_parts, 3); segment directions in the candidate
-    # occluders' frames from one product (r, 3) @ (3, 3 n_parts), then gathered per pair
-    m_all = np.einsum("pji,cpj->cpi", R, centres[:, None, :] - t[None, :, :])
-    m = m_all[c[i], q]
-    D = P - centres[c]
-    d = (D @ R.transpose(1, 0, 2).reshape(3, 3 * n_parts)).reshape(-1, n_parts, 3)[i, q]
-    a, b, k, z1, z2 = model.cones.T[:, q]  # each (pairs,)
-    g1, g2, g3 = m[:, 0] / a, m[:, 1] / b, 1.0 + k * m[:, 2]
-    h1, h2, h3 = d[:, 0] / a, d[:, 1] / b, k * d[:, 2]
+    a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
+    # per (camera, part): g = (m1/a, m2/b, 1 + k m3), q(0) = |g|²_(+,+,-), z1 - m3, z2 - m3
+    m_all = np.einsum("pji,cpj->cpi", R, centres[:, None, :] - t[None, :, :])  # (n_cams, n_parts, 3)
+    per_cp = np.empty((6,) + m_all.shape[:2])  # component-major: gathered rows stay contiguous
+    g1, g2 = m_all[..., 0] / a, m_all[..., 1] / b
+    g3 = 1.0 + k * m_all[..., 2]
+    per_cp[0], per_cp[1], per_cp[2] = g1, g2, g3
+    per_cp[3] = g1 * g1 + g2 * g2 - g3 * g3
+    per_cp[4], per_cp[5] = z1 - m_all[..., 2], z2 - m_all[..., 2]
+    # per (point, part): h = (d1/a, d2/b, k d3) and d3 of d = R_q^T (P - C), all parts from one
+    # product (4 n_parts, 3) @ (3, n) with the columns of every R scaled by (1/a, 1/b, k, 1)
+    W = np.empty((4, n_parts, 3))
+    W[0] = R[:, :, 0] / a[:, None]
+    W[1] = R[:, :, 1] / b[:, None]
+    W[2] = R[:, :, 2] * k[:, None]
+    W[3] = R[:, :, 2]
+    n = P.shape[0]
+    per_pp = W.reshape(4 * n_parts, 3) @ (P - centres[c]).T  # (4 n_parts, n): [component, part, point]
+    h1, h2, h3, d3 = np.take(per_pp.reshape(4, n_parts * n), q * n + i, axis=1)  # each (pairs,)
+    g1, g2, g3, qc, e1, e2 = np.take(per_cp.reshape(6, -1), c[i] * n_parts + q, axis=1)
     qa = h1 * h1 + h2 * h2 - h3 * h3
     qb = g1 * h1 + g2 * h2 - g3 * h3
-    qc = g1 * g1 + g2 * g2 - g3 * g3
     # slab z1 <= m3 + s d3 <= z2, intersected with s in [0, 1]
-    m3, d3 = m[:, 2], d[:, 2]
     flat = np.abs(d3) < 1e-15
-    safe = np.where(flat, 1.0, d3)
-    sa, sb = (z1 - m3) / safe, (z2 - m3) / safe
-    inside_slab = (m3 >= z1) & (m3 <= z2)
-    lo = np.where(flat, np.where(inside_slab, 0.0, 1.0), np.maximum(np.minimum(sa, sb), 0.0))
-    hi = np.where(flat, np.where(inside_slab, 1.0, 0.0), np.minimum(np.maximum(sa, sb), 1.0))
+    inside_slab = (e1 <= 0.0) & (e2 >= 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):  # flat rows are replaced below
+        sa, sb = e1 / d3, e2 / d3
+    lo = np.maximum(np.minimum(sa, sb), 0.0)
+    hi = np.minimum(np.maximum(sa, sb), 1.0)
+    if flat.any():
+        lo[flat] = np.where(inside_slab[flat], 0.0, 1.0)
+        hi[flat] = np.where(inside_slab[flat], 1.0, 0.0)
     ok = (lo <= hi) & (~flat | inside_slab)
-    # the minimum of q on [lo, hi]: at an end, or at the vertex when q is convex
-    vertex = np.clip(-qb / np.where(qa > 0, qa, 1.0), lo, hi)
-    vertex = np.where(qa > 0, vertex, lo)
+    # the minimum of q on [lo, hi]: at the (clipped) vertex when q is convex, else at an end
+    convex = qa > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(convex, np.clip(-qb / qa, lo, hi), lo)
 
     def q_at(s):
         return (qa * s + 2.0 * qb) * s + qc
@@ -117,7 +130,7 @@ def hidden_points(
     return hidden
 
 
-_CHUNK = 10  # consecutive points (same camera) culled together first
+_CHUNK = 4  # consecutive points (same camera) culled together first (half a ruling at n_samples = 8)
 
 
 def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
