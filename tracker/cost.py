@@ -218,7 +218,9 @@ class ChamferCost:
             self.boundary = [np.zeros((0, 2)) for _ in chamfer]
         self.n_reverse = sum(len(b) for b in self.boundary)
         self._boundary_all = np.concatenate(self.boundary) if self.n_reverse else np.zeros((0, 2))
-        self._boundary_sq = [(b * b).sum(1)[:, None] for b in self.boundary]
+        # nearest contour point of a boundary sample y: argmin over x of |x|² − 2 y·x (|y|² is the
+        # same for every x), one product (k, 3) @ (3, n) per camera with (−2 y, 1) and (x, |x|²)
+        self._boundary_aug = [np.concatenate([-2.0 * b, np.ones((len(b), 1))], axis=1) for b in self.boundary]
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
@@ -267,15 +269,17 @@ class ChamferCost:
         K = self.n_reverse
         nearest = np.full(K, -1)  # matched contour row of each boundary sample (-1: camera has none)
         per_cam = contours.n_points // max(len(self.cameras), 1)
+        xa = np.empty((contours.n_points, 3))  # (u, v, u² + v²) per contour row
+        xa[:, :2] = contours.uv
+        xa[:, 2] = np.einsum("ij,ij->i", contours.uv, contours.uv)
         k0 = 0
-        for c, (y, yy) in enumerate(zip(self.boundary, self._boundary_sq)):
-            k1 = k0 + len(y)
-            rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
-            if len(y) and rows.size:
-                x = contours.uv[rows]
-                # squared distances by the expansion |y|² − 2 y·x + |x|² (one small matrix product)
-                d2 = (x * x).sum(1) - 2.0 * (y @ x.T) + yy
-                nearest[k0:k1] = rows[np.argmin(d2, axis=1)]
+        for c, ya in enumerate(self._boundary_aug):
+            k1 = k0 + len(ya)
+            if k1 > k0:
+                rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam])
+                if rows.size:
+                    rows += c * per_cam
+                    nearest[k0:k1] = rows[np.argmin(ya @ xa[rows].T, axis=1)]
             k0 = k1
         has = nearest >= 0
         diff = self._boundary_all - contours.uv[nearest]
