@@ -41,7 +41,7 @@ import numpy as np
 
 from capture.camera import Camera
 from tracker.contours import Contours, extremal_contours
-from tracker.jacobian import contour_jacobian
+from tracker.jacobian import apply_screws, contour_image_motion
 from tracker.kinematics import Pose, forward
 from tracker.model import BodyModel
 from tracker.visibility import hidden_points
@@ -348,21 +348,31 @@ class ChamferCost:
             r = np.concatenate([r, rev[0][rkeep]])
         J = None
         if jacobian:
-            Jx = contour_jacobian(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            Ju = grad[urows] @ Jx  # (n_used, 2, 2) @ (n_used, 2, n_params)
-            if compact:
-                J = Ju[keep]
-            else:
-                J = np.zeros((contours.n_points, 2, self.model.n_params))
-                J[urows] = Ju
-                J = J.reshape(-1, self.model.n_params)
+            # residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and
+            # reverse directions are applied there, then one product with the parts' screws
+            n_p = self.model.n_params
+            Mx = contour_image_motion(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
+            Mu = grad[urows] @ Mx  # (n_used, 2, 2) @ (n_used, 2, 6)
+            part = contours.part[urows]
+            Mr = rp = None
             if rev is not None:
                 _, match, unit, _ = rev
-                Jr = np.zeros((self.n_reverse, self.model.n_params))
                 m = match >= 0
                 pos = np.searchsorted(urows, match[m])  # matched rows are used rows
-                Jr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Jx[pos])[:, 0]
-                J = np.concatenate([J, Jr[rkeep]])
+                Mr = np.zeros((self.n_reverse, 6))
+                Mr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Mx[pos])[:, 0]
+                rp = np.zeros(self.n_reverse, dtype=part.dtype)
+                rp[m] = part[pos]
+            if compact:
+                rows6 = [Mu[keep]] + ([] if Mr is None else [Mr[rkeep]])
+                parts = [np.broadcast_to(part[:, None], keep.shape)[keep]] + ([] if rp is None else [rp[rkeep]])
+                J = apply_screws(self.model, pose, np.concatenate(rows6), np.concatenate(parts))
+            else:
+                J = np.zeros((contours.n_points, 2, n_p))
+                J[urows] = apply_screws(self.model, pose, Mu.reshape(-1, 6), np.repeat(part, 2)).reshape(-1, 2, n_p)
+                J = J.reshape(-1, n_p)
+                if Mr is not None:
+                    J = np.concatenate([J, apply_screws(self.model, pose, Mr, rp)])
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):

@@ -45,7 +45,7 @@ from tracker.contours import Contours, camera_centres
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
 
-__all__ = ["contour_jacobian", "contour_point_jacobian", "contour_motion"]
+__all__ = ["contour_jacobian", "contour_image_motion", "apply_screws", "contour_point_jacobian", "contour_motion"]
 
 
 def _select(contours: Contours, rows) -> np.ndarray:
@@ -157,6 +157,54 @@ def contour_point_jacobian(
     return J * model.affects[contours.part[r]][:, None, :]
 
 
+def contour_image_motion(
+    model: BodyModel,
+    pose: Pose,
+    cameras: Sequence[Camera],
+    contours: Contours,
+    *,
+    sliding: bool = True,
+    rows=None,
+) -> np.ndarray:
+    """J_I (A + B) of the contour points: image velocity per unit screw of the point's part.
+
+    Returns
+    -------
+    ndarray, shape (n, 2, 6)
+        Pixels per unit screw ``(ω; v)`` (world); n = N or len(rows).  ``contour_jacobian``
+        is this times the part's screws (``apply_screws``); a caller that combines rows (image
+        gradients, directions) can do so here, on 6 columns instead of n_params.
+    """
+    _check(model, pose, cameras, contours)
+    r = _select(contours, rows)
+    Y = contours.points[r]
+    JI = project_many_with_jacobian(cameras, Y, cam_index=contours.cam[r])[1]  # invalid rows: junk, as their uv
+    # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
+    M = np.empty((r.size, 2, 6))
+    j0, j1, j2 = JI[:, :, 0], JI[:, :, 1], JI[:, :, 2]
+    y0, y1, y2 = Y[:, 0, None], Y[:, 1, None], Y[:, 2, None]
+    M[:, :, 0] = y1 * j2 - y2 * j1
+    M[:, :, 1] = y2 * j0 - y0 * j2
+    M[:, :, 2] = y0 * j1 - y1 * j0
+    M[:, :, 3:] = JI
+    if sliding:
+        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
+        JIe = j0 * e[:, 0, None] + j1 * e[:, 1, None] + j2 * e[:, 2, None]  # (n, 2)
+        M += JIe[:, :, None] * w[:, None, :]
+    return M
+
+
+def apply_screws(model: BodyModel, pose: Pose, motion: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """Rows of per-screw motion times J_H of their parts: ``motion (n, 6) -> (n, n_params)``.
+
+    ``motion`` row i is a linear functional of the screw of part ``part[i]`` (e.g. one row of
+    ``contour_image_motion``); the result is its derivative with respect to the parameters
+    (``J_H`` = the parameters' screws, masked by ``model.affects``)."""
+    J = motion @ _screws(model, pose)
+    J *= _affects_float(model)[part]
+    return J
+
+
 def contour_jacobian(
     model: BodyModel,
     pose: Pose,
@@ -183,23 +231,7 @@ def contour_jacobian(
     ndarray, shape (n, 2, n_params)
         Pixels per unit parameter (radians, metres); n = N or len(rows).
     """
-    _check(model, pose, cameras, contours)
     r = _select(contours, rows)
-    Y = contours.points[r]
-    cam = contours.cam[r]
-    JI = project_many_with_jacobian(cameras, Y, cam_index=cam)[1]  # invalid rows give junk, as their uv does
-    # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
-    M = np.empty((r.size, 2, 6))
-    j0, j1, j2 = JI[:, :, 0], JI[:, :, 1], JI[:, :, 2]
-    y0, y1, y2 = Y[:, 0, None], Y[:, 1, None], Y[:, 2, None]
-    M[:, :, 0] = y1 * j2 - y2 * j1
-    M[:, :, 1] = y2 * j0 - y0 * j2
-    M[:, :, 2] = y0 * j1 - y1 * j0
-    M[:, :, 3:] = JI
-    if sliding:
-        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
-        JIe = j0 * e[:, 0, None] + j1 * e[:, 1, None] + j2 * e[:, 2, None]  # (n, 2)
-        M += JIe[:, :, None] * w[:, None, :]
-    J = (M.reshape(-1, 6) @ _screws(model, pose)).reshape(r.size, 2, model.n_params)
-    J *= _affects_float(model)[contours.part[r]][:, None, :]
-    return J
+    M = contour_image_motion(model, pose, cameras, contours, sliding=sliding, rows=r)
+    part = np.repeat(contours.part[r], 2)
+    return apply_screws(model, pose, M.reshape(-1, 6), part).reshape(r.size, 2, model.n_params)
