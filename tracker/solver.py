@@ -153,10 +153,11 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
     status = MAX_ITERATIONS
     it = 0
     while it < max_iterations:
-        w = robust_weights(r, loss=loss, f_scale=f_scale)
-        Jw = J * w[:, None]
-        A = J.T @ Jw + np.diag(pw)
-        g = Jw.T @ r + pw * (x - xp)
+        sw = np.sqrt(robust_weights(r, loss=loss, f_scale=f_scale))  # IRLS weights are >= 0
+        Js = J * sw[:, None]
+        A = Js.T @ Js  # a product with its own transpose: one symmetric rank-k update (syrk)
+        A[np.diag_indices(x.size)] += pw
+        g = Js.T @ (sw * r) + pw * (x - xp)
         # freeze parameters at a bound that the gradient pushes outward
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
         if np.max(np.abs(g[free]), initial=0.0) <= gtol:
