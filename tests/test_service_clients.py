@@ -80,3 +80,32 @@ def test_export_command_writes_bvh(tmp_path, rng, capsys):
     assert rc == 0 and "4 frames at 100.00 fps" in capsys.readouterr().out
     rc = export.run(_args(export, [str(tmp_path / "p.jsonl"), "--bvh", str(tmp_path / "o.bvh"), "--model", "nope"]))
     assert rc == 2 and "--model" in capsys.readouterr().err
+
+
+def test_echo_bad_out_file_is_a_clear_error_before_connecting(capsys, tmp_path):
+    from service.commands import echo
+
+    port = free_port()
+    peer = open_session(ZenohSettings.loopback(port, listen=True))  # reachable: only --out is wrong
+    try:
+        rc = echo.run(_args(echo, ["--connect", f"tcp/127.0.0.1:{port}", "--timeout-s", "2",
+                                   "--out", str(tmp_path / "no" / "such" / "p.jsonl")]))
+    finally:
+        peer.close()
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("contourcap echo: --out:") and "p.jsonl" in err
+
+
+def test_view_bad_save_path_is_a_clear_error(capsys, tmp_path):
+    pytest.importorskip("rerun")
+    from service.commands import view
+
+    port = free_port()
+    peer = open_session(ZenohSettings.loopback(port, listen=True))
+    try:
+        rc = view.run(_args(view, ["--connect", f"tcp/127.0.0.1:{port}", "--timeout-s", "2",
+                                   "--save", str(tmp_path / "no" / "x.rrd")]))
+    finally:
+        peer.close()
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("contourcap view: --save") and "x.rrd" in err

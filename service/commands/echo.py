@@ -44,16 +44,21 @@ def run(args: argparse.Namespace) -> int:
 
     stop = threading.Event()
     stop_on_signals(stop)
+    out = None
     try:
         settings, studio = client_settings(args)
+        out = open(args.out, "ab") if args.out else None  # before the session: nothing to leave open
         session = open_session(settings)
-    except (ConfigError, BusError) as exc:
-        print(f"contourcap echo: {exc}", file=sys.stderr)
+    except (ConfigError, BusError, OSError) as exc:
+        if out is not None:
+            out.close()
+        what = f"--out: {exc}" if isinstance(exc, OSError) else str(exc)
+        print(f"contourcap echo: {what}", file=sys.stderr)
         return 2
-    inbox = Inbox(session, Keys(studio).pose, PoseRecord.from_bytes, mode="live", depth=256)
-    out = open(args.out, "ab") if args.out else None
+    inbox = None
     n, last = 0, time.monotonic()
     try:
+        inbox = Inbox(session, Keys(studio).pose, PoseRecord.from_bytes, mode="live", depth=256)
         while not stop.is_set() and (args.count is None or n < args.count):
             got = inbox.recv(0.1)
             if got is None:
@@ -71,9 +76,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if out is not None:
             out.close()
-        if inbox.dropped or inbox.bad:
-            print(f"contourcap echo: {inbox.dropped} poses dropped (too slow), {inbox.bad} bad messages",
-                  file=sys.stderr)
-        inbox.close()
+        if inbox is not None:
+            if inbox.dropped or inbox.bad:
+                print(f"contourcap echo: {inbox.dropped} poses dropped (too slow), {inbox.bad} bad messages",
+                      file=sys.stderr)
+            inbox.close()
         session.close()
     return 0

@@ -55,30 +55,35 @@ def run(args: argparse.Namespace) -> int:
         settings, studio = client_settings(args)
         calib = _calibration_path(args)
         cameras = cameras_for_view(calib) if calib is not None else []
+        # the rerun sink first: a bad --save path or busy port must not leave a zenoh session open
+        rec = rr.RecordingStream("contourcap", recording_id=f"contourcap-{studio}")
+        if args.save:
+            try:
+                rec.save(args.save)
+            except RuntimeError as exc:
+                raise MessageError(f"--save {args.save}: {exc}") from None
+        elif args.serve_web:
+            uri = rec.serve_grpc(grpc_port=args.grpc_port)
+            rr.serve_web_viewer(web_port=args.web_port, open_browser=False, connect_to=uri)
+            print(f"contourcap view: web viewer at http://127.0.0.1:{args.web_port}/?url={uri}", file=sys.stderr)
+        else:
+            rec.spawn()
         session = open_session(settings)
     except (ConfigError, BusError, MessageError) as exc:
         print(f"contourcap view: {exc}", file=sys.stderr)
         return 2
-    rec = rr.RecordingStream("contourcap", recording_id=f"contourcap-{studio}")
-    if args.save:
-        rec.save(args.save)
-    elif args.serve_web:
-        uri = rec.serve_grpc(grpc_port=args.grpc_port)
-        rr.serve_web_viewer(web_port=args.web_port, open_browser=False, connect_to=uri)
-        print(f"contourcap view: web viewer at http://127.0.0.1:{args.web_port}/?url={uri}", file=sys.stderr)
-    else:
-        rec.spawn()
     bridge = RerunBridge(rec, cameras=cameras, image_every=args.image_every)
     keys = Keys(studio)
-    inboxes = [(Inbox(session, keys.pose, PoseRecord.from_bytes, mode="live", depth=64), bridge.on_pose)]
-    if not args.no_images:
-        n = max(1, len(cameras))
-        inboxes += [(Inbox(session, keys.frame("*"), FrameMessage.from_bytes, mode="live", depth=2 * n),
-                     bridge.on_frame),
-                    (Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode="live", depth=2 * n),
-                     bridge.on_chamfer)]
+    inboxes: list = []
     start = last = time.monotonic()
     try:
+        inboxes.append((Inbox(session, keys.pose, PoseRecord.from_bytes, mode="live", depth=64), bridge.on_pose))
+        if not args.no_images:
+            n = max(1, len(cameras))
+            inboxes += [(Inbox(session, keys.frame("*"), FrameMessage.from_bytes, mode="live", depth=2 * n),
+                         bridge.on_frame),
+                        (Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode="live", depth=2 * n),
+                         bridge.on_chamfer)]
         while not stop.is_set():
             got_any = False
             for inbox, handle in inboxes:
