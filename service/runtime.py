@@ -72,6 +72,19 @@ def _session(cfg: StudioConfig):
     return load_session(cfg.session)
 
 
+def preflight(cfg: StudioConfig, host: str, *, fit_plugin: str | None = None) -> None:
+    """What ``contourcap run`` checks before starting ``host``'s workers: the session (calibration,
+    subject) that its tracker or replay cameras need loads.  ConfigError / SessionError /
+    CalibrationError name the file; without this each worker would fail and be restarted forever."""
+    replay = any(c.backend == "replay" for c in cfg.cameras_on(host))
+    if replay or (cfg.tracker_host == host and not fit_plugin):
+        _session(cfg)
+    if cfg.tracker_host == host and not fit_plugin and cfg.calibration is not None:
+        from capture.calibration import load_calibration
+
+        load_calibration(cfg.calibration)
+
+
 def needs_trigger(cfg: StudioConfig, cameras) -> bool:
     """Whether these cameras take their frame ids from the USB trigger box."""
     return cfg.trigger.backend == "usb" and any(cfg.camera(c).backend == "opencv" for c in cameras)

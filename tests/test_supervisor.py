@@ -150,3 +150,16 @@ def test_run_command_streams_and_stops_everything_on_sigterm(tmp_path, rng):
     assert proc.returncode == 0, err[-2000:]
     time.sleep(0.2)
     assert _processes_mentioning(str(path)) == [], "workers left running after SIGTERM"
+
+
+def test_run_command_checks_the_session_before_starting_workers(tmp_path, capsys):
+    """A missing session is one clear error (exit 2), not workers that fail and restart forever."""
+    from service.commands import run
+
+    path = tmp_path / "studio.toml"
+    path.write_text(f'[studio]\nname = "pf"\nsession = "gone"\n[zenoh]\nlisten = ["tcp/127.0.0.1:{free_port()}"]\n'
+                    '[tracker]\nhost = "h1"\n[[camera]]\nname = "cam0"\nhost = "h1"\nbackend = "replay"\n')
+    rc = run.main(["--config", str(path), "--host", "h1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert err == [f"contourcap run: {tmp_path / 'gone' / 'session.toml'}: session file not found"]

@@ -23,16 +23,17 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fit-plugin", default=None, help="module:factory replacing the tracker")
     parser.add_argument("--start-delay-s", type=float, default=2.0,
                         help="live replay: session time 0 is this long after start (workers start up)")
-    parser.add_argument("--log-level", default="INFO")
+    parser.add_argument("--log-level", default="INFO", type=str.upper,
+                        choices=("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"))
 
 
 def run(args: argparse.Namespace) -> int:
     from service.bus import BusError, open_session
     from service.config import ConfigError, load_config
-    from service.runtime import hub_endpoint, stop_on_signals
+    from service.runtime import hub_endpoint, preflight, stop_on_signals
     from service.supervisor import Supervisor, plan_host
 
-    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+    logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s run %(levelname)s %(message)s")
     stop = threading.Event()
     stop_on_signals(stop)
@@ -46,6 +47,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"contourcap run: {cfg.path}: host {host!r} has no workers (hosts: {list(cfg.hosts)}); "
               "pass --host", file=sys.stderr)
         return 2
+    from capture.calibration import CalibrationError
+    from capture.session import SessionError
+
+    try:
+        preflight(cfg, host, fit_plugin=args.fit_plugin)
+    except (ConfigError, SessionError, CalibrationError) as exc:
+        print(f"contourcap run: {exc}", file=sys.stderr)
+        return 2
     hub_session, hub = None, None
     if cfg.zenoh.mode == "peer":
         from dataclasses import replace
@@ -58,10 +67,10 @@ def run(args: argparse.Namespace) -> int:
             return 2
     replay_live = cfg.delivery == "live" and any(c.backend == "replay" for c in cfg.cameras_on(host))
     epoch = time.time_ns() + int(args.start_delay_s * 1e9) if replay_live else None
-    specs = plan_host(cfg, args.config, host, hub=hub, epoch_ns=epoch, idle_exit_s=args.idle_exit_s,
-                      segment_plugin=args.segment_plugin, fit_plugin=args.fit_plugin)
-    sup = Supervisor(specs)
-    try:
+    try:  # the hub session is closed whatever happens (an open one hangs the process at exit)
+        specs = plan_host(cfg, args.config, host, hub=hub, epoch_ns=epoch, idle_exit_s=args.idle_exit_s,
+                          segment_plugin=args.segment_plugin, fit_plugin=args.fit_plugin)
+        sup = Supervisor(specs)
         sup.run(stop, until_finished=args.until_finished)
     finally:
         if hub_session is not None:
