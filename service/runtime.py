@@ -121,11 +121,23 @@ def start_trigger(cfg: StudioConfig, stop: threading.Event, *, resync_s: float =
     return box
 
 
+def free_run_frame_ids(fps: float) -> Callable[[int], int]:
+    """Frame ids of cameras without a trigger box: the index of the nearest ``1/fps`` tick of the
+    wall clock (``time.time_ns``, NTP/PTP-synchronised across hosts).  Frames of separately started
+    (or restarted) camera processes then share ids when taken at about the same time; counting from
+    0 per process instead misaligned the cameras and, after a restart, made every frame of the
+    restarted camera "late" in live mode for good."""
+    if not (fps > 0):
+        raise ConfigError(f"fps must be positive to number frames, got {fps!r}")
+    period_ns = int(round(1e9 / fps))
+    return lambda timestamp_ns: (int(timestamp_ns) + period_ns // 2) // period_ns
+
+
 def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, paced: bool = False,
                   frame_id_at: Callable[[int], int] | None = None, loop: bool = False) -> dict:
     """Open camera sources: replay (realtime pacing live, as fast as credits allow lossless, or
     ``paced`` externally by an EpochPacer) or OpenCV (frame ids from ``frame_id_at``, the trigger
-    box's, when given).  ``loop``: replays restart at the end with increasing frame ids."""
+    box's, when given, else :func:`free_run_frame_ids` on wall-clock timestamps).  ``loop``: replays restart at the end with increasing frame ids."""
     out: dict = {}
     try:
         for name in cameras:
@@ -148,9 +160,13 @@ def _open_source(cfg: StudioConfig, name: str, *, mode: str, paced: bool, frame_
     else:
         from capture.opencv_source import OpenCVSource
 
+        import time
+
         device = int(cam.source) if cam.source.isdigit() else cam.source
-        src = OpenCVSource(device, name=name, width=cam.width, height=cam.height,
-                           fps=cam.fps or cfg.trigger.fps, exposure=cam.exposure, frame_id_at=frame_id_at)
+        fps = cam.fps or cfg.trigger.fps
+        clock = {} if frame_id_at is not None else {"clock": time.time_ns}  # the trigger box's clock is its own
+        src = OpenCVSource(device, name=name, width=cam.width, height=cam.height, fps=fps, exposure=cam.exposure,
+                           frame_id_at=frame_id_at if frame_id_at is not None else free_run_frame_ids(fps), **clock)
     src.open()
     return src
 

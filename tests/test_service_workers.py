@@ -298,3 +298,38 @@ def test_worker_command_missing_camera_is_one_clear_error(tmp_path, capsys):
     assert rc == 2
     assert err[-1].startswith("contourcap worker camera: camera 'cam0' (/dev/video-none)")
     assert not any("Traceback" in line for line in err)
+
+
+def test_free_running_cameras_share_frame_ids_across_processes_and_restarts(tmp_path):
+    """Without a trigger box, frame ids come from the wall clock: two cameras opened at different
+    times (or one reopened) give the same id to frames taken within half a period of each other."""
+    import cv2
+
+    from service.config import load_config
+    from service.runtime import build_sources, free_run_frame_ids
+
+    assert [free_run_frame_ids(25.0)(t) for t in (0, 19_999_999, 20_000_000, 40_000_000, 59_999_999)] == [0, 0, 1, 1, 1]
+    ids = free_run_frame_ids(100.0)  # 10 ms ticks (the config's trigger fps)
+    video = tmp_path / "cam.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (40, 30))
+    for _ in range(2000):  # a file reads faster than the clock ticks: frames of a tick already used are skipped
+        writer.write(np.zeros((30, 40, 3), np.uint8))
+    writer.release()
+    cfg_path = tmp_path / "studio.toml"
+    cfg_path.write_text('[studio]\nname = "t"\n[trigger]\nfps = 100.0\n' + "".join(
+        f'[[camera]]\nname = "{c}"\nhost = "h"\nbackend = "opencv"\nsource = "{video}"\n' for c in ("a", "b")))
+    cfg = load_config(cfg_path)
+    first = build_sources(cfg, ("a",), mode="live")["a"]
+    second = None
+    try:
+        early = first.read()  # camera a has delivered a frame before camera b's process starts
+        second = build_sources(cfg, ("b",), mode="live")["b"]
+        fa, fb = first.read(), second.read()
+        assert early.frame_id < fa.frame_id and fa.frame_id == ids(fa.timestamp_ns)
+        # b's first frame is numbered by the clock like a's, not 0: taken after a's first, a higher id
+        assert early.frame_id < fb.frame_id == ids(fb.timestamp_ns) <= ids(time.time_ns())
+        assert abs(fa.frame_id - fb.frame_id) <= 1 + (abs(fa.timestamp_ns - fb.timestamp_ns) // 10_000_000)
+    finally:
+        first.close()
+        if second is not None:
+            second.close()
