@@ -11,6 +11,10 @@ Rules (``cameras`` = the configured camera names):
 - ``live``: the newest complete (or timed-out) set is released; older pending sets are dropped
   and counted in ``stale``; messages for ids at or below the last released one are dropped
   (``late``).  ``lossless``: sets are released strictly in frame-id order, never dropped.
+- ``live``: frame ids of one camera increase; a camera whose id goes back by more than
+  ``restart_gap`` frames (a few back is just a late message) has restarted its numbering (e.g. the trigger box was reopened): its new ids are accepted, ids already released
+  above them stop counting as "released", and pending sets of the old numbering above them are
+  dropped (counted in ``restarts``) — otherwise every later frame would be ``late`` for good.
 """
 
 from __future__ import annotations
@@ -40,19 +44,20 @@ class _Pending:
 
 class FrameSetAssembler(Generic[T]):
     def __init__(self, cameras: tuple[str, ...], *, mode: str = "live", timeout_s: float = 0.08,
-                 absent_after_s: float = 1.0) -> None:
+                 absent_after_s: float = 1.0, restart_gap: int = 8) -> None:
         if mode not in ("live", "lossless"):
             raise ValueError(f"mode must be live or lossless, got {mode!r}")
         if not cameras:
             raise ValueError("cameras: at least one camera name is needed")
         self.cameras, self.mode = tuple(cameras), mode
         self.timeout_s, self.absent_after_s = float(timeout_s), float(absent_after_s)
+        self.restart_gap = int(restart_gap)
         self._pending: dict[int, _Pending] = {}
         self._latest_id: dict[str, int] = {}
         self._last_seen: dict[str, float] = {}
         self.last_released = -1
         self._t_start: float | None = None
-        self.stale = self.late = self.unknown = 0
+        self.stale = self.late = self.unknown = self.restarts = 0
 
     def add(self, camera: str, frame_id: int, item: T, now_s: float) -> None:
         """Record one camera's message for ``frame_id`` received at ``now_s``."""
@@ -62,6 +67,12 @@ class FrameSetAssembler(Generic[T]):
         self._last_seen[camera] = now_s
         if self._t_start is None:
             self._t_start = now_s
+        if self.mode == "live" and frame_id < self._latest_id.get(camera, -1) - self.restart_gap:  # renumbered
+            self.restarts += 1
+            self._latest_id[camera] = frame_id
+            self.last_released = min(self.last_released, frame_id - 1)
+            for fid in [f for f in self._pending if f > frame_id]:
+                del self._pending[fid]
         self._latest_id[camera] = max(self._latest_id.get(camera, -1), frame_id)
         if frame_id <= self.last_released:
             self.late += 1
@@ -114,8 +125,13 @@ class FrameSetAssembler(Generic[T]):
             return None
         return min(p.first_arrival_s for p in self._pending.values()) + self.timeout_s
 
+    def is_pending(self, frame_id: int) -> bool:
+        """Whether a set with this id is waiting to be released."""
+        return frame_id in self._pending
+
     def __len__(self) -> int:
         return len(self._pending)
 
     def stats(self) -> dict[str, Any]:
-        return {"pending": len(self._pending), "stale_sets": self.stale, "late": self.late}
+        return {"pending": len(self._pending), "stale_sets": self.stale, "late": self.late,
+                "restarts": self.restarts}

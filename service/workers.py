@@ -232,7 +232,8 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     done = 0
 
     def gauges() -> dict:
-        return {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,
+        return {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
+                "bad": inbox.bad,
                 "dropped": inbox.dropped, "cameras": len(asm.present(clock()))}
 
     last_input = None  # idle time counts from the first input
@@ -253,7 +254,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
                     status.count("mismatched_key")
                 else:
                     asm.add(msg.camera, msg.frame_id, msg, clock())
-                    if got.sent_ns is not None:
+                    if got.sent_ns is not None and asm.is_pending(msg.frame_id):
                         sent[msg.frame_id] = min(sent.get(msg.frame_id, got.sent_ns), got.sent_ns)
                 got = inbox.recv(0) if len(inbox) else None
             for fs in asm.pop_ready(clock()):
@@ -283,7 +284,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
                 status.count("processed")
                 status.count("missing_cameras", len(fs.missing))
                 done += 1
-            for fid in [f for f in sent if f <= asm.last_released]:
+            for fid in [f for f in sent if not asm.is_pending(f)]:  # bounded by the pending sets
                 del sent[fid]
             status.tick(**gauges())
         return {**status.counters, "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,

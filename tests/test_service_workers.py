@@ -174,6 +174,25 @@ def test_assembler_rules():
     assert asm.pop_ready(2.1) == []
 
 
+def test_assembler_live_accepts_a_restarted_numbering():
+    """The trigger box reopened (camera worker restarted): ids start again from 0; sets go on."""
+    asm = FrameSetAssembler(("a", "b"), mode="live", timeout_s=0.1, absent_after_s=1.0)
+    for fid in (500, 501):
+        asm.add("a", fid, "a", 0.0)
+        asm.add("b", fid, "b", 0.0)
+    assert [fs.frame_id for fs in asm.pop_ready(0.0)] == [501]
+    asm.add("a", 502, "a", 0.01)  # pending set of the old numbering; then both restart
+    asm.add("a", 0, "a0", 1.0)
+    asm.add("b", 0, "b0", 1.0)
+    (fs,) = asm.pop_ready(1.0)
+    assert fs.frame_id == 0 and fs.missing == () and asm.restarts == 2 and asm.late == 0
+    asm.add("a", 1, "a1", 1.04)
+    asm.add("b", 1, "b1", 1.04)
+    assert [fs.frame_id for fs in asm.pop_ready(1.04)] == [1]
+    asm.add("b", 0, "late", 1.05)  # a few back: a late message, not a restart
+    assert asm.late == 1 and asm.restarts == 2
+
+
 def test_assembler_lossless_in_order():
     asm = FrameSetAssembler(("a", "b"), mode="lossless", timeout_s=1.0)
     for fid in (1, 2, 3):
