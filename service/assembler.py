@@ -15,6 +15,8 @@ Rules (``cameras`` = the configured camera names):
   ``restart_gap`` frames (a few back is just a late message) has restarted its numbering (e.g. the trigger box was reopened): its new ids are accepted, ids already released
   above them stop counting as "released", and pending sets of the old numbering above them are
   dropped (counted in ``restarts``) — otherwise every later frame would be ``late`` for good.
+- Memory is bounded (ids come from the network): beyond ``max_pending`` pending sets the oldest
+  is discarded (counted in ``overflow``).
 """
 
 from __future__ import annotations
@@ -44,20 +46,20 @@ class _Pending:
 
 class FrameSetAssembler(Generic[T]):
     def __init__(self, cameras: tuple[str, ...], *, mode: str = "live", timeout_s: float = 0.08,
-                 absent_after_s: float = 1.0, restart_gap: int = 8) -> None:
+                 absent_after_s: float = 1.0, restart_gap: int = 8, max_pending: int = 256) -> None:
         if mode not in ("live", "lossless"):
             raise ValueError(f"mode must be live or lossless, got {mode!r}")
         if not cameras:
             raise ValueError("cameras: at least one camera name is needed")
         self.cameras, self.mode = tuple(cameras), mode
         self.timeout_s, self.absent_after_s = float(timeout_s), float(absent_after_s)
-        self.restart_gap = int(restart_gap)
+        self.restart_gap, self.max_pending = int(restart_gap), max(1, int(max_pending))
         self._pending: dict[int, _Pending] = {}
         self._latest_id: dict[str, int] = {}
         self._last_seen: dict[str, float] = {}
         self.last_released = -1
         self._t_start: float | None = None
-        self.stale = self.late = self.unknown = self.restarts = 0
+        self.stale = self.late = self.unknown = self.restarts = self.overflow = 0
 
     def add(self, camera: str, frame_id: int, item: T, now_s: float) -> None:
         """Record one camera's message for ``frame_id`` received at ``now_s``."""
@@ -78,6 +80,9 @@ class FrameSetAssembler(Generic[T]):
             self.late += 1
             return
         self._pending.setdefault(frame_id, _Pending(now_s)).items[camera] = item
+        if len(self._pending) > self.max_pending:
+            del self._pending[min(self._pending)]
+            self.overflow += 1
 
     def present(self, now_s: float) -> tuple[str, ...]:
         """Cameras heard from within ``absent_after_s`` (never-heard ones count during the first
@@ -134,4 +139,4 @@ class FrameSetAssembler(Generic[T]):
 
     def stats(self) -> dict[str, Any]:
         return {"pending": len(self._pending), "stale_sets": self.stale, "late": self.late,
-                "restarts": self.restarts}
+                "restarts": self.restarts, "overflow": self.overflow}

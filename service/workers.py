@@ -233,6 +233,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
 
     def gauges() -> dict:
         return {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
+                "overflow": asm.overflow,
                 "bad": inbox.bad,
                 "dropped": inbox.dropped, "cameras": len(asm.present(clock()))}
 

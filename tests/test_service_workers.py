@@ -193,6 +193,15 @@ def test_assembler_live_accepts_a_restarted_numbering():
     assert asm.late == 1 and asm.restarts == 2
 
 
+def test_assembler_memory_is_bounded_against_a_flood_of_ids():
+    asm = FrameSetAssembler(("a", "b"), mode="lossless", timeout_s=5.0, max_pending=16)
+    for fid in range(1000):  # a rogue peer: a new frame id per message, never completed
+        asm.add("a", fid, "x", 0.0)
+    assert len(asm) == 16 and asm.overflow == 1000 - 16
+    asm.add("b", 999, "b", 0.0)
+    assert [fs.frame_id for fs in asm.pop_ready(5.1)][-1] == 999
+
+
 def test_assembler_lossless_in_order():
     asm = FrameSetAssembler(("a", "b"), mode="lossless", timeout_s=1.0)
     for fid in (1, 2, 3):
