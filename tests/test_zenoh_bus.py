@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from service.bus import (BusError, CreditGate, Inbox, Keys, StatusReporter, ZenohSettings, declare_publisher,
-                         free_port, open_session)
+                         free_port, open_session, wait_until_matched)
 from service.messages import ChamferMessage, FrameMessage
 from service.records import CreditMessage, PoseRecord, StatusMessage
 
@@ -52,7 +52,7 @@ def test_every_type_crosses_and_garbage_is_counted(pair, rng):
     keys, msgs = _messages(rng)
     inboxes = [Inbox(b, key, decode, mode="lossless", depth=16) for key, _, decode in msgs]
     pubs = [declare_publisher(a, key, mode="lossless") for key, _, _ in msgs]
-    time.sleep(0.2)
+    assert wait_until_matched(pubs, timeout_s=5.0)
     garbage = [b"", b"\x00" * 7, b"CCAP\x01\x09" + b"\0" * 20, b'{"frame": NaN}', b"[" * 5000, rng.bytes(300)]
     for pub, (_, msg, _) in zip(pubs, msgs):
         for g in garbage:
@@ -74,7 +74,7 @@ def test_live_inbox_keeps_newest_and_counts_drops(pair):
     keys = Keys("lab2")
     inbox = Inbox(b, keys.credit("*"), CreditMessage.from_bytes, mode="live", depth=2)
     pub = declare_publisher(a, keys.credit("x"), mode="live")
-    time.sleep(0.2)
+    assert wait_until_matched([pub], timeout_s=5.0)
     for k in range(10):
         pub.put(CreditMessage("x", k).to_bytes())
     assert _wait(lambda: inbox.received == 10)
@@ -87,7 +87,7 @@ def test_credit_gate_blocks_until_acknowledged(pair):
     keys = Keys("lab3")
     gate = CreditGate(a, keys, ("track",), window=2, first_frame=0)
     pub = declare_publisher(b, keys.credit("track"), mode="lossless")
-    time.sleep(0.2)
+    assert wait_until_matched([pub], timeout_s=5.0)
     assert gate.wait(0, timeout_s=0.1) and gate.wait(1, timeout_s=0.1)
     assert not gate.wait(2, timeout_s=0.2)  # frame 0 not acknowledged yet
     pub.put(CreditMessage("track", 0).to_bytes())
@@ -99,7 +99,9 @@ def test_status_reporter_and_liveliness(pair):
     a, b = pair
     keys = Keys("lab4")
     inbox = Inbox(b, keys.status("*"), StatusMessage.from_bytes, depth=8)
-    time.sleep(0.2)
+    probe = a.declare_publisher(keys.status("probe"))  # the subscription has reached a
+    assert wait_until_matched([probe], timeout_s=5.0)
+    probe.undeclare()
     t = [0.0]
     rep = StatusReporter(a, keys, "segment-cam0", period_s=1.0, clock=lambda: t[0])
     rep.count("processed", 25)

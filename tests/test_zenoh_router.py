@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from service.bus import BusError, Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session
+from service.bus import (BusError, Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session,
+                         wait_until_matched)
 from service.records import PoseRecord
 
 REPO = Path(__file__).resolve().parent.parent
@@ -87,11 +88,14 @@ def test_tls_user_password_and_acl(router):
         got_viewer = Inbox(viewer, keys.pose, PoseRecord.from_bytes, mode="lossless", depth=100)
         pub = declare_publisher(worker, keys.pose, mode="lossless")
         forged = declare_publisher(viewer, keys.pose, mode="lossless")
-        time.sleep(0.5)
+        assert wait_until_matched([pub], timeout_s=5.0)
         for k in range(5):
             pub.put(_pose(k).to_bytes())
             forged.put(_pose(1000 + k).to_bytes())
-        time.sleep(0.5)
+        deadline = time.monotonic() + 5.0
+        while (len(got_worker) < 5 or len(got_viewer) < 5) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.2)  # the forged puts were sent alongside: give a leak through the ACL time to show
         frames = [r.message.frame for r in got_worker.drain()]
         assert frames == [0, 1, 2, 3, 4]  # the viewer's puts were denied by the ACL
         # the viewer reads the worker's poses (its own puts it only sees locally, in its own session)
@@ -122,7 +126,7 @@ def test_router_command_relays_between_clients(tmp_path):
         keys = Keys("routed")
         inbox = Inbox(b, keys.pose, PoseRecord.from_bytes, mode="lossless", depth=10)
         pub = declare_publisher(a, keys.pose, mode="lossless")
-        time.sleep(0.3)
+        assert wait_until_matched([pub], timeout_s=5.0)
         pub.put(_pose(7).to_bytes())
         got = inbox.recv(3.0)
         a.close()
