@@ -74,15 +74,20 @@ def _session(cfg: StudioConfig):
 
 def preflight(cfg: StudioConfig, host: str, *, fit_plugin: str | None = None) -> None:
     """What ``contourcap run`` checks before starting ``host``'s workers: the session (calibration,
-    subject) that its tracker or replay cameras need loads.  ConfigError / SessionError /
+    subject) that its tracker or replay cameras need loads, and every camera of the studio is calibrated.  ConfigError / SessionError /
     CalibrationError name the file; without this each worker would fail and be restarted forever."""
     replay = any(c.backend == "replay" for c in cfg.cameras_on(host))
-    if replay or (cfg.tracker_host == host and not fit_plugin):
-        _session(cfg)
-    if cfg.tracker_host == host and not fit_plugin and cfg.calibration is not None:
+    session = _session(cfg) if replay or (cfg.tracker_host == host and not fit_plugin) else None
+    if cfg.tracker_host == host and not fit_plugin:
         from capture.calibration import load_calibration
 
-        load_calibration(cfg.calibration)
+        calibrated = ({c.name for c in load_calibration(cfg.calibration)} if cfg.calibration is not None
+                      else {c.name for c in session.calibration})
+        missing = [c.name for c in cfg.cameras if c.name not in calibrated]
+        if missing:  # the tracker would report every frame as "unknown camera(s)"
+            where = cfg.calibration or session.root / "calibration.toml"
+            raise ConfigError(f"{where}: no calibration for camera(s) {missing} of {cfg.path} "
+                              f"(calibrated: {sorted(calibrated)})")
 
 
 def needs_trigger(cfg: StudioConfig, cameras) -> bool:

@@ -163,3 +163,16 @@ def test_run_command_checks_the_session_before_starting_workers(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
     assert err == [f"contourcap run: {tmp_path / 'gone' / 'session.toml'}: session file not found"]
+
+
+def test_run_command_names_an_uncalibrated_camera(tmp_path, rng, capsys):
+    from service.commands import run
+
+    make_studio(tmp_path, rng, n_frames=2, delivery="live", port=free_port())  # session: cam0..cam2, calibrated
+    path = tmp_path / "studio2.toml"
+    path.write_text(f'[studio]\nname = "pf2"\nsession = "session"\n[zenoh]\nlisten = ["tcp/127.0.0.1:{free_port()}"]\n'
+                    '[tracker]\nhost = "h1"\n[[camera]]\nname = "cam0"\nhost = "h1"\nbackend = "replay"\n'
+                    '[[camera]]\nname = "cam9"\nhost = "h2"\nbackend = "opencv"\nsource = "0"\n')
+    rc = run.main(["--config", str(path), "--host", "h1"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no calibration for camera(s) ['cam9']" in err and "calibration.toml" in err
