@@ -37,6 +37,9 @@ Segmenter = Callable[[FrameMessage, object], ChamferMessage]
 Fitter = Callable[[int, int, dict], dict]
 TRACK_CONSUMER = "track"
 
+#: lossless delivery: how long a frame set waits for a camera (CPU load, not loss, delays it)
+LOSSLESS_SET_TIMEOUT_S = 60.0
+
 
 class WorkerError(RuntimeError):
     """A worker could not go on (camera lost, peers unreachable, no credit): its process must exit
@@ -223,8 +226,10 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     lossless = mode == "lossless"
     inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
                   depth=16 * len(cameras) if lossless else 2 * len(cameras))
+    # lossless waits for every camera (a set released incomplete would not give the offline poses); only a
+    # camera silent for LOSSLESS_SET_TIMEOUT_S is given up on, so a dead one stalls, not stops, the replay
     asm: FrameSetAssembler = FrameSetAssembler(cameras, mode=mode, timeout_s=set_timeout_s if not lossless
-                                               else max(set_timeout_s, 5.0))
+                                               else max(set_timeout_s, LOSSLESS_SET_TIMEOUT_S))
     pose_pub = declare_publisher(session, keys.pose, mode=mode)
     credit_pub = declare_publisher(session, keys.credit(TRACK_CONSUMER), mode="lossless") if lossless else None
     status = StatusReporter(session, keys, component, clock=clock)
