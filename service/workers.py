@@ -54,19 +54,28 @@ def segment_token(camera: str) -> str:
 class EpochPacer:
     """Live replay pacing shared by all camera workers of a studio: a frame with session time ``t``
     is due at wall time ``epoch_ns + t``; frames already late by more than ``max_late_ns`` are
-    skipped (so a restarted camera worker rejoins at the present, not at frame 0)."""
+    skipped (so a restarted camera worker rejoins at the present, not at frame 0) — except that a
+    late frame still goes out when none went out for ``max_gap_ns``: a host too slow to read the
+    cameras at full rate then streams fewer, late frames instead of none at all."""
 
-    def __init__(self, epoch_ns: int, *, max_late_ns: int = 20_000_000, wall_ns: Callable[[], int] = time.time_ns,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
-        self.epoch_ns, self.max_late_ns, self._wall_ns, self._sleep = int(epoch_ns), int(max_late_ns), wall_ns, sleep
+    def __init__(self, epoch_ns: int, *, max_late_ns: int = 20_000_000, max_gap_ns: int = 200_000_000,
+                 wall_ns: Callable[[], int] = time.time_ns, sleep: Callable[[float], None] = time.sleep) -> None:
+        self.epoch_ns, self.max_late_ns, self.max_gap_ns = int(epoch_ns), int(max_late_ns), int(max_gap_ns)
+        self._wall_ns, self._sleep = wall_ns, sleep
+        self._last_sent_ns: int | None = None
 
     def __call__(self, timestamp_ns: int) -> bool:
         due = self.epoch_ns + int(timestamp_ns)
         now = self._wall_ns()
         if now - due > self.max_late_ns:
-            return False
-        if due > now:
+            starved = self._last_sent_ns is not None and now - self._last_sent_ns >= self.max_gap_ns
+            if not starved:
+                if self._last_sent_ns is None:  # first frame: count the gap from here
+                    self._last_sent_ns = now
+                return False
+        elif due > now:
             self._sleep((due - now) / 1e9)
+        self._last_sent_ns = self._wall_ns()
         return True
 
 
@@ -136,6 +145,13 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
         status.close()
 
 
+def _cameras_alive(session: zenoh.Session, keys: Keys) -> bool:
+    """Whether any camera worker's liveliness token is visible."""
+    prefix = keys.status("camera")
+    replies = session.liveliness().get(keys.status("*"), timeout=1.0)
+    return any(r.ok is not None and str(r.ok.key_expr).startswith(prefix) for r in replies)
+
+
 def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[str, Segmenter], *,
                        mode: str = "live", stop: threading.Event, component: str = "segment",
                        idle_exit_s: float | None = None) -> dict:
@@ -144,7 +160,8 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
     A frame the segmenter rejects with MessageError is counted (``bad``); any other exception ends
     the worker with :class:`WorkerError` (the supervisor restarts the process).
 
-    ``idle_exit_s``: return after that long without any frame once frames came (replays); None = until stop.
+    ``idle_exit_s``: return after that long without any frame once frames came and no camera worker is
+    alive (replays: a lossless camera may wait long for credits while the tracker initialises); None = until stop.
     """
     lock = threading.Lock()
     last_frame: list = [None]  # idle time counts from the first frame
@@ -195,7 +212,8 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
         t.start()
     try:
         while not stop.is_set() and all(t.is_alive() for t in threads):
-            if idle_exit_s is not None and last_frame[0] is not None and time.monotonic() - last_frame[0] > idle_exit_s:
+            if (idle_exit_s is not None and last_frame[0] is not None and time.monotonic() - last_frame[0] > idle_exit_s
+                    and not _cameras_alive(session, keys)):  # a camera waiting for credits is not finished
                 break
             with lock:
                 status.tick(**gauges())
