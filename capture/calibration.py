@@ -110,12 +110,7 @@ def toml_flavour(data: dict) -> str:
 def load_calibration(path) -> list[Camera]:
     """Read an anipose / Pose2Sim / FreeMoCap / contourcap calibration TOML (see module doc) into cameras in metres."""
     path = Path(path)
-    try:
-        data = load_file(path)
-    except FileNotFoundError:
-        raise CalibrationError(f"{path}: calibration file not found") from None
-    except ValueError as exc:
-        raise CalibrationError(str(exc)) from None
+    data = load_file(path, error=CalibrationError, what="calibration file")
     meta = data.get("metadata", {})
     if not isinstance(meta, dict):
         raise CalibrationError(f"{path}: key 'metadata' must be a table [metadata]")

@@ -367,12 +367,7 @@ def load_capture_config(path) -> CaptureConfig:
     session is loaded only when a camera uses the replay backend.
     """
     path = Path(path)
-    try:
-        data = load_file(path)
-    except FileNotFoundError:
-        raise RecorderError(f"{path}: studio config not found") from None
-    except (ValueError, OSError) as exc:  # load_file's message names the file
-        raise RecorderError(str(exc)) from None
+    data = load_file(path, error=RecorderError, what="studio config")
     base = path.resolve().parent
     studio = data.get("studio", {})
     trigger = data.get("trigger", {})

@@ -288,10 +288,7 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
     toml_path = path if path.is_file() else root / SESSION_FILE
     if not toml_path.is_file():
         raise SessionError(f"{toml_path}: session file not found")
-    try:
-        data = load_file(toml_path)
-    except (ValueError, OSError) as exc:  # load_file's message names the file
-        raise SessionError(str(exc)) from None
+    data = load_file(toml_path, error=SessionError, what="session file")
     sess = data.get("session")
     if not isinstance(sess, dict):
         raise SessionError(f"{toml_path}: missing table [session]")

@@ -86,20 +86,31 @@ def loads(text: str) -> dict:
     return tomllib.loads(text)
 
 
-def load_file(path) -> dict:
+def load_file(path, *, error: type[Exception] | None = None, what: str = "file") -> dict:
     """Parse a TOML file.
 
-    Raises ``FileNotFoundError`` when it is absent, and ``ValueError`` naming the file for anything
-    else: a syntax error, bytes that are not UTF-8, a folder or an unreadable file.
+    Without ``error``: raises ``FileNotFoundError`` when it is absent, and ``ValueError`` naming the file
+    for anything else (a syntax error, bytes that are not UTF-8, a folder or an unreadable file).
+    With ``error`` (e.g. ``CalibrationError``): every failure is that type, the absent file reading
+    "<path>: <what> not found".
     """
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        try:
+            with open(path, "rb") as fh:
+                return tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: invalid TOML: {exc}") from exc
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: invalid TOML: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        except FileNotFoundError:
+            raise
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except FileNotFoundError:
-        raise
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: invalid TOML: {exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{path}: invalid TOML: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        if error is None:
+            raise
+        raise error(f"{path}: {what} not found") from None
+    except ValueError as exc:
+        if error is None:
+            raise
+        raise error(str(exc)) from None

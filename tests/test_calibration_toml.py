@@ -50,3 +50,16 @@ def test_unreadable_calibration_file_is_named(tmp_path):
     (tmp_path / "folder.toml").mkdir()
     with pytest.raises(CalibrationError, match=r"folder.toml: cannot read"):
         load_calibration(tmp_path / "folder.toml")
+
+
+def test_load_file_maps_every_failure_to_the_callers_error(tmp_path):
+    from capture.tomlio import load_file
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[cam\n")
+    for path, match in ((tmp_path / "absent.toml", "absent.toml: thing not found"), (bad, "bad.toml: invalid TOML"),
+                        (tmp_path, "cannot read")):
+        with pytest.raises(CalibrationError, match=match):
+            load_file(path, error=CalibrationError, what="thing")
+    with pytest.raises(FileNotFoundError):
+        load_file(tmp_path / "absent.toml")

@@ -206,12 +206,7 @@ def load_model(
         path = MODELS_DIR / f"{name_or_path}.toml"
         if not path.exists():
             raise ModelError(f"unknown body model {str(name_or_path)!r}; available: {', '.join(available_models())}")
-    try:
-        data = load_file(path)
-    except FileNotFoundError:
-        raise ModelError(f"{path}: model file not found") from None
-    except ValueError as exc:
-        raise ModelError(str(exc)) from None
+    data = load_file(path, error=ModelError, what="model file")
     height = DEFAULT_HEIGHT_M if height_m is None else float(height_m)
     if not (0.5 <= height <= 2.6):
         raise ModelError(f"height_m must be between 0.5 and 2.6 m, got {height_m}")
