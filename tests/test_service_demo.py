@@ -43,9 +43,9 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="OPEN DEFECT: about 1 run in 4 the worker's first-frame initialisation differs from "
-                   "the offline one (0.4 rad), and so does every later frame; cause not found yet (see the closing "
-                   "note of issue 6). The other runs are equal to 1e-9.")
+@pytest.mark.xfail(strict=False, reason="OPEN DEFECT: in ~2 of 10 slow, loaded full-suite runs one frame's params differ "
+                   "from the offline tracker's (up to 0.4 rad); cause not found yet (see the closing note of "
+                   "issue 6). The other runs are equal to 1e-9.")
 def test_demo_lossless_real_tracker_equals_offline(tmp_path):
     """The contract of DESIGN.md: lossless replay over zenoh gives the same poses as `contourcap track`."""
     from tracker.offline import track_session
