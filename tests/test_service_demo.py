@@ -42,12 +42,45 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
     assert (tmp_path / "out" / "demo.rrd").stat().st_size > 0
 
 
+def _pose_table(live: list[dict], offline: list[dict]) -> str:
+    """Per frame, live vs offline: cameras, iterations, ok/reason, rms_px and max |params diff|."""
+    def side(r: dict) -> str:
+        rms = r.get("rms_px")
+        return (f"cameras {r.get('cameras')} it {r.get('iterations')} "
+                + ("ok" if r.get("ok") else f"NOT ok ({r.get('reason')})")
+                + (f" rms {rms:.4f}" if rms is not None else ""))
+
+    lines = []
+    for p, o in zip(live, offline):
+        both = p.get("params") and o.get("params") and len(p["params"]) == len(o["params"])
+        d = float(np.max(np.abs(np.subtract(p["params"], o["params"])))) if both else float("nan")
+        lines.append(f"frame {p.get('frame')}: live {side(p)} | offline {side(o)} | max |diff| {d:.3g}")
+    return "\n".join(lines)
+
+
+def _equal(p: dict, o: dict, atol: float) -> bool:
+    keys = ("frame", "ok", "cameras", "iterations")
+    if any(p.get(k) != o.get(k) for k in keys) or p.get("joints", {}).keys() != o.get("joints", {}).keys():
+        return False
+    if "params" not in p or "params" not in o:
+        return "params" not in p and "params" not in o
+    names = list(o["joints"])
+    return (np.allclose(p["params"], o["params"], rtol=0, atol=atol)
+            and np.allclose([p["joints"][k] for k in names], [o["joints"][k] for k in names], rtol=0, atol=atol))
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="OPEN DEFECT: in ~2 of 10 slow, loaded full-suite runs one frame's params differ "
-                   "from the offline tracker's (up to 0.4 rad); cause not found yet (see the closing note of "
-                   "issue 6). The other runs are equal to 1e-9.")
+@pytest.mark.xfail(strict=False, reason="KNOWN CAUSE, fix pending in service/workers.py: a lossless camera worker "
+                   "closes its zenoh session right after its last put and, under CPU load, frames a slow segment "
+                   "worker has not read yet are lost (the set is released without that camera after the set "
+                   "timeout). Remove this marker once run_camera_worker waits for the tracker's credit of its "
+                   "last frame before returning.")
 def test_demo_lossless_real_tracker_equals_offline(tmp_path):
-    """The contract of DESIGN.md: lossless replay over zenoh gives the same poses as `contourcap track`."""
+    """The contract of DESIGN.md: lossless replay over zenoh gives the same poses as `contourcap track`.
+
+    Under CPU load this failed now and then (a set released after the lossless set timeout without a
+    camera: a camera worker closed its zenoh session right after its last put, and frames a slow
+    segment worker had not read yet were lost); the message gives per frame what each side used."""
     from tracker.offline import track_session
 
     opts = DemoOptions(cameras=3, size=(200, 150), frames=4, fps=30.0, out_dir=tmp_path / "out",
@@ -55,13 +88,11 @@ def test_demo_lossless_real_tracker_equals_offline(tmp_path):
     summary = run_demo(opts, progress=lambda m: None)
     live = [json.loads(line) for line in (tmp_path / "out" / "poses.jsonl").read_text().splitlines()]
     offline = list(track_session(load_session(summary.session)))
-    assert [p["frame"] for p in live] == [o["frame"] for o in offline] == [0, 1, 2, 3]
-    assert [p["ok"] for p in live] == [o["ok"] for o in offline]
+    table = _pose_table(live, offline)
+    assert [p["frame"] for p in live] == [o["frame"] for o in offline] == [0, 1, 2, 3], table
+    assert all(o["ok"] and o["cameras"] == 3 for o in offline), table
     # Equal to rounding: run after the other service tests in one process, the last bits (~1e-15) have been
-    # seen to differ from the workers' now and then (cause not pinned down); 1e-9 (nanometres,
-    # nanoradians) still catches any real difference.
-    for p, o in zip(live, offline):
-        np.testing.assert_allclose(p["params"], o["params"], rtol=0, atol=1e-9)
-        assert p["joints"].keys() == o["joints"].keys()
-        np.testing.assert_allclose([p["joints"][k] for k in o["joints"]], [o["joints"][k] for k in o["joints"]],
-                                   rtol=0, atol=1e-9)
+    # seen to differ from the workers' now and then; 1e-9 (nanometres, nanoradians) still catches any real
+    # difference (a camera missing from a set moves the pose by ~0.2-0.5 rad).
+    bad = [p["frame"] for p, o in zip(live, offline) if not _equal(p, o, atol=1e-9)]
+    assert not bad, f"live != offline at frames {bad}:\n{table}"
