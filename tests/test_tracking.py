@@ -47,18 +47,24 @@ def perturb(model, p, rng, *, deg=10.0, root_m=0.05):
     return model.clamp(q)
 
 
-#: converge fully (the tracking defaults stop earlier, for speed, on small inter-frame motion)
-CONVERGE = TrackerOptions(max_iterations=40, reverse_min_px=2.0, f_scale=3.0, ftol=2e-3, rtol=0.0)
+#: converge fully (the tracking defaults stop earlier, for speed, on small inter-frame motion); a
+#: tighter robust scale (renders have no outliers) and a stronger prior hold the weakly observed
+#: DOF (hands, clavicles) near the start instead of letting them wander along flat directions
+CONVERGE = TrackerOptions(max_iterations=40, reverse_min_px=2.0, f_scale=1.0, prior_rad=100.0, ftol=2e-3, rtol=0.0)
 
 
 def test_perturbed_pose_converges_back(hop_pose, cameras, rng):
     """From the truth perturbed by up to 10° per joint and 5 cm at the root (joint centres start
-    50–200 mm off), one frame converges back: < 1 px RMS, < 10 mm mean joint-centre error.
+    50–200 mm off), one frame converges back: < 1 px RMS, < 10 mm mean joint-centre error and
+    < 2° mean joint error for both models.
 
-    Angles: rotations of a part about its own long axis (twist, pronation: axis ±z in the part
-    frame) barely change a cone's outline, so they are weakly observable; for knossow40 the mean
-    error of the other DOF must be < 2°.  (Measured, seed 12345: knossow40 1.1° non-axial /
-    1.7° all DOF; knossow54 4.6° non-axial, driven by the small hand cones' flexion/deviation.)
+    Joint error: the mean absolute error of the rotational DOF, every joint counted (wrists and
+    hands included) except rotations of a part about its own long axis (twist, pronation: axis ±z
+    in the part frame), which barely change a cone's outline and are weakly observable.
+    Measured with ``CONVERGE`` over 12 seeds (12345–12356; this test runs 12345): knossow40 mean
+    1.23° (0.82° here, worst 2.01°), knossow54 mean 1.44° (1.42° here, worst 1.96°).  Before the
+    reverse term's on-silhouette test (``tracker.cost``) knossow54 was at 2.9° (4.6° here): the
+    reverse residuals of the uncovered end caps pulled the hands and the head off the truth.
     """
     model, truth = hop_pose
     chamfer, _ = render_chamfer(model, truth, cameras)
@@ -75,9 +81,10 @@ def test_perturbed_pose_converges_back(hop_pose, cameras, rng):
     assert start_mm > 40.0  # the perturbation is not trivial
     assert rec["rms_px"] < 1.0
     assert mpjpe_mm < 10.0, (mpjpe_mm, start_mm)
-    if model.name == "knossow40":
-        non_axial = joints & (np.abs(model.param_axis[:, 2]) < 0.5)
-        assert err_deg[non_axial].mean() < 2.0, err_deg[non_axial].mean()
+    non_axial = joints & (np.abs(model.param_axis[:, 2]) < 0.5)
+    assert {"left_hand", "right_hand"} <= {model.part_names[model.param_part[k]] for k in np.flatnonzero(non_axial)} \
+        or model.name == "knossow40"  # knossow40's hands are rigid with the forearms
+    assert err_deg[non_axial].mean() < 2.0, err_deg[non_axial].mean()
     assert rec["frame"] == 7 and rec["timestamp_ns"] == 123 and rec["cameras"] == 6
     assert rec["inside_fraction"] > 0.9 and rec["iterations"] >= 1 and rec["latency_ms"] >= 0
     assert set(rec["joints"]) >= {"pelvis", "head", "left_wrist", "right_ankle"}

@@ -36,7 +36,7 @@ from capture.camera import Camera, stack_cameras
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
 
-__all__ = ["hidden_points"]
+__all__ = ["hidden_points", "covered_rays"]
 
 _Q_TOL = 1e-9
 
@@ -103,18 +103,27 @@ def hidden_points(
     per_pp = W.reshape(4 * n_parts, 3) @ (P - centres[c]).T  # (4 n_parts, n): [component, part, point]
     h1, h2, h3, d3 = np.take(per_pp.reshape(4, n_parts * n), q * n + i, axis=1)  # each (pairs,)
     g1, g2, g3, qc, e1, e2 = np.take(per_cp.reshape(6, -1), c[i] * n_parts + q, axis=1)
+    blocked = _meets_solid(g1, g2, g3, qc, e1, e2, h1, h2, h3, d3, s_max=1.0)
+    hidden[rows[i[blocked]]] = True
+    return hidden
+
+
+def _meets_solid(g1, g2, g3, qc, e1, e2, h1, h2, h3, d3, *, s_max: float) -> np.ndarray:
+    """Whether ``m + s d``, ``s in [0, s_max]``, meets the solid (module docstring): the minimum
+    of ``q(s) = qa s² + 2 qb s + qc`` over ``[0, s_max] ∩ slab`` is below ``-_Q_TOL``.  All
+    arguments are arrays of one shape (``qc = |g|²_(+,+,-)``, ``e1 = z1 - m3``, ``e2 = z2 - m3``)."""
     qa = h1 * h1 + h2 * h2 - h3 * h3
     qb = g1 * h1 + g2 * h2 - g3 * h3
-    # slab z1 <= m3 + s d3 <= z2, intersected with s in [0, 1]
+    # slab z1 <= m3 + s d3 <= z2, intersected with s in [0, s_max]
     flat = np.abs(d3) < 1e-15
     inside_slab = (e1 <= 0.0) & (e2 >= 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):  # flat rows are replaced below
         sa, sb = e1 / d3, e2 / d3
     lo = np.maximum(np.minimum(sa, sb), 0.0)
-    hi = np.minimum(np.maximum(sa, sb), 1.0)
+    hi = np.minimum(np.maximum(sa, sb), s_max)
     if flat.any():
-        lo[flat] = np.where(inside_slab[flat], 0.0, 1.0)
-        hi[flat] = np.where(inside_slab[flat], 1.0, 0.0)
+        lo[flat] = np.where(inside_slab[flat], 0.0, s_max)
+        hi[flat] = np.where(inside_slab[flat], s_max, 0.0)
     ok = (lo <= hi) & (~flat | inside_slab)
     # the minimum of q on [lo, hi]: at the (clipped) vertex when q is convex, else at an end
     convex = qa > 0
@@ -125,9 +134,44 @@ def hidden_points(
         return (qa * s + 2.0 * qb) * s + qc
 
     qmin = np.minimum(np.minimum(q_at(lo), q_at(hi)), q_at(vertex))
-    blocked = ok & (qmin < -_Q_TOL)
-    hidden[rows[i[blocked]]] = True
-    return hidden
+    return ok & (qmin < -_Q_TOL)
+
+
+def covered_rays(model: BodyModel, pose: Pose, centres: np.ndarray, directions: np.ndarray, *,
+                 margin_m: np.ndarray | float = 0.0, max_range_m: float = 100.0) -> np.ndarray:
+    """Which rays ``centres[i] + s directions[i]`` (s in [0, max_range_m]) meet the body: a pixel's
+    ray meets it exactly when the pixel lies on the model's silhouette.
+
+    Parameters
+    ----------
+    centres, directions : ndarray, shape (n, 3)
+        Ray origins (camera centres) and unit directions, world.
+    margin_m : ndarray (n, n_parts) or float
+        Every solid grown by this much (its semi-axes and both caps), metres: e.g. a tolerance of
+        ``t`` pixels is ``t × depth / focal length`` for a part at that depth.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    C = np.asarray(centres, dtype=float).reshape(-1, 3)
+    D = np.asarray(directions, dtype=float).reshape(-1, 3)
+    if C.shape != D.shape:
+        raise ValueError(f"centres, directions: expected the same shape (n, 3), got {C.shape} and {D.shape}")
+    if C.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    R, t = pose.rotation, pose.translation
+    a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
+    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (C.shape[0], model.n_parts))
+    a_g, b_g = a + grow, b + grow  # (n, n_parts)
+    m = np.einsum("pji,npj->npi", R, C[:, None, :] - t[None, :, :])  # origins in every part frame
+    d = np.einsum("pji,nj->npi", R, D)  # directions in every part frame
+    g1, g2, g3 = m[..., 0] / a_g, m[..., 1] / b_g, 1.0 + k * m[..., 2]
+    qc = g1 * g1 + g2 * g2 - g3 * g3
+    e1, e2 = z1 - grow - m[..., 2], z2 + grow - m[..., 2]
+    hit = _meets_solid(g1, g2, g3, qc, e1, e2, d[..., 0] / a_g, d[..., 1] / b_g, k * d[..., 2], d[..., 2],
+                       s_max=max_range_m)
+    return hit.any(axis=1)
 
 
 _CHUNK = 4  # consecutive points (same camera) culled together first (half a ruling at n_samples = 8)
