@@ -36,7 +36,8 @@ from capture.camera import Camera, matrix_to_rodrigues
 from tracker.kinematics import so3_exp
 from tracker.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 
-__all__ = ["mirror_map", "mirror_params", "mirror_joint_order", "front_back_cost", "FrontBack", "resolve_front_back"]
+__all__ = ["mirror_map", "mirror_params", "mirror_joint_order", "front_back_cost", "hypothesis_cost", "FrontBack",
+           "resolve_front_back"]
 
 _S = np.diag([1.0, -1.0, 1.0])
 _RZ_PI = np.diag([-1.0, -1.0, 1.0])
@@ -226,3 +227,10 @@ def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
                      label=("kept", "mirrored")[int(mirrored[best])], height_m=float(model.height_m),
                      candidates=len(outs))
     return (res, fb) if details else res
+
+
+def hypothesis_cost(model: BodyModel, params, rms_px: float, iou: float) -> float:
+    """``front_back_cost`` of a fitted pose ``params`` (n_params,) with its RMS chamfer residual and
+    mean silhouette IoU (the joint-limit count from ``params``, no feet cue): what the tracker's
+    periodic front/back check (``tracker.tracking.Tracker``) compares a pose and its mirror by."""
+    return front_back_cost(rms_px, iou, _at_limits(model, np.asarray(params, dtype=float)))

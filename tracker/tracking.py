@@ -18,7 +18,7 @@ initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -27,6 +27,7 @@ from capture.camera import Camera
 from tracker.cost import ChamferCost
 from tracker.kinematics import joint_centre_array
 from tracker.initialise import ScoreViews, initialise
+from tracker.mirror import hypothesis_cost, mirror_params
 from tracker.model import ROOT_TRANSLATION, BodyModel
 from tracker.recovery import LossMonitor
 from tracker.solver import SolverResult, least_squares_fd, levenberg_marquardt
@@ -65,7 +66,14 @@ class TrackerOptions:
     brings silhouettes) every ``iou_every`` frames, after a bad frame, and whenever a cheap figure
     is suspicious: coverage (observed silhouette boundary near the model's contour, the reverse
     term's figure) below ``iou_check_coverage``, RMS above ¾ of its limit, or an inside fraction
-    within 0.1 of its limit (``iou_every=1``: every frame).
+    within 0.1 of its limit (``iou_every=1``: every frame);
+    front_back_every, front_back_iterations, front_back_margin : the front/back check: silhouettes
+    hardly tell a body from its mirror (``tracker.mirror``), so a track can run turned round and
+    pass every figure above.  Every ``front_back_every`` good frames that bring silhouettes (0:
+    never), the mirror of the fitted pose is fitted too (``front_back_iterations`` LM steps) and
+    both are scored by ``tracker.mirror.hypothesis_cost`` (RMS + 10 × (1 − IoU) + 0.1 per joint
+    at a limit); the mirror is taken when it scores ``front_back_margin`` lower.  Costs one fit
+    and two IoU renders per check (≈ 1–2 ms per frame on average at 30).
     """
 
     n_samples: int = 8
@@ -94,6 +102,9 @@ class TrackerOptions:
     min_iou: float = 0.8
     iou_every: int = 10
     iou_check_coverage: float = 0.8
+    front_back_every: int = 30
+    front_back_iterations: int = 12
+    front_back_margin: float = 0.5
 
 
 def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
@@ -155,6 +166,8 @@ class Tracker:
     params : (n_params,) the last fitted pose (None before initialisation)
     last_good : (n_params,) the last pose of a good frame
     last_result : SolverResult of the last fit
+    n_initialisations, n_front_back_checks, n_turned : searches from the silhouettes, front/back
+        checks run, and the times the mirror was taken (``TrackerOptions``)
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
@@ -176,6 +189,9 @@ class Tracker:
                                    min_inside_fraction=options.min_inside_fraction, patience=patience)
         self._good_rms: list[float] = []
         self._since_iou = options.iou_every  # the first frame is checked
+        self._since_front_back = 0
+        self.n_front_back_checks = 0
+        self.n_turned = 0
         self._last_bad = False
         self.params: np.ndarray | None = None
         self.previous: np.ndarray | None = None
@@ -248,6 +264,23 @@ class Tracker:
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
         return "; ".join(why)
 
+    def _front_back(self, cams, chs, res, terms, views):
+        """The front/back check (``TrackerOptions``): ``(res, terms)`` of the fitted mirror when it
+        scores better than the fit ``res``, else None."""
+        o = self.options
+        self.n_front_back_checks += 1
+        p = np.asarray(res.params)
+        mp = self.model.clamp(mirror_params(self.model, p))
+        res_m, cost_m = fit_frame(self.model, cams, chs, mp, sliding=self.sliding, solver=self.solver,
+                                  options=replace(o, max_iterations=o.front_back_iterations))
+        pm = np.asarray(res_m.params)
+        terms_m = cost_m.evaluate(pm)
+        v = views()
+        iou = self._last_iou if self._last_iou is not None else float(v.score(p))
+        kept = hypothesis_cost(self.model, p, terms.rms_px(), iou)
+        turned = hypothesis_cost(self.model, pm, terms_m.rms_px(), float(v.score(pm)))
+        return (res_m, terms_m) if turned < kept - o.front_back_margin else None
+
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
         """Fit one frame set and return its pose record (a JSON-ready dict).
@@ -309,6 +342,17 @@ class Tracker:
                     if not bad:
                         self.monitor.reset()
                     restarted = True  # no velocity across a re-initialisation
+        if self.options.front_back_every > 0 and views is not None and not bad:
+            self._since_front_back += 1
+            if self._since_front_back >= self.options.front_back_every:
+                self._since_front_back = 0
+                turned = self._front_back(cams, chs, res, terms, views)
+                if turned is not None:
+                    res, terms = turned
+                    rms, inside = terms.rms_px(), terms.inside_fraction()
+                    self._last_iou = None  # the IoU recorded was the other hypothesis's
+                    self.n_turned += 1
+                    restarted = True  # no velocity across the turn
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
