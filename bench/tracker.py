@@ -9,7 +9,9 @@ the session's background videos) and the same chamfer images are then tracked th
   (``--auto-init``: from ``tracker.initialise`` instead);
 - LM without the sliding term (iterations only);
 - (for reference) the same quality figures at the ground-truth poses: with real segmentation the
-  RMS is dominated by the few contour points where the images show no edge;
+  RMS is dominated by the few contour points where the images show no edge (``rms_px`` of
+  ``tracker.cost.CostTerms``); the inlier RMS (residuals up to the robust loss's scale, 3 px) and
+  the outlier fraction are given beside it;
 - scipy ``least_squares`` with a finite-difference Jacobian (the baseline) on the first
   ``--lsq-frames`` frames, warm-started from the same ground-truth poses as the LM run on them.
 
@@ -87,16 +89,20 @@ def mpjpe_mm(records, truth) -> float:
 
 
 def residual_figures(model, cameras, frames, params_list):
-    """Per frame at the given poses: RMS (both terms) and median |residual| over the used contour
-    points, as the tracker's quality figure computes them; returns the medians over frames."""
-    rms, med = [], []
+    """Per frame at the given poses: RMS (both terms), median |residual|, inlier RMS and outlier
+    fraction (residuals above the robust loss's scale ``TrackerOptions.f_scale``) over the used
+    contour points, as ``tracker.cost.CostTerms`` computes them; returns the medians over frames."""
+    rms, med, inl, out = [], [], [], []
+    scale = TrackerOptions().f_scale
     for (fid, ts, ch, _), p in zip(frames, params_list):
         names = [c.name for c in cameras if c.name in ch]
         terms = ChamferCost(model, [c for c in cameras if c.name in ch], [ch[n] for n in names],
                             n_samples=TrackerOptions().n_samples).evaluate(np.asarray(p, dtype=float))
         rms.append(terms.rms_px())
         med.append(float(np.median(np.abs(np.concatenate([terms.d_sil[terms.used], terms.d_edge[terms.used]])))))
-    return float(np.median(rms)), float(np.median(med))
+        inl.append(terms.rms_px(max_px=scale))
+        out.append(terms.outlier_fraction(max_px=scale))
+    return float(np.median(rms)), float(np.median(med)), float(np.median(inl)), float(np.median(out))
 
 
 def median(records, key) -> float:
@@ -138,9 +144,11 @@ def main(argv=None) -> int:
         lsq_sub = [track(model, cameras, frames[i:i + 1], initial=np.asarray(truth[max(i - 1, 0)]["params"]),
                          solver="lsq")[0] for i in range(k)]
     lost = sum(not r["ok"] for r in main_run)
-    truth_rms, truth_med = residual_figures(model, cameras, frames, [truth[f[0]]["params"] for f in frames])
-    fit_rms, fit_med = residual_figures(model, cameras, frames, [r.get("params", truth[r["frame"]]["params"])
-                                                                 for r in main_run])
+    truth_rms, truth_med, truth_inl, truth_out = residual_figures(model, cameras, frames,
+                                                                  [truth[f[0]]["params"] for f in frames])
+    fit_rms, fit_med, fit_inl, fit_out = residual_figures(model, cameras, frames,
+                                                          [r.get("params", truth[r["frame"]]["params"])
+                                                           for r in main_run])
     lm_ms = median(lm_sub, "latency_ms")
     lsq_ms = median(lsq_sub, "latency_ms")
     result = {
@@ -152,6 +160,8 @@ def main(argv=None) -> int:
         "rms_px_at_truth_median": truth_rms,
         "abs_residual_px_median": fit_med,
         "abs_residual_px_at_truth_median": truth_med,
+        "rms_inlier_px_median": fit_inl, "outlier_fraction_median": fit_out,
+        "rms_inlier_px_at_truth_median": truth_inl, "outlier_fraction_at_truth_median": truth_out,
         "mpjpe_mm": mpjpe_mm(main_run, truth),
         "mpjpe_no_sliding_mm": mpjpe_mm(no_slide, truth),
         "lost_frames": lost,

@@ -113,6 +113,11 @@ def test_rendered_true_pose_has_subpixel_cost_and_perturbed_pose_does_not(scene,
     q[6:] += np.radians(8.0) * rng.choice([-1, 1], model.n_params - 6)
     off = ChamferCost(model, scene, chamfer).evaluate(model.clamp(q))
     assert off.rms_px() > 2 * true.rms_px()
+    # inlier RMS and outlier fraction: the residuals up to / above a scale, counted directly
+    r = np.concatenate([off.d_sil[off.used], off.d_edge[off.used]])
+    assert off.outlier_fraction(max_px=3.0) == pytest.approx(np.mean(r > 3.0)) and 0 < np.mean(r > 3.0) < 1
+    assert off.rms_px(max_px=3.0) == pytest.approx(np.sqrt(np.mean(r[r <= 3.0] ** 2)))
+    assert off.rms_px(max_px=3.0) < off.rms_px() and off.rms_px(max_px=1e9) == pytest.approx(off.rms_px())
 
 
 def test_reverse_term_jacobian_and_pull(scene, rng):

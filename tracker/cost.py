@@ -181,12 +181,32 @@ class CostTerms:
             return float("nan")
         return float(np.count_nonzero(self.boundary_dist <= tol_px) / self.boundary_dist.size)
 
-    def rms_px(self) -> float:
-        """RMS of the used residuals (both terms), pixels (NaN if none)."""
+    def rms_px(self, *, max_px: float | None = None) -> float:
+        """RMS of the used residuals (both terms), pixels (NaN if none); with ``max_px``, of those
+        at most ``max_px`` only (the inliers: see ``outlier_fraction``).
+
+        The tracker's quality figure is the plain RMS: a few large residuals dominate it (hop
+        session at the true poses: 3.4 px; 6.5 % of the edge residuals above 5 px make 71 % of the
+        sum of squares — upper arms and torso where the model's contour crosses the silhouette and
+        the image shows no edge, and feet that the segmentation lost in 1–2 cameras (0.8 % of the
+        residuals truncated at 30 px make 33 %)); the inlier RMS measures the fit on the rest."""
         n = self.n_used
         if not n:
             return float("nan")
-        return float(np.sqrt((self.d_sil[self.used] ** 2 + self.d_edge[self.used] ** 2).sum() / (2 * n)))
+        r = np.concatenate([self.d_sil[self.used], self.d_edge[self.used]])
+        if max_px is not None:
+            r = r[r <= max_px]
+            if not r.size:
+                return float("nan")
+        return float(np.sqrt(r @ r / r.size))
+
+    def outlier_fraction(self, *, max_px: float) -> float:
+        """Fraction of the used residuals (both terms) above ``max_px`` (NaN if none)."""
+        n = self.n_used
+        if not n:
+            return float("nan")
+        return float((np.count_nonzero(self.d_sil[self.used] > max_px)
+                      + np.count_nonzero(self.d_edge[self.used] > max_px)) / (2 * n))
 
 
 class ChamferCost:
