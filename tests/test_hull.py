@@ -210,3 +210,19 @@ def test_distorted_cameras():
         near |= hull.contains(joints + 0.01 * d)
     assert near.all()
     assert silhouette_iou(render_hull(hull, cams[1]), sils[1]) >= 0.85
+
+
+def test_common_view_bounds_cache_is_keyed_by_calibration():
+    """The box is cached per camera set: the same calibration gives the same box (a copy the
+    caller may change), another calibration its own box."""
+    from tracker.hull import _common_view_bounds
+
+    cams = ring_cameras(4, size=(320, 240))
+    first = common_view_bounds(cams)
+    assert np.array_equal(first, _common_view_bounds(cams, (0.0, 2.5), 0.2, 0.2))
+    first[:] = 0.0
+    assert np.array_equal(common_view_bounds(cams), _common_view_bounds(cams, (0.0, 2.5), 0.2, 0.2))
+    wide = ring_cameras(4, size=(320, 240), radius_m=6.0)
+    assert np.array_equal(common_view_bounds(wide), _common_view_bounds(wide, (0.0, 2.5), 0.2, 0.2))
+    assert not np.allclose(common_view_bounds(wide), common_view_bounds(cams))
+    assert common_view_bounds(cams, z_range=(0.0, 2.0))[1, 2] < common_view_bounds(cams)[1, 2]

@@ -8,7 +8,7 @@ import pytest
 from segmentation.distance import chamfer_images
 from tracker.hull import visual_hull
 from tracker.initialise import (InitResult, ScoreViews, estimate_height, feet_direction, initialise,
-                                model_top_m, pose_candidates, sized_model)
+                                model_top_m, pose_candidates, rendered_views, sized_model)
 from tracker.kinematics import forward, joint_centre_array
 from tracker.model import load_model
 from tracker.render import internal_edges, render_label_images
@@ -26,11 +26,7 @@ def _reference(model, rng, arms_deg):
 
 
 def _views(model, params, cams):
-    labels = render_label_images(model, forward(model, params), cams)
-    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cams, labels)}
-    chamfer = {c.name: chamfer_images(sils[c.name], internal_edges(lab), max_distance_px=48.0, resolution_px=0.25)
-               for c, lab in zip(cams, labels)}
-    return sils, chamfer
+    return rendered_views(model, params, cams)
 
 
 def _rotation_error_deg(Ra, Rb):
@@ -257,3 +253,26 @@ def test_initialise_heading_at_low_resolution(clip, start_s):
     res = initialise(model, cams, sils, chamfer)
     assert _heading_error_deg(model, res.params, truth) < 20.0
     assert res.label.endswith(("/kept", "/mirrored"))
+
+
+def test_score_views_partial_render_equals_full(rng):
+    """Scoring a pose as the parts a chain moves drawn onto the other parts rendered once (what
+    ``tracker.recovery.limb_search`` does) gives the same IoU as rendering every part."""
+    from tracker.recovery import limb_chains
+
+    model = load_model("knossow40")
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _reference(model, np.random.default_rng(4), -45.0)
+    sils, _ = _views(model, truth, cams)
+    views = ScoreViews(model, cams, list(sils.values()))
+    x = model.clamp(truth + np.where(model.param_kind == 2, rng.normal(0.0, 0.2, model.n_params), 0.0))
+    for idx in limb_chains(model).values():
+        moved = model.affects[:, idx].any(axis=1)
+        base = views.render(x, np.flatnonzero(~moved))
+        for _ in range(3):
+            y = x.copy()
+            y[idx] += rng.normal(0.0, 0.4, idx.size)
+            y = model.clamp(y)
+            assert views.score(y, np.flatnonzero(moved), base) == views.score(y)
+            assert all(np.array_equal(a, b) for a, b in zip(views.render(y, np.flatnonzero(moved), base),
+                                                             views.render(y)))

@@ -44,7 +44,7 @@ from tracker.render import body_points, cone_points
 from tracker.solver import levenberg_marquardt
 
 __all__ = ["InitResult", "initialise", "refine", "refine_best", "prepare_inputs", "ScoreViews", "pose_candidates",
-           "feet_direction", "chamfer_from_silhouette", "model_top_m", "estimate_height", "sized_model", "ARM_POSES_DEG"]
+           "feet_direction", "chamfer_from_silhouette", "rendered_views", "model_top_m", "estimate_height", "sized_model", "ARM_POSES_DEG"]
 
 #: Arm abductions tried by default (degrees; 0 = T-pose, negative lowers the arms).
 ARM_POSES_DEG = (0.0, -45.0)
@@ -103,14 +103,19 @@ class ScoreViews:
         self._local = cone_points(model, n_theta=12, n_z=2)  # (n_parts, 24, 3) part frames
         self.n_scored = 0
 
-    def render(self, params: np.ndarray) -> list[np.ndarray]:
+    def render(self, params: np.ndarray, parts: np.ndarray | None = None,
+               base: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
         """The model's silhouette in each scoring view, (h', w') bool: the union of the parts'
-        projected convex hulls (a coarse, fast stand-in for ``tracker.render``)."""
+        projected convex hulls (a coarse, fast stand-in for ``tracker.render``).
+
+        ``parts``: indices of the parts to draw (default all); ``base``: per-view masks to draw
+        them onto (e.g. the other parts, rendered once while a search varies one chain)."""
         pose = forward(self.model, params)
-        pts = np.einsum("pij,pmj->pmi", pose.rotation, self._local) + pose.translation[:, None, :]
+        sel = np.arange(self.model.n_parts) if parts is None else np.asarray(parts, dtype=int)
+        pts = np.einsum("pij,pmj->pmi", pose.rotation[sel], self._local[sel]) + pose.translation[sel, None, :]
         out = []
-        for cam in self.cameras:
-            img = np.zeros((cam.height, cam.width), np.uint8)
+        for k, cam in enumerate(self.cameras):
+            img = np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
             ok = cam.depth(pts) > 0.05
             uv = np.nan_to_num(np.clip(cam.project(pts), -1e5, 1e5)) * 16.0  # 4 fractional bits
             for p in range(len(pts)):
@@ -119,18 +124,21 @@ class ScoreViews:
             out.append(img.astype(bool))
         return out
 
-    def ious(self, params: np.ndarray) -> np.ndarray:
-        """Per-camera IoU of the model's silhouette with the observed one, shape (n_cams,)."""
+    def ious(self, params: np.ndarray, parts: np.ndarray | None = None,
+             base: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """Per-camera IoU of the model's silhouette with the observed one, shape (n_cams,)
+        (``parts``, ``base``: as ``render``; the IoU is of ``base`` and ``parts`` together)."""
         self.n_scored += 1
         out = []
-        for mask, r in zip(self.masks, self.render(params)):
+        for mask, r in zip(self.masks, self.render(params, parts, base)):
             union = np.count_nonzero(r | mask)
             out.append(np.count_nonzero(r & mask) / union if union else 1.0)
         return np.array(out)
 
-    def score(self, params: np.ndarray) -> float:
-        """Mean IoU over the cameras (higher is better)."""
-        return float(self.ious(params).mean())
+    def score(self, params: np.ndarray, parts: np.ndarray | None = None,
+              base: Sequence[np.ndarray] | None = None) -> float:
+        """Mean IoU over the cameras (higher is better; ``parts``, ``base``: as ``render``)."""
+        return float(self.ious(params, parts, base).mean())
 
 
 def chamfer_from_silhouette(silhouette: np.ndarray, *, max_distance_px: float = 48.0):
@@ -140,6 +148,20 @@ def chamfer_from_silhouette(silhouette: np.ndarray, *, max_distance_px: float = 
 
     sil = (np.asarray(silhouette) > 0).astype(np.uint8) * 255
     return chamfer_images(sil, silhouette_boundary(sil), max_distance_px=max_distance_px, resolution_px=0.25)
+
+
+def rendered_views(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]) -> tuple[dict, dict]:
+    """What a perfect segmentation of the model at ``params`` gives (tests, benchmarks): dicts
+    camera name -> silhouette (h, w) uint8 and camera name -> ``ChamferImages`` of the silhouette
+    and the parts' internal edges (``tracker.render``)."""
+    from segmentation.distance import chamfer_images
+    from tracker.render import internal_edges, render_label_images
+
+    labels = render_label_images(model, forward(model, params), cameras)
+    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cameras, labels)}
+    chamfer = {c.name: chamfer_images(sils[c.name], internal_edges(lab), max_distance_px=48.0, resolution_px=0.25)
+               for c, lab in zip(cameras, labels)}
+    return sils, chamfer
 
 
 # ----------------------------------------------------------------------------- hypotheses
@@ -346,7 +368,7 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
                arm_abduction_deg: Sequence[float] = ARM_POSES_DEG, keep: int = 3, min_voxel_m: float = 0.03,
                score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
                use_feet: bool = True, front_back: bool = True,
-               limb_search_both: bool = True) -> InitResult:
+               limb_search_both: bool = True, accept_iou: float = 0.87) -> InitResult:
     """Find the pose of a person standing in a T- or A-pose from silhouettes alone.
 
     Parameters
@@ -358,7 +380,8 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
         built from the silhouettes (outline as edges)
     hint : (n_params,) optional previous pose (e.g. the last good one): the search is then
         ``tracker.recovery.recover`` (the hint moved onto the hull at every heading, its joint
-        angles, limb search) together with the T/A hypotheses
+        angles, limb search) together with the T/A hypotheses, after its cheap local stage (accepted
+        at a mean silhouette IoU of ``accept_iou``)
     n_headings : evenly spaced headings searched (plus the two from the hull's floor axes)
     arm_abduction_deg : arm poses searched (0 = T, -45 = A)
     keep : candidates refined with LM
@@ -377,7 +400,7 @@ def initialise(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping
 
         return recover(model, cameras, silhouettes, chamfer, hint, n_headings=n_headings, keep=keep,
                        min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations,
-                       hull_tolerance=hull_tolerance, front_back=front_back)
+                       hull_tolerance=hull_tolerance, front_back=front_back, accept_iou=accept_iou)
     cameras, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
     hull = visual_hull(cameras, sils, min_voxel_m=min_voxel_m, tolerance=hull_tolerance).largest_component()
     if hull.empty:
