@@ -2,7 +2,7 @@
 
 Rules (``cameras`` = the configured camera names):
 
-- ``live``: a camera is *present* if it delivered anything within ``absent_after_s``; a camera
+- ``live``: a camera is *present* if it delivered anything (or was :meth:`seen` alive) within ``absent_after_s``; a camera
   that stops lowers the quality of later sets (it is left out of them), not availability; when it
   delivers again it rejoins at once.  ``lossless``: every configured camera is waited for.
 - Set ``k`` is *complete* when every present camera delivered ``k``, or — frames of one camera
@@ -83,6 +83,14 @@ class FrameSetAssembler(Generic[T]):
         if len(self._pending) > self.max_pending:
             del self._pending[min(self._pending)]
             self.overflow += 1
+
+    def seen(self, camera: str, now_s: float) -> None:
+        """``camera`` is alive at ``now_s`` without a message for a set (live mode on demand: its
+        segment worker's have notice; the camera then counts as present while its chamfer is due)."""
+        if camera in self.cameras:
+            self._last_seen[camera] = max(now_s, self._last_seen.get(camera, now_s))
+            if self._t_start is None:
+                self._t_start = now_s
 
     def present(self, now_s: float) -> tuple[str, ...]:
         """Cameras heard from within ``absent_after_s`` (never-heard ones count during the first

@@ -7,6 +7,8 @@ Keys (``<studio>`` configurable, default ``"default"``)::
     contourcap/<studio>/pose                   pose record JSON
     contourcap/<studio>/status/<component>     StatusMessage JSON + a liveliness token
     contourcap/<studio>/credit/<consumer>      CreditMessage JSON (lossless back-pressure)
+    contourcap/<studio>/cam/<cam>/have         HaveMessage JSON (live: frame ids a segment worker holds)
+    contourcap/<studio>/demand/<consumer>      DemandMessage JSON (live: the frame id to segment next)
 
 The default configuration is a peer on loopback with multicast scouting off: no router needed.
 
@@ -63,6 +65,12 @@ class Keys:
 
     def credit(self, consumer: str = "*") -> str:
         return f"{self.root}/credit/{consumer}"
+
+    def have(self, cam: str = "*") -> str:
+        return f"{self.root}/cam/{cam}/have"
+
+    def demand(self, consumer: str = "*") -> str:
+        return f"{self.root}/demand/{consumer}"
 
     def camera_of(self, key: str) -> str | None:
         """``cam`` from ``.../cam/<cam>/...`` or None."""
@@ -199,34 +207,40 @@ def attachment_ns(wall_ns: int) -> bytes:
     return int(wall_ns).to_bytes(8, "little", signed=False)
 
 
+def sent_ns_of(sample: zenoh.Sample) -> int | None:
+    """The wall-clock time of a sample's :func:`attachment_ns` attachment, or None."""
+    att = sample.attachment
+    if att is None:
+        return None
+    raw = att.to_bytes()
+    return int.from_bytes(raw, "little") if len(raw) == 8 else None
+
+
 class Inbox(Generic[T]):
     """A bounded queue filled by a zenoh subscriber callback with decoded, validated messages.
 
     ``mode="live"``: holds at most ``depth`` items, the oldest is overwritten (counted in
     ``dropped``).  ``mode="lossless"``: FIFO up to ``depth`` (producers keep under it via credits;
     overflow is still counted, never blocking zenoh's thread).  ``recv(timeout_s)`` returns
-    :class:`Received` ``(key, message, sent_ns)`` or None.
+    :class:`Received` ``(key, message, sent_ns)`` or None.  Inboxes given the same ``cv`` (a
+    ``threading.Condition``) can be waited on together with :func:`wait_any`.
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], T], *,
-                 mode: str = "live", depth: int = 4) -> None:
+                 mode: str = "live", depth: int = 4, cv: threading.Condition | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"delivery mode must be one of {MODES}, got {mode!r}")
         self.key, self.mode, self.depth = key, mode, int(depth)
         self._decode = decode
         self._items: collections.deque = collections.deque()
-        self._cv = threading.Condition()
+        self._cv = cv if cv is not None else threading.Condition()
         self.received = self.dropped = self.bad = 0
         self._last_log = 0.0
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        att = sample.attachment
-        sent_ns = None
-        if att is not None:
-            raw = att.to_bytes()
-            sent_ns = int.from_bytes(raw, "little") if len(raw) == 8 else None
+        sent_ns = sent_ns_of(sample)
         try:
             msg = self._decode(sample.payload.to_bytes())
         except MessageError as exc:
@@ -243,7 +257,7 @@ class Inbox(Generic[T]):
                 self._items.popleft()
                 self.dropped += 1
             self._items.append(Received(key, msg, sent_ns))
-            self._cv.notify()
+            self._cv.notify_all()
 
     def recv(self, timeout_s: float | None = None) -> Received | None:
         with self._cv:
@@ -265,6 +279,15 @@ class Inbox(Generic[T]):
             self._sub.undeclare()
         except Exception:  # session already closed
             pass
+
+
+def wait_any(inboxes: "list[Inbox]", timeout_s: float) -> bool:
+    """Wait until any of ``inboxes`` (sharing one ``cv``) holds an item; False on timeout."""
+    cv = inboxes[0]._cv
+    if any(i._cv is not cv for i in inboxes):
+        raise ValueError("wait_any: the inboxes must share one condition (Inbox(..., cv=...))")
+    with cv:
+        return cv.wait_for(lambda: any(i._items for i in inboxes), timeout_s)
 
 
 def declare_publisher(session: zenoh.Session, key: str, *, mode: str = "live") -> zenoh.Publisher:

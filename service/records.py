@@ -1,9 +1,11 @@
-"""JSON wire records: the pose record, status/stats, and lossless-mode credits.
+"""JSON wire records: the pose record, status/stats, lossless-mode credits and live-mode
+have/demand notices.
 
-All three are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
+All of them are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
-``latency_ms``; ``reason`` when ``ok`` is false).  Status and credit records carry ``"v": 1``.
+``latency_ms``; ``reason`` when ``ok`` is false).  Status, credit, have and demand records carry
+``"v": 1``.
 Validation on receipt as in :mod:`service.messages`: one :class:`MessageError` naming the field.
 """
 
@@ -132,17 +134,66 @@ class StatusMessage:
 
 
 @dataclass(frozen=True)
-class CreditMessage:
-    """Lossless mode: ``consumer`` has finished every frame up to and including ``frame_id``."""
+class _ConsumerFrame:
+    """``{"v": 1, "consumer": name, "frame_id": int}`` (credits and demands share this shape)."""
 
     consumer: str
     frame_id: int
+
+    WHAT = "record"
 
     def to_bytes(self) -> bytes:
         return dumps_json({"v": RECORD_VERSION, "consumer": self.consumer, "frame_id": self.frame_id})
 
     @classmethod
-    def from_bytes(cls, data: bytes, *, max_bytes: int = 4096) -> "CreditMessage":
-        obj = loads_json(data, max_bytes=max_bytes, what="credit")
-        _check_version(obj, "credit")
+    def from_bytes(cls, data: bytes, *, max_bytes: int = 4096):
+        obj = loads_json(data, max_bytes=max_bytes, what=cls.WHAT)
+        _check_version(obj, cls.WHAT)
         return cls(check_name(obj.get("consumer"), "consumer"), _int(obj, "frame_id"))
+
+
+@dataclass(frozen=True)
+class CreditMessage(_ConsumerFrame):
+    """Lossless mode: ``consumer`` has finished every frame up to and including ``frame_id``."""
+
+    WHAT = "credit"
+
+
+@dataclass(frozen=True)
+class DemandMessage(_ConsumerFrame):
+    """Live mode: ``consumer`` (the tracker) wants frame ``frame_id`` of every camera segmented now
+    (``contourcap/<studio>/demand/<consumer>``); segment workers segment nothing else."""
+
+    WHAT = "demand"
+
+
+HAVE_MAX_FRAMES = 64
+
+
+@dataclass(frozen=True)
+class HaveMessage:
+    """Live mode: the frame ids of ``camera`` that its segment worker holds (undecoded, ready to be
+    segmented on demand), oldest first, at most :data:`HAVE_MAX_FRAMES`
+    (``contourcap/<studio>/cam/<camera>/have``)."""
+
+    camera: str
+    frame_ids: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frame_ids", tuple(int(f) for f in self.frame_ids))
+
+    @property
+    def newest(self) -> int | None:
+        return max(self.frame_ids) if self.frame_ids else None
+
+    def to_bytes(self) -> bytes:
+        return dumps_json({"v": RECORD_VERSION, "camera": self.camera, "frames": list(self.frame_ids)})
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = 4096) -> "HaveMessage":
+        obj = loads_json(data, max_bytes=max_bytes, what="have")
+        _check_version(obj, "have")
+        frames = obj.get("frames")
+        if not isinstance(frames, list) or len(frames) > HAVE_MAX_FRAMES:
+            raise MessageError(f"frames: expected a list of at most {HAVE_MAX_FRAMES} frame ids")
+        return cls(check_name(obj.get("camera")), tuple(_int({"frames": f}, "frames") for f in frames))

@@ -27,10 +27,11 @@ import zenoh
 
 from capture.sources import EndOfStream, Source, SourceError, SourceTimeout
 from service.assembler import FrameSetAssembler
-from service.bus import (CreditGate, Inbox, Keys, StatusReporter, attachment_ns, declare_publisher,
-                         wait_until_alive, wait_until_matched)
+from service.bus import (CreditGate, Inbox, Keys, StatusReporter, attachment_ns, declare_publisher, sent_ns_of,
+                         wait_any, wait_until_alive, wait_until_matched)
+from service.demand import DemandPlanner, FrameRing
 from service.messages import ChamferMessage, FrameMessage, MessageError
-from service.records import CreditMessage, PoseRecord
+from service.records import HAVE_MAX_FRAMES, CreditMessage, DemandMessage, HaveMessage, PoseRecord
 
 log = logging.getLogger("contourcap.worker")
 Segmenter = Callable[[FrameMessage, object], ChamferMessage]
@@ -88,7 +89,8 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
 
     Lossless: frame ``k`` is published only once the tracker acknowledged ``k - window``
     (:class:`~service.bus.CreditGate`) and only once the tracker and a segment worker for each camera
-    are alive (``startup_timeout_s``).  Raises :class:`WorkerError` when the consumers are not
+    are alive (``startup_timeout_s``); at the end it returns only once the tracker has acknowledged
+    its last frame (closing the session earlier lost the frames still in flight).  Raises :class:`WorkerError` when the consumers are not
     reachable in time, a credit is missing for ``credit_timeout_s``, or a source fails (SourceError
     other than a timeout or the end of its stream); returns the counters when every source ended or
     ``stop`` was set.  Sources must already be open (context managers entered by the caller).  ``pace(timestamp_ns)``
@@ -99,6 +101,7 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
     gate = CreditGate(session, keys, (TRACK_CONSUMER,), window=window) if mode == "lossless" else None
     status = StatusReporter(session, keys, component)
     active = dict(sources)
+    last_sent: int | None = None
     try:
         if gate is not None:  # lossless: nothing may be published before the consumers listen
             needed = (TRACK_CONSUMER,) + tuple(segment_token(c) for c in sources)
@@ -135,8 +138,14 @@ def run_camera_worker(session: zenoh.Session, keys: Keys, sources: Mapping[str, 
                 msg = FrameMessage.from_image(name, frame.frame_id, frame.timestamp_ns, frame.image,
                                               encoding=encodings.get(name, "raw"), jpeg_quality=jpeg_quality)
                 pubs[name].put(msg.to_bytes(), attachment=attachment_ns(wall_ns()))
+                last_sent = frame.frame_id if last_sent is None else max(last_sent, frame.frame_id)
                 status.count("processed")
             status.tick(cameras=len(active))
+        if gate is not None and last_sent is not None and not stop.is_set():
+            # the frames still in flight would be lost with this session: wait until the tracker has them all
+            if not gate.wait(last_sent + gate.window, timeout_s=credit_timeout_s, stop=stop) and not stop.is_set():
+                raise WorkerError(f"no credit from the tracker for the last frame {last_sent} within "
+                                  f"{credit_timeout_s:g} s")
         status.tick(state="finished", force=True)
         return dict(status.counters)
     finally:
@@ -154,8 +163,14 @@ def _cameras_alive(session: zenoh.Session, keys: Keys) -> bool:
 
 def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[str, Segmenter], *,
                        mode: str = "live", stop: threading.Event, component: str = "segment",
-                       idle_exit_s: float | None = None) -> dict:
-    """One thread per camera: newest frame (live) or every frame in order (lossless) -> chamfer.
+                       idle_exit_s: float | None = None, ring_size: int = 8, demand_wait_s: float = 0.5) -> dict:
+    """One thread per camera.  Lossless: every frame in order -> chamfer.  Live: the newest
+    ``ring_size`` frames of each camera are kept undecoded (:class:`~service.demand.FrameRing`), their
+    ids announced on ``cam/<cam>/have``, and only the frames the tracker demands on ``demand/track``
+    are decoded and segmented (:mod:`service.demand`); a demanded frame not held is skipped (or
+    waited for up to ``demand_wait_s`` if it has not arrived yet) and counted in ``missed``.  A
+    segmenter still learning its background (it returned None) is given every new frame until it
+    has learnt.
 
     A frame the segmenter rejects with MessageError is counted (``bad``); any other exception ends
     the worker with :class:`WorkerError` (the supervisor restarts the process).
@@ -166,45 +181,111 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
     lock = threading.Lock()
     last_frame: list = [None]  # idle time counts from the first frame
     crashed: dict[str, BaseException] = {}  # camera -> what ended its thread
-    wires = {name: (Inbox(session, keys.frame(name), FrameMessage.from_bytes, mode=mode,
-                          depth=1 if mode == "live" else 4096),
-                    declare_publisher(session, keys.chamfer(name), mode=mode)) for name in segmenters}
-    status = StatusReporter(session, keys, component)  # liveliness only once subscribed
+    live = mode == "live"
+    # chamfers and demands are few (demanded frames only) and each costs a segmentation: never dropped
+    pubs = {name: declare_publisher(session, keys.chamfer(name), mode="lossless") for name in segmenters}
+    inboxes = {} if live else {name: Inbox(session, keys.frame(name), FrameMessage.from_bytes, mode=mode, depth=4096)
+                               for name in segmenters}
+    rings = {name: FrameRing(name, size=min(ring_size, HAVE_MAX_FRAMES)) for name in segmenters} if live else {}
+    have_pubs = {name: declare_publisher(session, keys.have(name)) for name in rings}
+    subs = []
+    status = StatusReporter(session, keys, component)
+
+    def count(name: str, n: float = 1) -> None:
+        with lock:
+            status.count(name, n)
+
+    def on_frame(ring: FrameRing):
+        def callback(sample: zenoh.Sample) -> None:
+            last_frame[0] = time.monotonic()
+            try:
+                ring.put(sample.payload.to_bytes(), sent_ns_of(sample))
+            except MessageError as exc:
+                count("bad")
+                log.debug("camera %s: bad frame: %s", ring.camera, exc)
+        return callback
+
+    def on_demand(sample: zenoh.Sample) -> None:
+        try:
+            demand = DemandMessage.from_bytes(sample.payload.to_bytes())
+        except MessageError:
+            count("bad")
+            return
+        if demand.consumer == TRACK_CONSUMER:
+            now = time.monotonic()
+            for ring in rings.values():
+                ring.demand(demand.frame_id, now)
+
+    if live:  # subscribed before the liveliness tokens below announce this worker
+        subs = [session.declare_subscriber(keys.frame(name), on_frame(ring)) for name, ring in rings.items()]
+        subs.append(session.declare_subscriber(keys.demand(TRACK_CONSUMER), on_demand))
     tokens = [session.liveliness().declare_token(keys.status(segment_token(name))) for name in segmenters]
 
-    def loop(name: str, segment: Segmenter) -> None:
-        inbox, pub = wires[name]
+    def segment_one(name: str, segment: Segmenter, msg: FrameMessage | bytes) -> ChamferMessage | None | bool:
+        """The segmenter's output for one frame; False if the frame was bad (counted)."""
         try:
-            while not stop.is_set():
-                got = inbox.recv(0.05)
-                if got is None:
-                    continue
-                last_frame[0] = time.monotonic()
-                try:
-                    out = segment(got.message, got.message.image())
-                except MessageError as exc:
-                    log.warning("camera %s frame %d: %s", name, got.message.frame_id, exc)
-                    with lock:
-                        status.count("bad")
-                    continue
-                if out is None:  # still learning the background
-                    with lock:
-                        status.count("learning")
-                    continue
-                att = attachment_ns(got.sent_ns) if got.sent_ns is not None else None
-                pub.put(out.to_bytes(), attachment=att)
-                with lock:
-                    status.count("processed")
+            if not isinstance(msg, FrameMessage):
+                msg = FrameMessage.from_bytes(msg)
+            return segment(msg, msg.image())
+        except MessageError as exc:
+            log.warning("camera %s: %s", name, exc)
+            count("bad")
+            return False
+
+    def publish(name: str, out: ChamferMessage, sent_ns: int | None) -> None:
+        pubs[name].put(out.to_bytes(), attachment=attachment_ns(sent_ns) if sent_ns is not None else None)
+        count("processed")
+
+    def lossless_loop(name: str, segment: Segmenter) -> None:
+        inbox = inboxes[name]
+        while not stop.is_set():
+            got = inbox.recv(0.05)
+            if got is None:
+                continue
+            last_frame[0] = time.monotonic()
+            out = segment_one(name, segment, got.message)
+            if out is None:  # still learning the background
+                count("learning")
+            elif out is not False:
+                publish(name, out, got.sent_ns)
+
+    def live_loop(name: str, segment: Segmenter) -> None:
+        ring, learning = rings[name], False
+        while not stop.is_set():
+            with ring.cv:
+                ring.cv.wait_for(ring.busy, 0.05)
+            held = ring.take_news()
+            if held is not None:
+                have_pubs[name].put(HaveMessage(name, held).to_bytes())
+                newest = ring.newest() if learning else None
+                if newest is not None:  # learning from every frame (not published: not demanded)
+                    learning = segment_one(name, segment, newest[1]) is None
+            missed, got = ring.next_demanded(time.monotonic(), wait_s=demand_wait_s)
+            if missed:
+                count("missed", len(missed))
+            if got is None:
+                continue
+            fid, data, sent_ns = got
+            out = segment_one(name, segment, data)
+            if out is None:
+                learning = True
+                count("learning")
+            elif out is not False:
+                publish(name, out, sent_ns)
+
+    def loop(name: str, segment: Segmenter) -> None:
+        try:
+            (live_loop if live else lossless_loop)(name, segment)
         except Exception as exc:  # a segmenter bug: the worker must fail loudly, not finish
             log.exception("camera %s: segmentation thread crashed", name)
             crashed[name] = exc
-        finally:
-            inbox.close()
 
     def gauges() -> dict:
-        inboxes = [w[0] for w in wires.values()]
-        return {"bad": sum(i.bad for i in inboxes), "dropped": sum(i.dropped for i in inboxes),
-                "queue_depth": sum(len(i) for i in inboxes)}
+        if live:
+            return {"evicted": sum(r.evicted for r in rings.values()),
+                    "queue_depth": sum(len(r) for r in rings.values())}
+        return {"bad": sum(i.bad for i in inboxes.values()), "dropped": sum(i.dropped for i in inboxes.values()),
+                "queue_depth": sum(len(i) for i in inboxes.values())}
 
     threads = [threading.Thread(target=loop, args=item, name=f"segment-{item[0]}", daemon=True)
                for item in segmenters.items()]
@@ -222,6 +303,11 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
         stop.set()
         for t in threads:
             t.join(2.0)
+        for sub in subs + list(inboxes.values()):
+            try:
+                (sub.close if isinstance(sub, Inbox) else sub.undeclare)()
+            except Exception:  # session already closed
+                pass
         with lock:
             status.tick(state="finished", force=True, **gauges())
         status.close()
@@ -230,35 +316,107 @@ def run_segment_worker(session: zenoh.Session, keys: Keys, segmenters: Mapping[s
     if crashed:
         name, exc = next(iter(crashed.items()))
         raise WorkerError(f"camera {name}: segmentation failed: {exc.__class__.__name__}: {exc}") from exc
-    return {**status.counters, **gauges()}
+    with lock:
+        return {**status.counters, **gauges()}
 
 
 def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
                      mode: str = "live", set_timeout_s: float = 0.08, stop: threading.Event,
                      clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
                      component: str = "track", max_frames: int | None = None, idle_exit_s: float | None = None,
-                     on_pose: Callable[[PoseRecord], None] | None = None) -> dict:
+                     on_pose: Callable[[PoseRecord], None] | None = None, absent_after_s: float = 0.5,
+                     demand_timeout_s: float | None = None) -> dict:
     """Assemble chamfer sets, fit, publish one pose record per released set (``ok: false`` + reason
     when fitting fails — never silently dropped).  Lossless mode acknowledges each frame id.
+    Live mode demands the frames it fits (:class:`~service.demand.DemandPlanner`: the newest frame
+    id the live cameras' segment workers hold, by their have notices; a camera silent for
+    ``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
+    before fitting it.  ``demand_timeout_s`` (default ``max(0.25, 2 * set_timeout_s)``): a demand
+    that brought nothing is given up.
     Returns after ``max_frames`` poses, ``idle_exit_s`` without input once input came, or ``stop``."""
     lossless = mode == "lossless"
+    cv = threading.Condition()
     inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
-                  depth=16 * len(cameras) if lossless else 2 * len(cameras))
+                  depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
+    haves = None if lossless else Inbox(session, keys.have("*"), HaveMessage.from_bytes, depth=64 * len(cameras),
+                                        cv=cv)
+    planner = None if lossless else DemandPlanner(
+        cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
+        demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
     # lossless waits for every camera (a set released incomplete would not give the offline poses); only a
     # camera silent for LOSSLESS_SET_TIMEOUT_S is given up on, so a dead one stalls, not stops, the replay
-    asm: FrameSetAssembler = FrameSetAssembler(cameras, mode=mode, timeout_s=set_timeout_s if not lossless
+    asm: FrameSetAssembler = FrameSetAssembler(cameras, mode=mode, absent_after_s=absent_after_s if not lossless
+                                               else 1.0, timeout_s=set_timeout_s if not lossless
                                                else max(set_timeout_s, LOSSLESS_SET_TIMEOUT_S))
     pose_pub = declare_publisher(session, keys.pose, mode=mode)
     credit_pub = declare_publisher(session, keys.credit(TRACK_CONSUMER), mode="lossless") if lossless else None
+    demand_pub = None if lossless else declare_publisher(session, keys.demand(TRACK_CONSUMER), mode="lossless")
     status = StatusReporter(session, keys, component, clock=clock)
     sent: dict[int, int] = {}
     done = 0
 
     def gauges() -> dict:
-        return {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
-                "overflow": asm.overflow,
-                "bad": inbox.bad,
-                "dropped": inbox.dropped, "cameras": len(asm.present(clock()))}
+        out = {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
+               "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
+               "cameras": len(asm.present(clock()))}
+        if planner is not None:
+            out.update(bad=inbox.bad + haves.bad, demands=planner.demands, demand_timeouts=planner.timeouts,
+                       cameras=len(planner.live(clock())))
+        return out
+
+    def demand() -> None:
+        fid = planner.next_demand(clock(), hold=asm.is_pending) if planner is not None else None
+        if fid is not None:
+            demand_pub.put(DemandMessage(TRACK_CONSUMER, fid).to_bytes())
+
+    def take_haves() -> None:
+        for got in haves.drain():
+            msg: HaveMessage = got.message
+            if keys.camera_of(got.key) != msg.camera:
+                status.count("mismatched_key")
+            elif planner.have(msg.camera, msg.frame_ids, clock()):
+                asm.seen(msg.camera, clock())
+
+    def take_chamfers() -> None:
+        for got in inbox.drain():
+            msg: ChamferMessage = got.message
+            if keys.camera_of(got.key) != msg.camera:
+                status.count("mismatched_key")
+                continue
+            if planner is not None and not planner.wanted(msg.frame_id):
+                status.count("undemanded")
+                continue
+            asm.add(msg.camera, msg.frame_id, msg, clock())
+            if got.sent_ns is not None and asm.is_pending(msg.frame_id):
+                sent[msg.frame_id] = min(sent.get(msg.frame_id, got.sent_ns), got.sent_ns)
+
+    def finish(fs) -> None:
+        """Fit one released set and publish its pose (and its credit, lossless)."""
+        first = next(iter(fs.items.values()))
+        try:
+            record = dict(fit(fs.frame_id, first.timestamp_ns, fs.items))
+        except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
+            log.exception("frame %d: fitting failed", fs.frame_id)
+            record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
+                      "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
+        record.setdefault("cameras", len(fs.items))
+        t0 = sent.pop(fs.frame_id, None)
+        if t0 is not None:
+            record["latency_ms"] = (wall_ns() - t0) / 1e6
+            status.latency(record["latency_ms"])
+        try:
+            pose = PoseRecord.from_dict(record)
+        except MessageError as exc:
+            pose = PoseRecord.from_dict({"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns,
+                                         "ok": False, "reason": f"invalid pose record: {exc}"[:200],
+                                         "cameras": len(fs.items)})
+        pose_pub.put(pose.to_bytes())
+        if on_pose is not None:
+            on_pose(pose)
+        if credit_pub is not None:
+            credit_pub.put(CreditMessage(TRACK_CONSUMER, fs.frame_id).to_bytes())
+        status.count("processed")
+        status.count("missing_cameras", len(fs.missing))
 
     last_input = None  # idle time counts from the first input
     try:
@@ -266,54 +424,27 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
             if (idle_exit_s is not None and last_input is not None and clock() - last_input > idle_exit_s
                     and not len(asm)):
                 break
+            demand()
             deadline = asm.next_deadline()
             wait = 0.05 if deadline is None else min(0.05, max(0.0, deadline - clock()))
-            got = inbox.recv(wait)
-            if got is not None:
+            if wait_any([inbox] if haves is None else [inbox, haves], wait):
                 last_input = clock()
-            while got is not None:
-                msg: ChamferMessage = got.message
-                cam = keys.camera_of(got.key)
-                if cam != msg.camera:
-                    status.count("mismatched_key")
-                else:
-                    asm.add(msg.camera, msg.frame_id, msg, clock())
-                    if got.sent_ns is not None and asm.is_pending(msg.frame_id):
-                        sent[msg.frame_id] = min(sent.get(msg.frame_id, got.sent_ns), got.sent_ns)
-                got = inbox.recv(0) if len(inbox) else None
+            if haves is not None:
+                take_haves()
+            take_chamfers()
             for fs in asm.pop_ready(clock()):
-                first = next(iter(fs.items.values()))
-                try:
-                    record = dict(fit(fs.frame_id, first.timestamp_ns, fs.items))
-                except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
-                    log.exception("frame %d: fitting failed", fs.frame_id)
-                    record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
-                              "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
-                record.setdefault("cameras", len(fs.items))
-                t0 = sent.pop(fs.frame_id, None)
-                if t0 is not None:
-                    record["latency_ms"] = (wall_ns() - t0) / 1e6
-                    status.latency(record["latency_ms"])
-                try:
-                    pose = PoseRecord.from_dict(record)
-                except MessageError as exc:
-                    pose = PoseRecord.from_dict({"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns,
-                                                 "ok": False, "reason": f"invalid pose record: {exc}"[:200],
-                                                 "cameras": len(fs.items)})
-                pose_pub.put(pose.to_bytes())
-                if on_pose is not None:
-                    on_pose(pose)
-                if credit_pub is not None:
-                    credit_pub.put(CreditMessage(TRACK_CONSUMER, fs.frame_id).to_bytes())
-                status.count("processed")
-                status.count("missing_cameras", len(fs.missing))
+                if planner is not None:  # pipelining: the next set is segmented while this one is fitted
+                    planner.released(fs.frame_id)
+                    demand()
+                finish(fs)
                 done += 1
             for fid in [f for f in sent if not asm.is_pending(f)]:  # bounded by the pending sets
                 del sent[fid]
             status.tick(**gauges())
-        return {**status.counters, "stale_sets": asm.stale, "late": asm.late, "bad": inbox.bad,
-                "dropped": inbox.dropped}
+        return {**status.counters, **gauges()}
     finally:
         status.tick(state="finished", force=True, **gauges())
         inbox.close()
+        if haves is not None:
+            haves.close()
         status.close()

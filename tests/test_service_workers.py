@@ -18,7 +18,7 @@ from service.assembler import FrameSetAssembler
 from service.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
                          wait_until_matched)
 from service.messages import ChamferMessage, FrameMessage
-from service.records import PoseRecord
+from service.records import DemandMessage, PoseRecord
 from service.workers import WorkerError, run_camera_worker, run_segment_worker, run_track_worker
 
 CAMS = ("cam0", "cam1", "cam2")
@@ -84,6 +84,21 @@ class Studio:
         t.start()
         self.threads.append(t)
 
+    def run_live(self, session, fit, segment, cameras=CAMS) -> tuple[list, dict]:
+        """Live track + segment workers for CAMS, then ``cameras`` replayed in real time by a camera
+        worker (until their end): (the poses so far, the camera worker's counters)."""
+        poses = []
+        self.start("track", run_track_worker, self.session(listen=True), self.keys, CAMS, fit, mode="live",
+                   set_timeout_s=0.3, stop=self.stop, on_pose=poses.append)
+        self.start("segment", run_segment_worker, self.session(), self.keys, {c: segment for c in CAMS},
+                   mode="live", stop=self.stop)
+        cam_session = self.session()
+        assert wait_until_alive(cam_session, self.keys, ("track", "segment"), timeout_s=10.0)
+        sources = {c: ReplaySource(session, c, pacing="realtime") for c in cameras}
+        for s in sources.values():
+            s.open()
+        return poses, run_camera_worker(cam_session, self.keys, sources, mode="live", stop=self.stop)
+
     def close(self):
         self.stop.set()
         for t in self.threads:
@@ -130,23 +145,17 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
 
 
 def test_live_missing_camera_lowers_cameras(tmp_path, rng, studio):
-    session = make_session(tmp_path / "s", rng, n_frames=10)
-    keys, poses = studio.keys, []
-    studio.start("track", run_track_worker, studio.session(listen=True), keys, CAMS, fitter, mode="live",
-                 set_timeout_s=0.3, stop=studio.stop, on_pose=poses.append)
-    studio.start("segment", run_segment_worker, studio.session(), keys, {c: segmenter for c in CAMS},
-                 mode="live", stop=studio.stop)
-    cam_session = studio.session()
-    assert wait_until_alive(cam_session, keys, ("track", "segment"), timeout_s=10.0)
-    sources = {c: ReplaySource(session, c, pacing="realtime") for c in CAMS[:2]}  # cam2 is down
-    for s in sources.values():
-        s.open()
-    run_camera_worker(cam_session, keys, sources, mode="live", stop=studio.stop)
-    assert wait_for(lambda: poses and poses[-1].frame == 9, 5.0)  # the last set, released at its timeout
-    assert len(poses) >= 5
+    """Live (demand-driven) with cam2 down: after the start-up grace (0.5 s without cam2's have notices)
+    the tracker demands the frames cam0 and cam1 hold and keeps publishing with two cameras."""
+    session = make_session(tmp_path / "s", rng, n_frames=40)  # 1.6 s at 25 fps (the grace is 0.5 s)
+    poses, _ = studio.run_live(session, fitter, segmenter, cameras=CAMS[:2])  # cam2 is down
+    assert wait_for(lambda: poses and poses[-1].frame == 39, 5.0)  # the last frame is demanded too
+    assert len(poses) >= 8
     assert all(p.to_dict()["params"][2] == -1.0 for p in poses)  # cam2 never contributed
-    # the tracker kept publishing without cam2; a set of only one camera is a late frame under heavy load
-    assert sum(p.get("cameras") == 2 for p in poses) >= 0.8 * len(poses)
+    frames = [p.frame for p in poses]
+    assert frames == sorted(set(frames))  # live: newest only, never backwards, never twice
+    # the tracker kept publishing without cam2, every set with both live cameras (they segment the demanded id)
+    assert sum(p.get("cameras") == 2 for p in poses) >= 0.9 * len(poses)
 
 
 def test_assembler_rules():
@@ -304,11 +313,13 @@ def test_segment_worker_fails_loudly_when_its_segmenter_crashes(rng, studio):
     keys = studio.keys
     sender = studio.session(listen=True)
     pub = declare_publisher(sender, keys.frame("cam0"))
+    demand = declare_publisher(sender, keys.demand("track"))
     frame = FrameMessage.from_image("cam0", 1, 0, rng.integers(0, 256, (30, 40, 3), dtype=np.uint8))
 
-    def send():
-        if wait_until_matched([pub], timeout_s=10.0):
+    def send():  # live: the frame is segmented only once the tracker demands it
+        if wait_until_matched([pub, demand], timeout_s=10.0):
             pub.put(frame.to_bytes())
+            demand.put(DemandMessage("track", 1).to_bytes())
 
     threading.Thread(target=send, daemon=True).start()
     with pytest.raises(WorkerError, match="cam0.*RuntimeError: segmenter bug"):

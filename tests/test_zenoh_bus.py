@@ -11,7 +11,7 @@ import pytest
 from service.bus import (BusError, CreditGate, Inbox, Keys, StatusReporter, ZenohSettings, declare_publisher,
                          free_port, open_session, wait_until_matched)
 from service.messages import ChamferMessage, FrameMessage
-from service.records import CreditMessage, PoseRecord, StatusMessage
+from service.records import CreditMessage, DemandMessage, HaveMessage, PoseRecord, StatusMessage
 
 
 @pytest.fixture
@@ -44,6 +44,8 @@ def _messages(rng):
                                           "joints": {"head": [0, 0, 1.7]}}), PoseRecord.from_bytes),
         (keys.status("track"), StatusMessage("track", "running", 1, {"fps": 50.0}), StatusMessage.from_bytes),
         (keys.credit("track"), CreditMessage("track", 3), CreditMessage.from_bytes),
+        (keys.have("cam0"), HaveMessage("cam0", (1, 2, 3)), HaveMessage.from_bytes),
+        (keys.demand("track"), DemandMessage("track", 3), DemandMessage.from_bytes),
     ]
 
 
