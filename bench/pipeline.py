@@ -1,18 +1,25 @@
 """Live pipeline benchmark: the demo studio over zenoh on loopback, workers as processes.
 
-Prints ``{"cameras","fps_in","fps_out","realtime_factor","latency_ms_p50","latency_ms_p99",
-"dropped_sets","cpu_percent"}`` (``--json``) or a table.  ``--live`` replays in real time (stale sets
-dropped); the default is lossless (every frame, back-pressure) which measures throughput.
-``--fit-plugin tests.test_service_plugins:fitter_factory`` measures the transport and segmentation
-without the tracker.
+Prints the figures of issue 6 ``{"cameras","fps_in","fps_out","realtime_factor","latency_ms_p50",
+"latency_ms_p99","dropped_sets","cpu_percent"}`` plus ``poses``/``ok`` (how many poses, how many
+solved), ``mean_joint_error_m`` (against the synthetic ground truth: a pipeline that keeps up by
+losing the track is no good) and where the time goes: ``cpu_by_component`` (percent of one core,
+over the run, per worker role — camera, segment, track — and ``hub``: this process, which records
+the poses and bridges frames and chamfers to rerun) (``--json``) or a table.  ``--live`` replays in
+real time (the tracker demands the frames it can take); the default is lossless (every frame,
+back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plugins:fitter_factory``
+measures the transport and segmentation without the tracker.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -21,7 +28,71 @@ from service.commands import demo as demo_cmd  # noqa: E402
 from service.demo import run_demo  # noqa: E402
 
 KEYS = ("cameras", "fps_in", "fps_out", "realtime_factor", "latency_ms_p50", "latency_ms_p99", "dropped_sets",
-        "cpu_percent")
+        "cpu_percent", "frames", "ok", "mean_joint_error_m")
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def _role(cmdline: list[str]) -> str | None:
+    """The worker role of a ``service.commands.worker ROLE ...`` command line, else None."""
+    if "service.commands.worker" in cmdline:
+        i = cmdline.index("service.commands.worker")
+        return cmdline[i + 1] if i + 1 < len(cmdline) else None
+    return None
+
+
+def _cpu_s(pid: int | str) -> float:
+    """User + system CPU seconds of one process (fields 14 and 15 of /proc/PID/stat)."""
+    stat = Path(f"/proc/{pid}/stat").read_text()
+    fields = stat[stat.rindex(")") + 2:].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+class CpuSampler:
+    """CPU seconds per worker role of this process's children, sampled every ``period_s`` (a worker
+    that exits keeps its last sample; its final ~``period_s`` of CPU is not counted)."""
+
+    def __init__(self, period_s: float = 0.25) -> None:
+        self.period_s, self.parent = period_s, os.getpid()
+        self.last: dict[int, tuple[str, float]] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _sample(self) -> None:
+        for proc in Path("/proc").iterdir():
+            if not proc.name.isdigit():
+                continue
+            try:
+                stat = (proc / "stat").read_text()
+                ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+                if ppid != self.parent:
+                    continue
+                role = _role((proc / "cmdline").read_bytes().decode(errors="replace").split("\0"))
+                if role is not None:
+                    self.last[int(proc.name)] = (role, _cpu_s(proc.name))
+            except (OSError, ValueError, IndexError):
+                continue  # exited meanwhile
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period_s):
+            self._sample()
+
+    def __enter__(self) -> "CpuSampler":
+        self.t0, self.self0 = time.monotonic(), _cpu_s(os.getpid())
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.wall = time.monotonic() - self.t0
+        self.self_s = _cpu_s(os.getpid()) - self.self0
+
+    def percent(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for role, cpu in self.last.values():
+            out[role] = out.get(role, 0.0) + cpu
+        out["hub"] = self.self_s
+        return {k: round(100.0 * v / self.wall, 1) for k, v in sorted(out.items())}
 
 
 def main(argv=None) -> int:
@@ -31,8 +102,10 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         if opts.out == "contourcap-demo":
             opts.out = tmp
-        summary = run_demo(demo_cmd.options_from_args(opts), progress=lambda m: print(m, file=sys.stderr))
+        with CpuSampler() as cpu:
+            summary = run_demo(demo_cmd.options_from_args(opts), progress=lambda m: print(m, file=sys.stderr))
     result = {k: summary.as_dict()[k] for k in KEYS}
+    result["cpu_by_component"] = cpu.percent()
     if opts.json:
         print(json.dumps(result))
     else:

@@ -422,7 +422,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
     try:
         while not stop.is_set() and (max_frames is None or done < max_frames):
             if (idle_exit_s is not None and last_input is not None and clock() - last_input > idle_exit_s
-                    and not len(asm)):
+                    and not len(asm) and not len(inbox) and not (haves is not None and len(haves))):
                 break
             demand()
             deadline = asm.next_deadline()
@@ -438,6 +438,7 @@ def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...
                     demand()
                 finish(fs)
                 done += 1
+                last_input = clock()  # a long fit (re-initialisation) is not idleness
             for fid in [f for f in sent if not asm.is_pending(f)]:  # bounded by the pending sets
                 del sent[fid]
             status.tick(**gauges())

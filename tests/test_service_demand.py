@@ -219,3 +219,18 @@ def _replayed(session, camera, fid):
                 return FrameMessage.from_image(camera, fid, fr.timestamp_ns, fr.image), fr.image
     finally:
         src.close()
+
+
+def test_live_track_worker_does_not_take_a_long_fit_for_idleness(tmp_path, rng, studio):
+    """A fit longer than idle_exit_s (a re-initialisation takes seconds) is not idleness: the worker
+    goes on while the cameras stream, and exits once they stop."""
+    session = make_session(tmp_path / "s", rng, n_frames=40)  # 1.6 s
+
+    def slow_fitter(frame_id, timestamp_ns, chamfer):
+        threading.Event().wait(0.3)
+        return fitter(frame_id, timestamp_ns, chamfer)
+
+    poses, _ = studio.run_live(session, slow_fitter, segmenter, idle_exit_s=0.2)
+    assert wait_for(lambda: "track" in studio.results, 5.0)  # exited after the stream ended
+    assert len(poses) >= 3 and poses[-1].frame >= 30, [p.frame for p in poses]
+

@@ -84,12 +84,12 @@ class Studio:
         t.start()
         self.threads.append(t)
 
-    def run_live(self, session, fit, segment, cameras=CAMS) -> tuple[list, dict]:
+    def run_live(self, session, fit, segment, cameras=CAMS, **track_kw) -> tuple[list, dict]:
         """Live track + segment workers for CAMS, then ``cameras`` replayed in real time by a camera
         worker (until their end): (the poses so far, the camera worker's counters)."""
         poses = []
         self.start("track", run_track_worker, self.session(listen=True), self.keys, CAMS, fit, mode="live",
-                   set_timeout_s=0.3, stop=self.stop, on_pose=poses.append)
+                   set_timeout_s=0.3, stop=self.stop, on_pose=poses.append, **track_kw)
         self.start("segment", run_segment_worker, self.session(), self.keys, {c: segment for c in CAMS},
                    mode="live", stop=self.stop)
         cam_session = self.session()
