@@ -8,7 +8,9 @@ over the run, per worker role — camera, segment, track — and ``hub``: this p
 the poses and bridges frames and chamfers to rerun) (``--json``) or a table.  ``--live`` replays in
 real time (the tracker demands the frames it can take); the default is lossless (every frame,
 back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plugins:fitter_factory``
-measures the transport and segmentation without the tracker.
+measures the transport and segmentation without the tracker.  ``--preload``: replay cameras decode
+the session into memory before streaming (``cpu_by_component.camera`` is then the cost of
+publishing frames, not of decoding the session's videos).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from service.commands import demo as demo_cmd  # noqa: E402
+from service.commands.worker import PRELOAD_ENV  # noqa: E402
 from service.demo import run_demo  # noqa: E402
 
 KEYS = ("cameras", "fps_in", "fps_out", "realtime_factor", "latency_ms_p50", "latency_ms_p99", "dropped_sets",
@@ -98,7 +101,12 @@ class CpuSampler:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     demo_cmd.add_args(parser)
+    parser.add_argument("--preload", action="store_true",
+                        help="live: camera workers decode the session into memory before streaming it (a camera "
+                             "that delivers decoded frames; without it the replay's FFV1 decoding is measured too)")
     opts = parser.parse_args(argv)
+    if opts.preload:  # inherited by the worker processes (service/commands/worker.py --preload)
+        os.environ[PRELOAD_ENV] = "1"
     with tempfile.TemporaryDirectory() as tmp:
         if opts.out == "contourcap-demo":
             opts.out = tmp

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import socket
 import sys
 import threading
 
 HELP = "run one worker process (camera, segment or track) of a studio"
+PRELOAD_ENV = "CONTOURCAP_PRELOAD_REPLAY"
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +29,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--epoch-ns", type=int, default=None,
                         help="camera, live replay: wall-clock ns at which session time 0 is due (set by run)")
     parser.add_argument("--loop", action="store_true", help="camera, replay: loop the session forever")
+    parser.add_argument("--preload", action="store_true", default=os.environ.get(PRELOAD_ENV) == "1",
+                        help="camera, live replay: decode the session into memory first and serve it from there "
+                             f"(benchmarks: a camera delivering decoded frames; default from ${PRELOAD_ENV}=1)")
     parser.add_argument("--log-level", default="INFO", type=str.upper,
                         choices=("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"))
 
@@ -86,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             paced = args.epoch_ns is not None and cfg.delivery == "live"
             box = start_trigger(cfg, stop) if needs_trigger(cfg, cams) else None
             sources = build_sources(cfg, cams, mode=cfg.delivery, paced=paced, loop=args.loop,
-                                    frame_id_at=None if box is None else box.frame_id_at)
+                                    frame_id_at=None if box is None else box.frame_id_at, preload=args.preload)
             try:
                 stats = run_camera_worker(session, keys, sources, mode=cfg.delivery, stop=stop,
                                           encodings={c: cfg.camera(c).encoding for c in cams},
