@@ -75,20 +75,16 @@ def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
 
 
 def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
-    """World rays through pixels (lens distortion removed): origins (K, 3), unit directions (K, 3)
-    and camera index (K,) of the pixels ``pixels[c]`` (k_c, 2) of every camera c."""
-    origins, dirs, cam = [], [], []
+    """World rays through pixels (lens distortion removed): unit directions (K, 3) and camera
+    index (K,) of the pixels ``pixels[c]`` (k_c, 2) of every camera c (origins: the centres)."""
+    dirs, cam = [np.zeros((0, 3))], [np.zeros(0, dtype=np.intp)]
     for c, (camera, uv) in enumerate(zip(cameras, pixels)):
-        if not len(uv):
-            continue
-        xy = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), camera.matrix, camera.distortion)
-        ray = np.concatenate([xy.reshape(-1, 2), np.ones((len(uv), 1))], axis=1) @ camera.rotation  # R^T x
-        dirs.append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
-        origins.append(np.broadcast_to(camera.center, ray.shape))
-        cam.append(np.full(len(uv), c))
-    if not dirs:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=int)
-    return np.concatenate(origins), np.concatenate(dirs), np.concatenate(cam)
+        if len(uv):
+            xy = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), camera.matrix, camera.distortion)
+            ray = np.concatenate([xy.reshape(-1, 2), np.ones((len(uv), 1))], axis=1) @ camera.rotation  # R^T x
+            dirs.append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
+            cam.append(np.full(len(uv), c, dtype=np.intp))
+    return np.concatenate(dirs), np.concatenate(cam)
 
 
 class _StackedChamfer:
@@ -336,11 +332,13 @@ class ChamferCost:
         far = has & (dist > self.reverse_min_px)
         if self._rays is not None and far.any():
             # a sample on the predicted silhouette (e.g. on an end cap, or between two contour
-            # samples) is explained by the model: no residual, whatever its nearest contour point
+            # samples) is explained by the model: no residual, whatever its nearest contour point.
+            # (Tested at every evaluation: reusing a linearisation point's answer at the trial
+            # points let steps that uncover samples look free; hop: MPJPE 7.7 -> 10.3 mm.)
             idx = np.flatnonzero(far)
-            centres, dirs, cam = self._rays
-            margin = self.reverse_cover_px * self._px_depth(pose)[cam[idx]]  # (n, n_parts) metres
-            on = covered_rays(self.model, pose, centres[idx], dirs[idx], margin_m=margin)
+            dirs, cam = self._rays
+            margin = self.reverse_cover_px * self._px_depth(pose)  # (n_cams, n_parts) metres
+            on = covered_rays(self.model, pose, self.cameras, cam[idx], dirs[idx], margin_m=margin)
             far[idx[on]] = False
             dist_all[idx[on]] = 0.0
         r = np.where(far, dist - self.reverse_min_px, 0.0)

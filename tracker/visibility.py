@@ -137,41 +137,84 @@ def _meets_solid(g1, g2, g3, qc, e1, e2, h1, h2, h3, d3, *, s_max: float) -> np.
     return ok & (qmin < -_Q_TOL)
 
 
-def covered_rays(model: BodyModel, pose: Pose, centres: np.ndarray, directions: np.ndarray, *,
-                 margin_m: np.ndarray | float = 0.0, max_range_m: float = 100.0) -> np.ndarray:
-    """Which rays ``centres[i] + s directions[i]`` (s in [0, max_range_m]) meet the body: a pixel's
-    ray meets it exactly when the pixel lies on the model's silhouette.
+def covered_rays(model: BodyModel, pose: Pose, cameras: Sequence[Camera], cam: np.ndarray, directions: np.ndarray, *,
+                 margin_m: np.ndarray | float = 0.0, range_m: float = 50.0) -> np.ndarray:
+    """Which rays from the centres of ``cameras`` meet the body: a pixel's ray meets it exactly when
+    the pixel lies on the model's silhouette.
 
     Parameters
     ----------
-    centres, directions : ndarray, shape (n, 3)
-        Ray origins (camera centres) and unit directions, world.
-    margin_m : ndarray (n, n_parts) or float
-        Every solid grown by this much (its semi-axes and both caps), metres: e.g. a tolerance of
-        ``t`` pixels is ``t × depth / focal length`` for a part at that depth.
+    cam : ndarray of int, shape (n,)
+        Camera of each ray (index into ``cameras``), grouped (non-decreasing) for speed.
+    directions : ndarray, shape (n, 3)
+        Unit directions, world.
+    margin_m : ndarray (n_cams, n_parts) or float
+        Every solid grown by this much (its semi-axes before the taper, and both caps), metres:
+        e.g. a tolerance of ``t`` pixels is ``t × depth / focal length`` for a part at that depth.
+        (The image-box cull below is not grown: a margin reaches past the solid's bounding box
+        only near the box's corners.)
+    range_m : rays are followed this far.
+
+    The (ray, part) pairs are culled by the parts' image boxes (as in ``hidden_points``; a ray
+    pointing away from a camera meets nothing), then tested exactly on the segment
+    ``[0, range_m]`` of each ray.
 
     Returns
     -------
     ndarray of bool, shape (n,)
     """
-    C = np.asarray(centres, dtype=float).reshape(-1, 3)
     D = np.asarray(directions, dtype=float).reshape(-1, 3)
-    if C.shape != D.shape:
-        raise ValueError(f"centres, directions: expected the same shape (n, 3), got {C.shape} and {D.shape}")
-    if C.shape[0] == 0:
-        return np.zeros(0, dtype=bool)
+    cam = np.asarray(cam, dtype=np.intp).reshape(-1)
+    if cam.shape[0] != D.shape[0]:
+        raise ValueError(f"cam, directions: expected one camera index per ray, got {cam.shape[0]} and {D.shape[0]}")
+    hit = np.zeros(D.shape[0], dtype=bool)
+    if D.shape[0] == 0:
+        return hit
+    st = stack_cameras(cameras)
+    cam_R, cam_t = st.rotation, st.translation
+    centres = -np.einsum("cji,cj->ci", cam_R, cam_t)  # (n_cams, 3) world
+    n_parts = model.n_parts
+    # cull: (ray, part) pairs whose ray's image point lies in the part's image box
+    box = _part_boxes(model, pose, cam_R, cam_t)[cam]  # (n, 4, n_parts)
+    Dc = np.einsum("nij,nj->ni", cam_R[cam], D)  # directions in the camera frames
+    ahead = Dc[:, 2] > 1e-9
+    zc = np.where(ahead, Dc[:, 2], 1.0)
+    xr, yr = (Dc[:, 0] / zc)[:, None], (Dc[:, 1] / zc)[:, None]
+    inside = (xr >= box[:, 0]) & (xr <= box[:, 1]) & (yr >= box[:, 2]) & (yr <= box[:, 3])
+    i, q = np.nonzero(inside & ahead[:, None])
+    if i.size == 0:
+        return hit
     R, t = pose.rotation, pose.translation
     a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
-    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (C.shape[0], model.n_parts))
-    a_g, b_g = a + grow, b + grow  # (n, n_parts)
-    m = np.einsum("pji,npj->npi", R, C[:, None, :] - t[None, :, :])  # origins in every part frame
-    d = np.einsum("pji,nj->npi", R, D)  # directions in every part frame
-    g1, g2, g3 = m[..., 0] / a_g, m[..., 1] / b_g, 1.0 + k * m[..., 2]
-    qc = g1 * g1 + g2 * g2 - g3 * g3
-    e1, e2 = z1 - grow - m[..., 2], z2 + grow - m[..., 2]
-    hit = _meets_solid(g1, g2, g3, qc, e1, e2, d[..., 0] / a_g, d[..., 1] / b_g, k * d[..., 2], d[..., 2],
-                       s_max=max_range_m)
-    return hit.any(axis=1)
+    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (centres.shape[0], n_parts))
+    c = cam[i]
+    g_pair = grow[c, q]
+    a_g, b_g = a[q] + g_pair, b[q] + g_pair
+    Rcat = R.transpose(1, 0, 2).reshape(3, 3 * n_parts)  # x @ Rcat: x in every part frame
+    m = ((centres @ Rcat).reshape(-1, n_parts, 3) - np.einsum("pj,pji->pi", t, R)[None])[c, q]  # (pairs, 3)
+    d = (D @ (range_m * Rcat)).reshape(-1, n_parts, 3)[i, q]  # (pairs, 3) segment vectors in the part frames
+    g1, g2, g3 = m[:, 0] / a_g, m[:, 1] / b_g, 1.0 + k[q] * m[:, 2]
+    on = _meets_solid(g1, g2, g3, g1 * g1 + g2 * g2 - g3 * g3, z1[q] - g_pair - m[:, 2], z2[q] + g_pair - m[:, 2],
+                      d[:, 0] / a_g, d[:, 1] / b_g, k[q] * d[:, 2], d[:, 2], s_max=1.0)
+    hit[i[on]] = True
+    return hit
+    n_parts = model.n_parts
+    R, t = pose.rotation, pose.translation
+    a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
+    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (C.shape[0], n_parts))
+    m = np.einsum("pji,cpj->cpi", R, C[:, None, :] - t[None, :, :])  # origins in every part frame
+    Rcat = R.transpose(1, 0, 2).reshape(3, 3 * n_parts)  # d @ Rcat: the direction in every part frame
+    for c in np.unique(cam):
+        rows = np.flatnonzero(cam == c)
+        d = (D[rows] @ Rcat).reshape(rows.size, n_parts, 3)
+        a_g, b_g = a + grow[c], b + grow[c]
+        g1, g2, g3 = m[c, :, 0] / a_g, m[c, :, 1] / b_g, 1.0 + k * m[c, :, 2]
+        shape = (rows.size, n_parts)
+        per_part = [np.broadcast_to(v, shape) for v in
+                    (g1, g2, g3, g1 * g1 + g2 * g2 - g3 * g3, z1 - grow[c] - m[c, :, 2], z2 + grow[c] - m[c, :, 2])]
+        hit[rows] = _meets_solid(*per_part, d[..., 0] / a_g, d[..., 1] / b_g, k * d[..., 2], d[..., 2],
+                                 s_max=max_range_m).any(axis=1)
+    return hit
 
 
 _CHUNK = 4  # consecutive points (same camera) culled together first (half a ruling at n_samples = 8)
@@ -184,20 +227,7 @@ def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
     samples along a ruling are neighbours) against each part's image box; the points of
     overlapping chunks are paired with that part.  Chunks with a point behind the camera
     are never culled."""
-    a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
-    s_max = np.maximum(1.0 + k * z1, 1.0 + k * z2)
-    corners = np.empty((model.n_parts, 8, 3))  # part-frame bounding box of each solid
-    corners[..., 0] = (a * s_max)[:, None] * _CORNERS[:, 0]
-    corners[..., 1] = (b * s_max)[:, None] * _CORNERS[:, 1]
-    corners[..., 2] = np.where(_CORNERS[:, 2] > 0, z2[:, None], z1[:, None])
-    world = np.einsum("pij,pkj->pki", pose.rotation, corners) + pose.translation[:, None, :]
-    Xc = np.einsum("cij,pkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
-    depth = Xc[..., 2]
-    front = depth.min(axis=-1) > 1e-9  # (n_cams, n_parts)
-    zc = np.where(front[..., None], depth, 1.0)
-    xn, yn = Xc[..., 0] / zc, Xc[..., 1] / zc
-    inf = np.where(front, 0.0, np.inf)
-    box = np.stack([xn.min(-1) - inf, xn.max(-1) + inf, yn.min(-1) - inf, yn.max(-1) + inf], axis=1)
+    box = _part_boxes(model, pose, cam_R, cam_t)
     n = c.size
     Pc = _to_cameras(cam_R, cam_t, c, P)
     ahead = Pc[:, 2] > 1e-9
@@ -225,6 +255,25 @@ def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
     q = q[rep]
     keep = own[i] != q  # a part does not hide its own contour
     return i[keep], q[keep]
+
+
+def _part_boxes(model, pose, cam_R, cam_t) -> np.ndarray:
+    """Image boxes of the parts' solids in normalised camera coordinates (x/z, y/z), shape
+    (n_cams, 4, n_parts): x min, x max, y min, y max (unbounded for a part not wholly in front)."""
+    a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
+    s_max = np.maximum(1.0 + k * z1, 1.0 + k * z2)
+    corners = np.empty((model.n_parts, 8, 3))  # part-frame bounding box of each solid
+    corners[..., 0] = (a * s_max)[:, None] * _CORNERS[:, 0]
+    corners[..., 1] = (b * s_max)[:, None] * _CORNERS[:, 1]
+    corners[..., 2] = np.where(_CORNERS[:, 2] > 0, z2[:, None], z1[:, None])
+    world = np.einsum("pij,pkj->pki", pose.rotation, corners) + pose.translation[:, None, :]
+    Xc = np.einsum("cij,pkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
+    depth = Xc[..., 2]
+    front = depth.min(axis=-1) > 1e-9  # (n_cams, n_parts)
+    zc = np.where(front[..., None], depth, 1.0)
+    xn, yn = Xc[..., 0] / zc, Xc[..., 1] / zc
+    inf = np.where(front, 0.0, np.inf)
+    return np.stack([xn.min(-1) - inf, xn.max(-1) + inf, yn.min(-1) - inf, yn.max(-1) + inf], axis=1)
 
 
 def _to_cameras(cam_R, cam_t, c, P):
