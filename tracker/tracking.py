@@ -47,8 +47,9 @@ class TrackerOptions:
     prior_m, prior_rad : prior weights per m² (root translation) and per rad² (rotations), in
     units of px² residual, towards the last fitted pose (not the extrapolation);
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse (silhouette →
-    model) term of ``tracker.cost`` (weight 0 turns it off; hop session: reverse_min_px 2 with the
-    on-silhouette test ``reverse_cover_px`` 1: MPJPE 7.7 mm, 8 without it: 9.4 mm, 2 without it: 10.8 mm);
+    model) term of ``tracker.cost`` (weight 0 turns it off; hop session with the on-silhouette
+    test ``reverse_cover_px`` 1: MPJPE 6.5 mm at reverse_min_px 4, 7.6 mm at 2; without the test:
+    9.4 mm at 8, 10.8 mm at 2; the test costs ~20 % more time per frame);
     damping, diagonal_floor : LM initial damping and damping-diagonal floor;
     constant_velocity : start from ``2 p_t − p_{t−1}`` (hop session: median 3 iterations instead
     of 5, mean joint error 9.1 mm instead of 11.6 mm);
@@ -69,11 +70,14 @@ class TrackerOptions:
     within 0.1 of its limit (``iou_every=1``: every frame);
     front_back_every, front_back_iterations, front_back_margin : the front/back check: silhouettes
     hardly tell a body from its mirror (``tracker.mirror``), so a track can run turned round and
-    pass every figure above.  Every ``front_back_every`` good frames that bring silhouettes (0:
-    never), the mirror of the fitted pose is fitted too (``front_back_iterations`` LM steps) and
+    pass every figure above (or fail them, as a poor fit, until recovery).  Every
+    ``front_back_every`` frames that bring silhouettes (0: never; not on a frame that was just
+    re-initialised), the mirror of the fitted pose is fitted too (``front_back_iterations`` LM steps) and
     both are scored by ``tracker.mirror.hypothesis_cost`` (RMS + 10 × (1 − IoU) + 0.1 per joint
-    at a limit); the mirror is taken when it scores ``front_back_margin`` lower.  Costs one fit
-    and two IoU renders per check (≈ 1–2 ms per frame on average at 30).
+    at a limit); when the mirror scores ``front_back_margin`` lower it is taken and fitted to
+    convergence (4 × ``front_back_iterations`` steps).  A check costs one fit and two IoU renders
+    (hop: ~20 ms, ≈ 0.7 ms per frame on average at 30).  (``tracker.mirror.resolve_front_back``,
+    the full check, takes 1–3 s and kept the mirrored pose on the test's clip: not used.)
     """
 
     n_samples: int = 8
@@ -89,7 +93,7 @@ class TrackerOptions:
     prior_rad: float = 30.0
     reverse_weight: float = 1.0
     reverse_samples: int = 150
-    reverse_min_px: float = 2.0
+    reverse_min_px: float = 4.0
     reverse_cover_px: float | None = 1.0
     damping: float = 1e-3
     diagonal_floor: float = 0.0
@@ -265,8 +269,8 @@ class Tracker:
         return "; ".join(why)
 
     def _front_back(self, cams, chs, res, terms, views):
-        """The front/back check (``TrackerOptions``): ``(res, terms)`` of the fitted mirror when it
-        scores better than the fit ``res``, else None."""
+        """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
+        mirror of the fit ``res`` scores better, else None."""
         o = self.options
         self.n_front_back_checks += 1
         p = np.asarray(res.params)
@@ -274,12 +278,16 @@ class Tracker:
         res_m, cost_m = fit_frame(self.model, cams, chs, mp, sliding=self.sliding, solver=self.solver,
                                   options=replace(o, max_iterations=o.front_back_iterations))
         pm = np.asarray(res_m.params)
-        terms_m = cost_m.evaluate(pm)
         v = views()
         iou = self._last_iou if self._last_iou is not None else float(v.score(p))
         kept = hypothesis_cost(self.model, p, terms.rms_px(), iou)
-        turned = hypothesis_cost(self.model, pm, terms_m.rms_px(), float(v.score(pm)))
-        return (res_m, terms_m) if turned < kept - o.front_back_margin else None
+        turned = hypothesis_cost(self.model, pm, cost_m.evaluate(pm).rms_px(), float(v.score(pm)))
+        if not turned < kept - o.front_back_margin:
+            return None
+        # turned: converge fully from there (the mirror of a contorted fit is itself off)
+        res_t, cost_t = fit_frame(self.model, cams, chs, pm, sliding=self.sliding, solver=self.solver,
+                                  options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0))
+        return res_t, cost_t.evaluate(np.asarray(res_t.params))
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -342,7 +350,7 @@ class Tracker:
                     if not bad:
                         self.monitor.reset()
                     restarted = True  # no velocity across a re-initialisation
-        if self.options.front_back_every > 0 and views is not None and not bad:
+        if self.options.front_back_every > 0 and views is not None and not restarted:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
                 self._since_front_back = 0
@@ -351,6 +359,9 @@ class Tracker:
                     res, terms = turned
                     rms, inside = terms.rms_px(), terms.inside_fraction()
                     self._last_iou = None  # the IoU recorded was the other hypothesis's
+                    bad = self._bad(terms, views)
+                    if not bad:
+                        self.monitor.reset()
                     self.n_turned += 1
                     restarted = True  # no velocity across the turn
         self.last_result = res
