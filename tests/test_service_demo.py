@@ -70,11 +70,6 @@ def _equal(p: dict, o: dict, atol: float) -> bool:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="KNOWN CAUSE, fix pending in service/workers.py: a lossless camera worker "
-                   "closes its zenoh session right after its last put and, under CPU load, frames a slow segment "
-                   "worker has not read yet are lost (the set is released without that camera after the set "
-                   "timeout). Remove this marker once run_camera_worker waits for the tracker's credit of its "
-                   "last frame before returning.")
 def test_demo_lossless_real_tracker_equals_offline(tmp_path):
     """The contract of DESIGN.md: lossless replay over zenoh gives the same poses as `contourcap track`.
 
