@@ -220,7 +220,9 @@ class ChamferCost:
     edge_weight : scale of the edge residual relative to the silhouette residual
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse term (module
         docstring); off at weight 0.  Boundary samples come from the chamfer objects'
-        ``silhouette_q``; ``reverse_cover_px`` None turns the on-silhouette test off.
+        ``silhouette_q``; ``reverse_cover_px`` None (the default) turns the on-silhouette test
+        off (the tracker turns it on, ``TrackerOptions``; ``tracker.initialise.refine`` leaves it
+        off: its searches from far-off poses rely on the pull of all far samples).
     visibility : ``"step"`` (default): occlusion is recomputed where the Jacobian is evaluated
         (each linearisation point) and that set of rows is kept for the trial steps from it;
         ``"frame"``: computed once, at the first pose evaluated, and kept; ``"always"``: at every
@@ -230,7 +232,7 @@ class ChamferCost:
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, *, sliding: bool = True,
                  n_samples: int = 12, visibility: str = "step", truncate_px: float | None = 30.0,
                  edge_weight: float = 1.0, reverse_weight: float = 0.0, reverse_samples: int = 120,
-                 reverse_min_px: float = 2.0, reverse_cover_px: float | None = 1.0) -> None:
+                 reverse_min_px: float = 2.0, reverse_cover_px: float | None = None) -> None:
         cameras = list(cameras)
         chamfer = list(chamfer)
         if len(cameras) != len(chamfer):

@@ -151,8 +151,6 @@ def covered_rays(model: BodyModel, pose: Pose, cameras: Sequence[Camera], cam: n
     margin_m : ndarray (n_cams, n_parts) or float
         Every solid grown by this much (its semi-axes before the taper, and both caps), metres:
         e.g. a tolerance of ``t`` pixels is ``t × depth / focal length`` for a part at that depth.
-        (The image-box cull below is not grown: a margin reaches past the solid's bounding box
-        only near the box's corners.)
     range_m : rays are followed this far.
 
     The (ray, part) pairs are culled by the parts' image boxes (as in ``hidden_points``; a ray
@@ -175,7 +173,8 @@ def covered_rays(model: BodyModel, pose: Pose, cameras: Sequence[Camera], cam: n
     centres = -np.einsum("cji,cj->ci", cam_R, cam_t)  # (n_cams, 3) world
     n_parts = model.n_parts
     # cull: (ray, part) pairs whose ray's image point lies in the part's image box
-    box = _part_boxes(model, pose, cam_R, cam_t)[cam]  # (n, 4, n_parts)
+    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (centres.shape[0], n_parts))
+    box = _part_boxes(model, pose, cam_R, cam_t, grow)[cam]  # (n, 4, n_parts)
     Dc = np.einsum("nij,nj->ni", cam_R[cam], D)  # directions in the camera frames
     ahead = Dc[:, 2] > 1e-9
     zc = np.where(ahead, Dc[:, 2], 1.0)
@@ -186,7 +185,6 @@ def covered_rays(model: BodyModel, pose: Pose, cameras: Sequence[Camera], cam: n
         return hit
     R, t = pose.rotation, pose.translation
     a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
-    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (centres.shape[0], n_parts))
     c = cam[i]
     g_pair = grow[c, q]
     a_g, b_g = a[q] + g_pair, b[q] + g_pair
@@ -197,23 +195,6 @@ def covered_rays(model: BodyModel, pose: Pose, cameras: Sequence[Camera], cam: n
     on = _meets_solid(g1, g2, g3, g1 * g1 + g2 * g2 - g3 * g3, z1[q] - g_pair - m[:, 2], z2[q] + g_pair - m[:, 2],
                       d[:, 0] / a_g, d[:, 1] / b_g, k[q] * d[:, 2], d[:, 2], s_max=1.0)
     hit[i[on]] = True
-    return hit
-    n_parts = model.n_parts
-    R, t = pose.rotation, pose.translation
-    a, b, k, z1, z2 = model.cones.T  # each (n_parts,)
-    grow = np.broadcast_to(np.asarray(margin_m, dtype=float), (C.shape[0], n_parts))
-    m = np.einsum("pji,cpj->cpi", R, C[:, None, :] - t[None, :, :])  # origins in every part frame
-    Rcat = R.transpose(1, 0, 2).reshape(3, 3 * n_parts)  # d @ Rcat: the direction in every part frame
-    for c in np.unique(cam):
-        rows = np.flatnonzero(cam == c)
-        d = (D[rows] @ Rcat).reshape(rows.size, n_parts, 3)
-        a_g, b_g = a + grow[c], b + grow[c]
-        g1, g2, g3 = m[c, :, 0] / a_g, m[c, :, 1] / b_g, 1.0 + k * m[c, :, 2]
-        shape = (rows.size, n_parts)
-        per_part = [np.broadcast_to(v, shape) for v in
-                    (g1, g2, g3, g1 * g1 + g2 * g2 - g3 * g3, z1 - grow[c] - m[c, :, 2], z2 + grow[c] - m[c, :, 2])]
-        hit[rows] = _meets_solid(*per_part, d[..., 0] / a_g, d[..., 1] / b_g, k * d[..., 2], d[..., 2],
-                                 s_max=max_range_m).any(axis=1)
     return hit
 
 
@@ -257,17 +238,19 @@ def _candidate_pairs(model, pose, cam_R, cam_t, c, own, P):
     return i[keep], q[keep]
 
 
-def _part_boxes(model, pose, cam_R, cam_t) -> np.ndarray:
+def _part_boxes(model, pose, cam_R, cam_t, grow=0.0) -> np.ndarray:
     """Image boxes of the parts' solids in normalised camera coordinates (x/z, y/z), shape
-    (n_cams, 4, n_parts): x min, x max, y min, y max (unbounded for a part not wholly in front)."""
+    (n_cams, 4, n_parts): x min, x max, y min, y max (unbounded for a part not wholly in front);
+    ``grow`` (n_cams, n_parts) or scalar: the solids grown by that much (metres)."""
     a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
     s_max = np.maximum(1.0 + k * z1, 1.0 + k * z2)
-    corners = np.empty((model.n_parts, 8, 3))  # part-frame bounding box of each solid
-    corners[..., 0] = (a * s_max)[:, None] * _CORNERS[:, 0]
-    corners[..., 1] = (b * s_max)[:, None] * _CORNERS[:, 1]
-    corners[..., 2] = np.where(_CORNERS[:, 2] > 0, z2[:, None], z1[:, None])
-    world = np.einsum("pij,pkj->pki", pose.rotation, corners) + pose.translation[:, None, :]
-    Xc = np.einsum("cij,pkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
+    g = np.broadcast_to(np.asarray(grow, dtype=float), (cam_R.shape[0], model.n_parts))[..., None]
+    corners = np.empty((cam_R.shape[0], model.n_parts, 8, 3))  # part-frame bounding box of each solid
+    corners[..., 0] = ((a + g[..., 0]) * s_max)[..., None] * _CORNERS[:, 0]
+    corners[..., 1] = ((b + g[..., 0]) * s_max)[..., None] * _CORNERS[:, 1]
+    corners[..., 2] = np.where(_CORNERS[:, 2] > 0, z2[:, None] + g, z1[:, None] - g)
+    world = np.einsum("pij,cpkj->cpki", pose.rotation, corners) + pose.translation[None, :, None, :]
+    Xc = np.einsum("cij,cpkj->cpki", cam_R, world) + cam_t[:, None, None, :]  # (n_cams, n_parts, 8, 3)
     depth = Xc[..., 2]
     front = depth.min(axis=-1) > 1e-9  # (n_cams, n_parts)
     zc = np.where(front[..., None], depth, 1.0)
