@@ -13,10 +13,12 @@ frame's silhouettes and chamfer images):
 * ``mirrored``: the hop's first frame, the last good pose its front/back mirror (4 × 320×240).
 
 Per scenario: recovery time (CPU time of this single-threaded process — what one idle core
-would take, robust to other load on the machine — median, p90, max; and the wall-clock median), mean joint-centre error (median, max)
+would take, robust to other load on the machine — median, p90, max; and the wall-clock median),
+mean joint-centre error (median, max)
 and the share of recoveries within ``--ok-mm`` (default 30 mm) of the truth, also after the
 Tracker's own fit from the recovered pose (``tracker.tracking.fit_frame``, what the frame reports).  ``--init``: also
-time the automatic initialisation of the hop's first frame.
+time the automatic initialisation of the hop's first frame.  ``--tracker``: the Tracker itself through
+``--gaps`` dropped frames at each of ``--drops`` (its searches' latency, frames not ok, errors).
 """
 
 from __future__ import annotations
@@ -109,7 +111,8 @@ def bench_turn(ok_mm: float, seeds=(21, 22, 23, 24, 25)) -> dict:
         last[:2] = [-0.2, 0.1]
         walked = turn_about_vertical(model, last, np.pi / 2, forward(model, last).translation[0])
         walked[0] += 0.4  # turned 90°, walked 40 cm, the limbs moved by ~4°
-        truth = model.clamp(walked + np.where(model.param_kind == 2, rng.normal(0.0, np.radians(4.0), model.n_params), 0))
+        jitter = np.where(model.param_kind == 2, rng.normal(0.0, np.radians(4.0), model.n_params), 0.0)
+        truth = model.clamp(walked + jitter)
         sils = {c.name: s for c, s in zip(cams, render_silhouettes(model, forward(model, truth), cams))}
         chamfer = {n: chamfer_from_silhouette(s) for n, s in sils.items()}
         rows.append(run_case(model, cams, sils, chamfer, last, truth))
@@ -127,6 +130,36 @@ def bench_mirrored(ok_mm: float, mot) -> dict:
         sils, chamfer = rendered_views(model, truth, cams)
         rows.append(run_case(model, cams, sils, chamfer, mirror_params(model, truth), truth))
     return summary("mirrored last pose (hop frames 0/30/60), 4 x 320x240", rows, ok_mm)
+
+
+def bench_tracker(n_cams: int, size, gap: int, drops, ok_mm: float, mot, after: int = 12) -> dict:
+    """The Tracker (``tracker.tracking.Tracker``, CPU-time clock) on the hop from the true first
+    pose; at each frame of ``drops`` the next ``gap`` frames are dropped, and it tracks on for
+    ``after`` frames: its searches (recoveries) and their latency, the frames reported not ok,
+    and the mean joint error over the frames after the drop."""
+    from tracker.tracking import Tracker
+
+    model, P = mot.model, mot.params
+    cams = ring_cameras(n_cams, size=tuple(size), start_deg=20.0)
+    lat, bad, errs, searches = [], 0, [], 0
+    for k in drops:
+        tracker = Tracker(model, cams, initial_params=P[max(k - 3, 0)], clock=time.process_time)
+        for f in list(range(max(k - 3, 0), k + 1)) + list(range(k + 1 + gap, min(k + 1 + gap + after, len(P)))):
+            sils, chamfer = rendered_views(model, P[f], cams)
+            n0 = tracker.n_initialisations
+            rec = tracker.step(f, 0, chamfer, sils)
+            if f > k:
+                bad += not rec["ok"]
+                errs.append(joint_error_m(model, np.asarray(rec["params"]), P[f]) if "params" in rec else np.nan)
+            if tracker.n_initialisations > n0:
+                lat.append(rec["latency_ms"])
+                searches += 1
+    e = 1e3 * np.array(errs)
+    return {"scenario": f"Tracker, hop, {gap} frames dropped at {list(drops)}, {n_cams} x {size[0]}x{size[1]}",
+            "searches": searches, "search_frame_cpu_ms_median": round(float(np.median(lat))) if lat else None,
+            "search_frame_cpu_ms_max": round(float(np.max(lat))) if lat else None,
+            "frames_not_ok": f"{bad}/{len(e)}", "err_mm_mean_after_drop": round(float(np.nanmean(e)), 1),
+            f"frames_within_{ok_mm:g}mm": f"{int((e < ok_mm).sum())}/{len(e)}"}
 
 
 def bench_init(n_cams: int, size, mot) -> dict:
@@ -152,6 +185,8 @@ def main(argv=None) -> int:
     ap.add_argument("--ok-mm", type=float, default=30.0)
     ap.add_argument("--skip", nargs="*", default=[], choices=["hop", "turn", "mirrored"])
     ap.add_argument("--init", action="store_true", help="also time the initialisation of the hop's first frame")
+    ap.add_argument("--tracker", action="store_true", help="also run the Tracker through dropped frames")
+    ap.add_argument("--drops", type=int, nargs="+", default=[20, 50, 80])
     args = ap.parse_args(argv)
     mot = hop_motion()
     rows = []
@@ -163,7 +198,11 @@ def main(argv=None) -> int:
         rows.append(bench_mirrored(args.ok_mm, mot))
     if args.init:
         rows += [bench_init(n, args.size, mot) for n in args.cameras]
-    print(json.dumps(rows, indent=1) if args.json else "\n".join("  ".join(f"{k}={v}" for k, v in r.items()) for r in rows))
+    if args.tracker:
+        rows += [bench_tracker(n, args.size, gap, args.drops, args.ok_mm, mot)
+                 for n in args.cameras for gap in args.gaps]
+    lines = ("  ".join(f"{k}={v}" for k, v in r.items()) for r in rows)
+    print(json.dumps(rows, indent=1) if args.json else "\n".join(lines))
     return 0
 
 

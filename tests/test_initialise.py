@@ -276,3 +276,45 @@ def test_score_views_partial_render_equals_full(rng):
             assert views.score(y, np.flatnonzero(moved), base) == views.score(y)
             assert all(np.array_equal(a, b) for a, b in zip(views.render(y, np.flatnonzero(moved), base),
                                                              views.render(y)))
+
+
+def test_elbow_search_bends_the_forearms_four_cameras_hide():
+    """Hop frames 20 and 30 (crouched, arms hanging with the elbows bent in front of the body)
+    seen by four cameras: the elbow search finds the bent forearms the silhouettes hide (measured
+    mean joint error 5.5 mm with it, 17.9 mm without)."""
+    from tracker.bvh import load_bvh
+    from tracker.retarget import retarget_bvh
+    from tracker.synth import bundled_motion
+
+    mot = retarget_bvh(load_bvh(bundled_motion("scaled_131_03")), frames=120, start_s=0.0)
+    cams = ring_cameras(4, size=(640, 480), start_deg=20.0)
+    errs = {True: [], False: []}
+    for frame in (20, 30):
+        sils, chamfer = rendered_views(mot.model, mot.params[frame], cams)
+        truth = joint_centre_array(mot.model, forward(mot.model, mot.params[frame]))
+        for elbows in (True, False):
+            res = initialise(mot.model, cams, sils, chamfer, elbows=elbows)
+            assert ("+elbows/" in res.label) <= elbows
+            errs[elbows].append(np.linalg.norm(joint_centre_array(mot.model, forward(mot.model, res.params)) - truth,
+                                               axis=1).mean())
+    with_, without = 1e3 * np.mean(errs[True]), 1e3 * np.mean(errs[False])
+    assert with_ < 15.0 and with_ < without - 3.0, (with_, without)
+
+
+@pytest.mark.parametrize("size", [(320, 240), (640, 480)])
+def test_expected_iou_is_what_the_true_pose_scores(size):
+    """``ScoreViews.expected_iou`` predicts the IoU of the true pose from the views' resolution
+    (lower views lose more to the polygonal parts and the down-scaled masks)."""
+    from tracker.bvh import load_bvh
+    from tracker.retarget import retarget_bvh
+    from tracker.synth import bundled_motion
+
+    mot = retarget_bvh(load_bvh(bundled_motion("scaled_131_03")), frames=60, start_s=0.0)
+    cams = ring_cameras(4, size=size, start_deg=20.0)
+    for frame in (0, 30, 59):
+        sils, _ = rendered_views(mot.model, mot.params[frame], cams)
+        views = ScoreViews(mot.model, cams, list(sils.values()))
+        assert abs(views.score(mot.params[frame]) - views.expected_iou()) < 0.03
+        turned = mot.params[frame].copy()
+        turned[5] += np.pi / 2
+        assert views.score(turned) < views.expected_iou() - 0.1

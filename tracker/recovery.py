@@ -278,13 +278,15 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
             chamfer: Mapping[str, object] | None, last_good_params, *, n_headings: int = 12, keep: int = 2,
             min_voxel_m: float = 0.03, score_scale: float = 0.5, max_iterations: int = 10, hull_tolerance: int = 0,
             prior_rad: float = 50.0, front_back: bool = True, local: bool = True,
-            accept_iou: float = 0.87) -> InitResult:
+            accept_iou: float = 0.87, iou_margin: float = 0.02) -> InitResult:
     """Re-initialise a lost track from the hull, seeded from ``last_good_params`` (n_params,).
 
     Parameters as in ``tracker.initialise.initialise``; the subject may be in any pose.
-    ``local``: try the cheap ``local_search`` first (accepted at a mean silhouette IoU of
-    ``accept_iou``: set it below what a good fit reaches on the studio's segmentation, e.g. the
-    last good frame's IoU less a few hundredths); the full search runs only when it fails.
+    ``local``: try the cheap ``local_search`` first, accepted at a mean silhouette IoU of
+    ``accept_iou`` or of ``iou_margin`` below what a correct pose reaches on these views
+    (``ScoreViews.expected_iou``: ~0.88 at 320x240, ~0.93 at 640x480), whichever is lower; a
+    caller that knows what good frames reach on its segmentation (e.g. the tracker's recent IoU)
+    can pass that less a few hundredths.  The full search runs only when the local stage fails.
     ``front_back``: finish with ``tracker.mirror.resolve_front_back`` (the winner against its
     mirror, both after a limb search and a full refinement).
     """
@@ -298,7 +300,8 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
         raise ValueError("recover: the silhouettes share no volume (empty visual hull)")
     views = ScoreViews(model, cameras, sils, scale=score_scale)
     if local:
-        res = local_search(model, cameras, chs, views, hull, last, n_headings=n_headings, accept_iou=accept_iou,
+        accept = min(accept_iou, views.expected_iou() - iou_margin)  # lower views (320x240) score lower
+        res = local_search(model, cameras, chs, views, hull, last, n_headings=n_headings, accept_iou=accept,
                            mirror_check=front_back)
         if res is not None:
             return res
