@@ -8,11 +8,13 @@ consecutive bad frames make the track *lost*; one good frame makes it ``ok`` aga
 **Recovery** (``recover``): the subject may be in any pose, so instead of the T/A reference
 poses of ``tracker.initialise`` the search starts from the last good pose, in two stages.
 
-The cheap stage (``local_search``; hop clip with 5-10 frames dropped: ~0.2 s of one core instead
-of 1.2-1.6 s, taken in 29 of 35 cases with 6 cameras): the last good pose, moved onto the hull
-and turned to ``n_headings`` headings, the best by IoU limb-searched and refined once by staged
-LM; its front/back mirror refined too where the silhouettes cannot tell them apart.  Accepted
-when the mean silhouette IoU reaches ``accept_iou``; otherwise the full search:
+The cheap stage (``local_search``; ``bench/recovery.py``, hop clip with 5-10 frames dropped,
+6 cameras at 320x240 or 640x480: 0.2 s of one core instead of 1.2-1.5 s, taken in 25-30 of 35
+cases, as often within 30 mm of the truth as the full search): the last good pose, moved onto
+the hull and turned to ``n_headings`` headings, the best by IoU limb-searched and refined once
+by staged LM; its front/back mirror refined too where the silhouettes cannot tell them apart.
+Accepted when the mean silhouette IoU reaches ``accept_iou`` (or what the views allow, see
+``recover``); otherwise the full search:
 
 1. the last good pose is moved onto the hull (its volume centroid onto the hull's, horizontally)
    and turned about the vertical through it to ``n_headings`` headings; the best by silhouette
@@ -315,6 +317,6 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
     # 4. front or back: the winner and its mirror, limb search and full refinement on both
     from tracker.mirror import resolve_front_back
 
-    fb = resolve_front_back(model, cameras, silhouettes, chamfer, res.params, views=views, prepared=(cameras, sils, chs),
-                            prepare=lambda p, s: limb_search(model, views, p, s))
+    fb = resolve_front_back(model, cameras, silhouettes, chamfer, res.params, views=views,
+                            prepared=(cameras, sils, chs), prepare=lambda p, s: limb_search(model, views, p, s))
     return replace(fb, label=f"{res.label}/{fb.label}", height_m=res.height_m, candidates=views.n_scored, hull=hull)
