@@ -40,7 +40,7 @@
     host = "host-a"
     backend = "replay"                # replay | opencv
     source = "0"                      # opencv device index/URL; ignored by replay (uses studio.session)
-    encoding = "jpeg"                 # raw | jpeg | png on the wire
+    encoding = "raw"                  # raw | jpeg | png on the wire (raw: the segment worker is on this host)
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ class CameraConfig:
     host: str
     backend: str = "replay"
     source: str = ""
-    encoding: str = "jpeg"
+    encoding: str = "raw"
     width: int | None = None       # opencv: requested capture size and exposure (capture.sources keys)
     height: int | None = None
     fps: float | None = None
@@ -210,7 +210,7 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
         cam = CameraConfig(r.name(c, "name", p), r.name(c, "host", p),
                            r.get(c, "backend", p, (str,), "replay", choices=BACKENDS),
                            str(r.get(c, "source", p, (str, int), "")),
-                           r.get(c, "encoding", p, (str,), "jpeg", choices=ENCODINGS),
+                           r.get(c, "encoding", p, (str,), "raw", choices=ENCODINGS),
                            width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure)
         if cam.name in seen:
             raise r.err(f"{p}.name", f"duplicate camera {cam.name!r}")

@@ -31,7 +31,7 @@ def test_example_parses(tmp_path):
 @pytest.mark.parametrize("old, new, key", [
     ('delivery = "live"', 'delivery = "sometimes"', "studio.delivery"),
     ('name = "cam4"', 'name = "cam0"', "camera[4].name"),
-    ('encoding = "jpeg"\n\n[[camera]]\nname = "cam1"', 'encoding = "gif"\n\n[[camera]]\nname = "cam1"',
+    ('encoding = "raw"\n\n[[camera]]\nname = "cam1"', 'encoding = "gif"\n\n[[camera]]\nname = "cam1"',
      "camera[0].encoding"),
     ('window = 8', 'window = "8"', "tracker.window"),
     ('mode = "client"', 'mode = "client"\nport = 3', "zenoh.port"),
