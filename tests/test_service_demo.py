@@ -1,9 +1,11 @@
 """`contourcap demo` plumbing end to end (workers as processes, real segmentation over zenoh, a
 deterministic stand-in for the tracker): every frame arrives, in order, with exactly the values the
-offline segmentation gives; summary, poses.jsonl and .rrd are written."""
+offline segmentation gives; summary, poses.jsonl and .rrd are written.  Live: poses over the replay
+window, the tracker's demand counters, images of the first camera only."""
 
 from __future__ import annotations
 
+import collections
 import json
 
 import numpy as np
@@ -40,6 +42,27 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
     assert summary.latency_ms_p50 is not None and summary.latency_ms_p99 >= summary.latency_ms_p50 > 0
     assert summary.mean_joint_error_m is not None and np.isfinite(summary.mean_joint_error_m)
     assert (tmp_path / "out" / "demo.rrd").stat().st_size > 0
+    assert summary.poses_per_s is None and summary.demand_timeouts is None and summary.missing_cameras is None
+
+
+def test_demo_live_summary_and_rrd(tmp_path):
+    rrchunk = pytest.importorskip("rerun.chunk")
+    opts = DemoOptions(cameras=2, size=(160, 120), frames=30, fps=30.0, out_dir=tmp_path / "out",
+                       cache_dir=tmp_path / "cache", timeout_s=120.0, delivery="live", image_every=3,
+                       live_start_delay_s=4.0, live_duration_s=4.0,
+                       fit_plugin="tests.test_service_plugins:fitter_factory")
+    summary = run_demo(opts, progress=lambda m: None)
+    assert summary.frames > 0
+    # poses over the whole 4 s replay window (not between the first and the last pose)
+    assert summary.poses_per_s == pytest.approx(summary.frames / 4.0, rel=0.02)
+    assert summary.demand_timeouts is not None and summary.demand_timeouts >= 0
+    assert summary.missing_cameras is not None and summary.missing_cameras >= 0
+    rows = collections.Counter()
+    for chunk in rrchunk.RrdReader(tmp_path / "out" / "demo.rrd").stream():
+        rows[str(chunk.entity_path)] += chunk.num_rows
+    assert rows["/world/cameras/cam0/image"] >= 1 and rows["/world/cameras/cam1/image"] == 0  # one camera's
+    assert rows["/world/cameras/cam0/silhouette"] >= 1 and rows["/world/cameras/cam1/silhouette"] >= 1
+    assert rows["/world/skeleton"] >= 1 + 1  # poses + the static annotation context
 
 
 def _pose_table(live: list[dict], offline: list[dict]) -> str:

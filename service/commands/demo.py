@@ -57,10 +57,15 @@ def run(args: argparse.Namespace) -> int:
         return "n/a" if v is None else format(v, fmt)
 
     print(f"frames {summary.frames} ({summary.ok} ok) from {summary.cameras} cameras in {summary.wall_s:.1f} s\n"
-          f"fps out {summary.fps_out:.2f} (in {summary.fps_in:.1f}, realtime x{summary.realtime_factor:.2f})\n"
-          f"latency p50 {f(summary.latency_ms_p50, '.1f')} ms, p99 {f(summary.latency_ms_p99, '.1f')} ms\n"
+          f"fps out {summary.fps_out:.2f} (in {summary.fps_in:.1f}, realtime x{summary.realtime_factor:.2f}; "
+          f"first to last pose)\n"
+          + (f"poses/s {summary.poses_per_s:.2f} over the replay window\n" if summary.poses_per_s is not None else "")
+          + f"latency p50 {f(summary.latency_ms_p50, '.1f')} ms, p99 {f(summary.latency_ms_p99, '.1f')} ms\n"
           f"median rms {f(summary.median_rms_px, '.2f')} px, mean joint error "
           f"{f(None if summary.mean_joint_error_m is None else 100 * summary.mean_joint_error_m, '.1f')} cm\n"
-          f"dropped sets {summary.dropped_sets}, cpu {summary.cpu_percent:.0f} %\n"
+          f"dropped sets {summary.dropped_sets}"
+          + (f", demand timeouts {summary.demand_timeouts}" if summary.demand_timeouts is not None else "")
+          + (f", missing cameras {summary.missing_cameras}" if summary.missing_cameras is not None else "")
+          + f", cpu {summary.cpu_percent:.0f} %\n"
           f"poses {summary.poses}\nbvh   {summary.bvh or 'n/a'}\nrrd   {summary.rrd}")
     return 0

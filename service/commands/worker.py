@@ -8,9 +8,15 @@ import os
 import socket
 import sys
 import threading
+import time
 
 HELP = "run one worker process (camera, segment or track) of a studio"
 PRELOAD_ENV = "CONTOURCAP_PRELOAD_REPLAY"
+LINGER_S = 0.5
+"""Seconds a worker keeps its zenoh session open after its loop returned, before closing it: a session
+closed right after a put loses what a slow reader has not read yet (a track worker's last pose and
+credit after ``--max-frames``, every worker's 'finished' status), and zenoh cannot tell when matched
+subscribers got a put.  Bounded: at most this long per exit, only after a worker ran to its end."""
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -84,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     component = "track" if args.role == "track" else f"{args.role}-{'-'.join(cams) if args.cameras else host}"
     from service.workers import WorkerError
 
+    finished = False
     try:
         if args.role == "camera":
             from service.workers import EpochPacer, run_camera_worker
@@ -117,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
             stats = run_track_worker(session, keys, cams, fitter, mode=cfg.delivery,
                                      set_timeout_s=cfg.set_timeout_ms / 1e3, stop=stop,
                                      max_frames=args.max_frames, idle_exit_s=idle)
+        finished = True
         log.info("finished: %s", {k: v for k, v in sorted(stats.items())})
         return 0
     except _setup_errors() as exc:
@@ -126,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)
         return 1
     finally:
+        if finished:
+            time.sleep(LINGER_S)  # its last messages reach slow readers (see LINGER_S)
         session.close()
 
 
