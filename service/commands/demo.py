@@ -24,6 +24,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache", default=None, help="where the rendered session is kept (~/.cache/contourcap)")
     parser.add_argument("--timeout-s", type=float, default=1800.0)
     parser.add_argument("--duration-s", type=float, default=20.0, help="live: how long the looped replay runs")
+    parser.add_argument("--image-cameras", type=int, default=1,
+                        help="live: how many cameras' images the viewer (demo.rrd) takes (default 1: decoding "
+                             "every camera's frames in the demo process competes with the pipeline)")
     parser.add_argument("--segment-plugin", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--fit-plugin", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -35,7 +38,7 @@ def options_from_args(args: argparse.Namespace):
     kw = dict(cameras=args.cameras, frames=args.frames, size=tuple(args.size), fps=args.fps, motion=args.motion,
               delivery="live" if args.live else "lossless", out_dir=Path(args.out), timeout_s=args.timeout_s,
               segment_plugin=args.segment_plugin, fit_plugin=args.fit_plugin,
-              live_duration_s=args.duration_s)
+              live_duration_s=args.duration_s, live_image_cameras=args.image_cameras)
     if args.cache:
         kw["cache_dir"] = Path(args.cache)
     return DemoOptions(**kw)
