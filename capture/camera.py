@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 __all__ = [
@@ -164,6 +165,24 @@ class Camera:
         xd, yd, _, _ = self._distort(x, y)
         K = self.matrix
         return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit world directions (n, 3) of the rays from the centre through pixels ``uv`` (n, 2).
+
+        Distortion is inverted with ``cv2.undistortPoints`` (iterative, to 1e-10), so a ray projects
+        back to its pixel.
+        """
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        if not len(uv):
+            return np.zeros((0, 3))
+        if np.any(self.distortion != 0):
+            crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+            xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.matrix, self.distortion, criteria=crit).reshape(-1, 2)
+        else:
+            Kinv = np.linalg.inv(self.matrix)
+            xy = uv @ Kinv[:2, :2].T + Kinv[:2, 2]
+        d = np.concatenate([xy, np.ones((len(xy), 1))], axis=1) @ self.rotation  # rows: R^T d_cam
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
 
     def depth(self, points_world: np.ndarray) -> np.ndarray:
         """Camera-frame z of world points, shape (...)."""

@@ -116,3 +116,16 @@ def test_project_many_bad_shapes_named(rng):
         project_many(cams, np.zeros((5, 3)), cam_index=np.array([0, 1, 2, 3, 4]))
     with pytest.raises(ValueError, match="cameras"):
         project_many([], np.zeros((0, 5, 3)))
+
+
+@pytest.mark.parametrize("distorted", [True, False])
+def test_rays_project_back_to_their_pixels(rng, distorted):
+    cam = random_camera(rng, distorted=distorted)
+    w, h = cam.size
+    uv = rng.uniform([0.2 * w, 0.2 * h], [0.8 * w, 0.8 * h], size=(50, 2))
+    d = cam.rays(uv)
+    assert d.shape == (50, 3) and np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    depth = rng.uniform(0.5, 5.0, size=(50, 1))
+    np.testing.assert_allclose(cam.project(cam.center + depth * d), uv, atol=1e-6)
+    assert np.all(cam.depth(cam.center + depth * d) > 0)  # in front of the camera
+    assert cam.rays(np.zeros((0, 2))).shape == (0, 3)

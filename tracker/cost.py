@@ -80,9 +80,7 @@ def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
     dirs, cam = [np.zeros((0, 3))], [np.zeros(0, dtype=np.intp)]
     for c, (camera, uv) in enumerate(zip(cameras, pixels)):
         if len(uv):
-            xy = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), camera.matrix, camera.distortion)
-            ray = np.concatenate([xy.reshape(-1, 2), np.ones((len(uv), 1))], axis=1) @ camera.rotation  # R^T x
-            dirs.append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
+            dirs.append(camera.rays(uv))
             cam.append(np.full(len(uv), c, dtype=np.intp))
     return np.concatenate(dirs), np.concatenate(cam)
 

@@ -380,17 +380,6 @@ def visual_hull(
     return VoxelHull(centres, sizes, full, grid, float(min_voxel_m))
 
 
-def _pixel_rays(camera: Camera, uv: np.ndarray) -> np.ndarray:
-    """World ray directions (n, 3) through pixels ``uv`` (n, 2) (distortion undone)."""
-    if np.any(camera.distortion != 0):
-        pts = uv.reshape(-1, 1, 2).astype(np.float64)
-        xy = cv2.undistortPoints(pts, camera.matrix, camera.distortion).reshape(-1, 2)
-        rays_c = np.column_stack([xy, np.ones(len(xy))])
-    else:
-        rays_c = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(camera.matrix).T
-    return rays_c @ camera.rotation  # R^T applied to row vectors
-
-
 def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) -> np.ndarray:
     """Rasterise the hull into ``camera``: (h, w) uint8 mask, 255 where a pixel's ray meets a voxel.
 
@@ -419,7 +408,7 @@ def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) 
     C = camera.center
     if np.any(camera.distortion != 0):
         cols, rows = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-        table = _pixel_rays(camera, np.column_stack([cols.ravel(), rows.ravel()]))  # (h*w, 3)
+        table = camera.rays(np.column_stack([cols.ravel(), rows.ravel()]))  # (h*w, 3)
         rays = lambda col, row: table[row * w + col]  # noqa: E731
     else:  # the ray direction is affine in the pixel: R^T K^-1 (u, v, 1)
         A = camera.rotation.T @ np.linalg.inv(camera.matrix)

@@ -185,17 +185,7 @@ def pixel_rays(camera: Camera) -> np.ndarray:
     """
     w, h = camera.size
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    uv = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
-    if np.any(camera.distortion != 0):
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
-        xy = cv2.undistortPoints(uv, camera.matrix, camera.distortion, criteria=crit).reshape(-1, 2)
-    else:
-        Kinv = np.linalg.inv(camera.matrix)
-        xy = uv.reshape(-1, 2) @ Kinv[:2, :2].T + Kinv[:2, 2]
-    d_cam = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
-    d = d_cam @ camera.rotation  # rows: R^T d_cam
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return d.reshape(h, w, 3)
+    return camera.rays(np.stack([u.ravel(), v.ravel()], axis=-1)).reshape(h, w, 3)
 
 
 def render_background(camera: Camera, texture: RoomTexture, *, with_floor_mask: bool = False):

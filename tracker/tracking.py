@@ -49,9 +49,9 @@ class TrackerOptions:
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse (silhouette →
     model) term of ``tracker.cost`` (weight 0 turns it off; hop session with the on-silhouette
     test ``reverse_cover_px`` 1: MPJPE 7.7 mm at reverse_min_px 2, 8.2 mm and a frame flagged at
-    4, 11.7 mm at 6; without the test: 9.4 mm at 8, 10.8 mm at 2; the test costs ~10 % more time
-    per frame; these figures move by ±1–2 mm with small changes: the right arm is lost for a few
-    frames around 58–60 and 65–90 in some runs);
+    4, 11.7 mm at 6; without the test: 9.4 mm at 8, 10.8 mm at 2; the test costs ~26 % more time
+    per frame (hop, reverse_min_px 2, one run: 20.2 against 16.0 ms); these figures move by ±1–2 mm
+    with small changes: the right arm is lost for a few frames around 58–60 and 65–90 in some runs);
     damping, diagonal_floor : LM initial damping and damping-diagonal floor;
     constant_velocity : start from ``2 p_t − p_{t−1}`` (hop session: median 3 iterations instead
     of 5, mean joint error 9.1 mm instead of 11.6 mm);
