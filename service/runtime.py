@@ -197,15 +197,8 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
     out: dict = {}
     try:
         for name in cameras:
-            if preload and paced and cfg.camera(name).backend == "replay":
-                from capture.replay import ReplaySource
-
-                session = _session(cfg)
-                src = PreloadedReplay(ReplaySource(session, name), fps=session.fps, loop=loop)
-                src.open()
-                out[name] = src
-                continue
-            out[name] = _open_source(cfg, name, mode=mode, paced=paced, frame_id_at=frame_id_at, loop=loop)
+            out[name] = _open_source(cfg, name, mode=mode, paced=paced, frame_id_at=frame_id_at, loop=loop,
+                                     preload=preload)
     except BaseException:  # release the cameras already opened
         for src in out.values():
             src.close()
@@ -213,14 +206,19 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
     return out
 
 
-def _open_source(cfg: StudioConfig, name: str, *, mode: str, paced: bool, frame_id_at, loop: bool):
+def _open_source(cfg: StudioConfig, name: str, *, mode: str, paced: bool, frame_id_at, loop: bool,
+                 preload: bool = False):
     """One camera source, opened."""
     cam = cfg.camera(name)
     if cam.backend == "replay":
         from capture.replay import ReplaySource
 
-        src = ReplaySource(_session(cfg), name, pacing="realtime" if mode == "live" and not paced else "fast",
-                           loop=loop)
+        session = _session(cfg)
+        if preload and paced:
+            src = PreloadedReplay(ReplaySource(session, name, pacing="fast"), fps=session.fps, loop=loop)
+        else:
+            src = ReplaySource(session, name, pacing="realtime" if mode == "live" and not paced else "fast",
+                               loop=loop)
     else:
         from capture.opencv_source import OpenCVSource
 
