@@ -6,7 +6,7 @@
 jittered by 5°) from silhouettes degraded like a real segmentation (a 3x3 dilation or erosion,
 blobs and holes), with 6 and 4 cameras: joint-centre error statistics.
 
-Synthetic: 6 ring cameras at 800x600, a random knossow40 pose rendered by ``tracker.render``.
+Synthetic: 6 ring cameras at 800x600, a random knossow40 pose rendered by ``tracker.imaging.render``.
 Real: ``../shared/data/dancer_8view`` (8 x 780x582) when present.
 """
 
@@ -19,19 +19,21 @@ import sys
 import time
 from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # as the CLI does (service/cli.py)
-    os.environ.setdefault(_var, "1")
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from tracker.hull import _common_view_bounds, common_view_bounds, visual_hull  # noqa: E402
-from tracker.kinematics import forward  # noqa: E402
-from tracker.model import load_model  # noqa: E402
-from tracker.render import render_silhouettes  # noqa: E402
-from tracker.scene import ring_cameras  # noqa: E402
+from tracker.search.hull import _common_view_bounds, common_view_bounds, visual_hull  # noqa: E402
+from tracker.body.kinematics import forward  # noqa: E402
+from tracker.body.model import load_model  # noqa: E402
+from tracker.imaging.render import render_silhouettes  # noqa: E402
+from tracker.synthetic.scene import ring_cameras  # noqa: E402
 
 
 def _time(fn, repeat: int) -> tuple[float, object]:
@@ -73,8 +75,8 @@ def _degrade(sil: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def bench_accuracy(model, n_cams: int, trials: int, seed: int = 11) -> dict:
-    from tracker.initialise import initialise
-    from tracker.kinematics import joint_centre_array
+    from tracker.search.initialise import initialise
+    from tracker.body.kinematics import joint_centre_array
 
     cams = ring_cameras(n_cams)
     rng = np.random.default_rng(seed)
@@ -123,9 +125,9 @@ def main(argv=None) -> int:
         dcams = [read_projection_matrix(data / "calibration" / f"cam{i:02d}.xml", size=(780, 582)) for i in range(8)]
         rows += bench_hull(dcams, masks, "dancer_8view 8x780x582", args.repeat)
     if not args.no_init:
-        from tracker.initialise import initialise
-        from tracker.kinematics import joint_centre_array
-        from tracker.recovery import recover, turn_about_vertical
+        from tracker.search.initialise import initialise
+        from tracker.body.kinematics import joint_centre_array
+        from tracker.search.recovery import recover, turn_about_vertical
 
         views = {c.name: s for c, s in zip(cams, sils)}
         ref = model.zero()

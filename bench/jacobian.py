@@ -4,7 +4,7 @@ Prints the median time per frame over random poses of
 
 - ``extremal_contours`` (n_samples=20 per ruling, i.e. 40 points per part, with visibility),
 - ``contour_jacobian`` on the visible points (what a solver iteration needs),
-- ``tracker.render.render_silhouettes`` for the 6 cameras (null if the module is absent),
+- ``tracker.imaging.render.render_silhouettes`` for the 6 cameras (null if the module is absent),
 
 and the largest per-point relative error of the analytic Jacobian against central
 finite differences (all valid points, the first ``--fd-poses`` poses).  Each pose is
@@ -23,8 +23,13 @@ process should do the same.
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -36,14 +41,14 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracker.contours import extremal_contours  # noqa: E402
-from tracker.jacobian import contour_jacobian  # noqa: E402
-from tracker.kinematics import forward  # noqa: E402
-from tracker.model import load_model  # noqa: E402
-from tracker.scene import ring_cameras  # noqa: E402
+from tracker.imaging.contours import extremal_contours  # noqa: E402
+from tracker.imaging.jacobian import contour_jacobian  # noqa: E402
+from tracker.body.kinematics import forward  # noqa: E402
+from tracker.body.model import load_model  # noqa: E402
+from tracker.synthetic.scene import ring_cameras  # noqa: E402
 
 try:
-    from tracker.render import render_silhouettes
+    from tracker.imaging.render import render_silhouettes
 except ImportError:  # pragma: no cover - the renderer is optional here
     render_silhouettes = None
 

@@ -16,6 +16,14 @@ publishing frames, not of decoding the session's videos).
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
+
 import argparse
 import json
 import os

@@ -2,11 +2,11 @@
 
     python bench/recovery.py [--json] [--cameras 6 4] [--size 640 480] [--gaps 5 8 10] [--every 10]
 
-Scenarios (``tracker.recovery.recover`` called as the Tracker calls it: the last good pose, the
+Scenarios (``tracker.search.recovery.recover`` called as the Tracker calls it: the last good pose, the
 frame's silhouettes and chamfer images):
 
 * ``hop drop``: the bundled CMU hop (``scaled_131_03``, 120 frames) rendered by
-  ``tracker.render`` (silhouettes and internal edges); the last good pose is the truth at frame k,
+  ``tracker.imaging.render`` (silhouettes and internal edges); the last good pose is the truth at frame k,
   the frame to recover is k + gap (``--gaps`` frames dropped), k every ``--every`` frames;
 * ``turn 90``: as in tests/test_recovery.py (a random pose; since the last good frame the
   subject turned 90° and walked 40 cm), silhouette-only chamfer images, 6 × 800×600, 5 seeds;
@@ -16,7 +16,7 @@ Per scenario: recovery time (CPU time of this single-threaded process — what o
 would take, robust to other load on the machine — median, p90, max; and the wall-clock median),
 mean joint-centre error (median, max)
 and the share of recoveries within ``--ok-mm`` (default 30 mm) of the truth, also after the
-Tracker's own fit from the recovered pose (``tracker.tracking.fit_frame``, what the frame reports).  ``--init``: also
+Tracker's own fit from the recovered pose (``tracker.fitting.tracking.fit_frame``, what the frame reports).  ``--init``: also
 time the automatic initialisation of the hop's first frame.  ``--tracker``: the Tracker itself through
 ``--gaps`` dropped frames at each of ``--drops`` (its searches' latency, frames not ok, errors).
 """
@@ -30,17 +30,19 @@ import sys
 import time
 from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # as the CLI does (service/cli.py)
-    os.environ.setdefault(_var, "1")
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from tracker.initialise import rendered_views  # noqa: E402
-from tracker.kinematics import forward, joint_centre_array  # noqa: E402
-from tracker.scene import ring_cameras  # noqa: E402
+from tracker.search.initialise import rendered_views  # noqa: E402
+from tracker.body.kinematics import forward, joint_centre_array  # noqa: E402
+from tracker.synthetic.scene import ring_cameras  # noqa: E402
 
 
 def joint_error_m(model, a, b) -> float:
@@ -49,8 +51,8 @@ def joint_error_m(model, a, b) -> float:
 
 
 def run_case(model, cams, sils, chamfer, last, truth) -> dict:
-    from tracker.recovery import recover
-    from tracker.tracking import fit_frame
+    from tracker.search.recovery import recover
+    from tracker.fitting.tracking import fit_frame
 
     t0, c0 = time.perf_counter(), time.process_time()
     res = recover(model, cams, sils, chamfer, last)
@@ -76,9 +78,9 @@ def summary(name: str, rows: list[dict], ok_mm: float) -> dict:
 
 
 def hop_motion(frames: int = 120):
-    from tracker.bvh import load_bvh
-    from tracker.retarget import retarget_bvh
-    from tracker.synth import bundled_motion
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.retarget import retarget_bvh
+    from tracker.synthetic.synth import bundled_motion
 
     return retarget_bvh(load_bvh(bundled_motion("scaled_131_03")), frames=frames, start_s=0.0)
 
@@ -97,10 +99,10 @@ def bench_hop_drop(n_cams: int, size, gaps, every: int, ok_mm: float, mot) -> di
 
 
 def bench_turn(ok_mm: float, seeds=(21, 22, 23, 24, 25)) -> dict:
-    from tracker.initialise import chamfer_from_silhouette
-    from tracker.model import load_model
-    from tracker.recovery import turn_about_vertical
-    from tracker.render import render_silhouettes
+    from tracker.search.initialise import chamfer_from_silhouette
+    from tracker.body.model import load_model
+    from tracker.search.recovery import turn_about_vertical
+    from tracker.imaging.render import render_silhouettes
 
     model = load_model("knossow40")
     cams = ring_cameras(6)
@@ -120,7 +122,7 @@ def bench_turn(ok_mm: float, seeds=(21, 22, 23, 24, 25)) -> dict:
 
 
 def bench_mirrored(ok_mm: float, mot) -> dict:
-    from tracker.mirror import mirror_params
+    from tracker.search.mirror import mirror_params
 
     model = mot.model
     cams = ring_cameras(4, size=(320, 240), start_deg=20.0)
@@ -133,11 +135,11 @@ def bench_mirrored(ok_mm: float, mot) -> dict:
 
 
 def bench_tracker(n_cams: int, size, gap: int, drops, ok_mm: float, mot, after: int = 12) -> dict:
-    """The Tracker (``tracker.tracking.Tracker``, CPU-time clock) on the hop from the true first
+    """The Tracker (``tracker.fitting.tracking.Tracker``, CPU-time clock) on the hop from the true first
     pose; at each frame of ``drops`` the next ``gap`` frames are dropped, and it tracks on for
     ``after`` frames: its searches (recoveries) and their latency, the frames reported not ok,
     and the mean joint error over the frames after the drop."""
-    from tracker.tracking import Tracker
+    from tracker.fitting.tracking import Tracker
 
     model, P = mot.model, mot.params
     cams = ring_cameras(n_cams, size=tuple(size), start_deg=20.0)
@@ -163,7 +165,7 @@ def bench_tracker(n_cams: int, size, gap: int, drops, ok_mm: float, mot, after: 
 
 
 def bench_init(n_cams: int, size, mot) -> dict:
-    from tracker.initialise import initialise
+    from tracker.search.initialise import initialise
 
     cams = ring_cameras(n_cams, size=tuple(size), start_deg=20.0)
     sils, chamfer = rendered_views(mot.model, mot.params[0], cams)

@@ -11,6 +11,14 @@ there, the real uu_studio held-out background false-positive rate.
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
+
 import argparse
 import json
 import os

@@ -1,16 +1,16 @@
 """Tracker benchmark on a synthetic session (hop, CMU 131_03): iterations, accuracy, speed.
 
-A session is rendered with ``tracker.synth.make_synthetic_session`` (6 ring cameras, 800x600,
+A session is rendered with ``tracker.synthetic.synth.make_synthetic_session`` (6 ring cameras, 800x600,
 textured room, shadows, pixel noise; FFV1 video) into a temporary folder (or ``--session``), each
 frame is segmented once (``segmentation.pipeline.segment_frame`` against a background model from
 the session's background videos) and the same chamfer images are then tracked three ways:
 
 - LM with the sliding term (the tracker), from the ground-truth pose of the first frame
-  (``--auto-init``: from ``tracker.initialise`` instead);
+  (``--auto-init``: from ``tracker.search.initialise`` instead);
 - LM without the sliding term (iterations only);
 - (for reference) the same quality figures at the ground-truth poses: with real segmentation the
   RMS is dominated by the few contour points where the images show no edge (``rms_px`` of
-  ``tracker.cost.CostTerms``); the inlier RMS (residuals up to the robust loss's scale, 3 px) and
+  ``tracker.fitting.cost.CostTerms``); the inlier RMS (residuals up to the robust loss's scale, 3 px) and
   the outlier fraction are given beside it;
 - scipy ``least_squares`` with a finite-difference Jacobian (the baseline) on the first
   ``--lsq-frames`` frames, warm-started from the same ground-truth poses as the LM run on them.
@@ -32,9 +32,13 @@ BLAS/OpenMP threads are limited to 1 before numpy is imported.  ``ms_per_frame_*
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from service.blas import pin_blas_threads  # noqa: E402
+
+pin_blas_threads()
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -51,10 +55,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
-from tracker.offline import background_models, session_model  # noqa: E402
-from tracker.synth import bundled_motion, make_synthetic_session  # noqa: E402
-from tracker.cost import ChamferCost  # noqa: E402
-from tracker.tracking import Tracker, TrackerOptions  # noqa: E402
+from service.offline import background_models, session_model  # noqa: E402
+from tracker.synthetic.synth import bundled_motion, make_synthetic_session  # noqa: E402
+from tracker.fitting.cost import ChamferCost  # noqa: E402
+from tracker.fitting.tracking import Tracker, TrackerOptions  # noqa: E402
 
 
 def segment_session(session, frames: int):
@@ -98,7 +102,7 @@ def mpjpe_mm(records, truth) -> float:
 def residual_figures(model, cameras, frames, params_list):
     """Per frame at the given poses: RMS (both terms), median |residual|, inlier RMS and outlier
     fraction (residuals above the robust loss's scale ``TrackerOptions.f_scale``) over the used
-    contour points, as ``tracker.cost.CostTerms`` computes them; returns the medians over frames."""
+    contour points, as ``tracker.fitting.cost.CostTerms`` computes them; returns the medians over frames."""
     rms, med, inl, out = [], [], [], []
     scale = TrackerOptions().f_scale
     for (fid, ts, ch, _), p in zip(frames, params_list):

@@ -12,6 +12,8 @@ import importlib
 import importlib.util
 import sys
 
+from service.blas import pin_blas_threads
+
 # name -> module under service.commands (module names avoid Python keywords)
 COMMANDS = {
     "demo": "demo",
@@ -75,6 +77,7 @@ def _version() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    pin_blas_threads()  # before any command imports numpy
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_in(argv))
     args = parser.parse_args(argv)

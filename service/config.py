@@ -10,7 +10,7 @@
     model = "knossow40"               # body model name or file
     jpeg_quality = 90
 
-    [zenoh]                           # see service.bus.ZenohSettings
+    [zenoh]                           # see service.wire.bus.ZenohSettings
     mode = "peer"                     # peer | client | router
     listen = ["tcp/127.0.0.1:7447"]
     connect = []
@@ -51,8 +51,8 @@ from typing import Any, Mapping
 
 from capture.sources import parse_source_specs
 from capture.tomlio import tomllib
-from service.bus import MODES, ZenohSettings
-from service.messages import ENCODINGS, check_name, MessageError
+from service.wire.bus import MODES, ZenohSettings
+from service.wire.messages import ENCODINGS, check_name, MessageError
 
 BACKENDS = ("replay", "opencv")
 

@@ -1,6 +1,6 @@
 """``contourcap demo``: a synthetic studio end to end over zenoh on loopback.
 
-1. A demo session is rendered once from a CMU BVH bundled with the package (``tracker.synth``) and
+1. A demo session is rendered once from a CMU BVH bundled with the package (``tracker.synthetic.synth``) and
    cached under ``cache_dir`` (keyed by its options).
 2. A studio config for it is written to ``out_dir`` (replay cameras, loopback peer hub, multicast
    off); the camera, segment and track workers run as processes under the :class:`Supervisor`.
@@ -31,8 +31,8 @@ from typing import Callable
 
 import numpy as np
 
-from service.bus import Inbox, Keys, ZenohSettings, free_port, open_session
-from service.records import PoseRecord, StatusMessage
+from service.wire.bus import Inbox, Keys, ZenohSettings, free_port, open_session
+from service.wire.records import PoseRecord, StatusMessage
 
 STUDIO = "demo"
 HOST = "demo"
@@ -86,7 +86,7 @@ class DemoSummary:
 
 def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> Path:
     """The cached synthetic session for ``opts`` (rendered on first use)."""
-    from tracker.synth import bundled_motion, make_synthetic_session
+    from tracker.synthetic.synth import bundled_motion, make_synthetic_session
 
     key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps], sort_keys=True)
     root = Path(opts.cache_dir) / f"demo-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
@@ -151,8 +151,8 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     from capture.session import load_session
     from service.config import load_config
     from service.export import ExportError, write_bvh, write_pose_records
-    from service.messages import ChamferMessage, FrameMessage
-    from service.supervisor import Supervisor, plan_host
+    from service.wire.messages import ChamferMessage, FrameMessage
+    from service.flow.supervisor import Supervisor, plan_host
     from service.viewer import RerunBridge
 
     session_root = demo_session(opts, progress=progress)
@@ -234,8 +234,8 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     write_pose_records(poses_path, poses)
     bvh = None
     if any(p.ok and p.get("params") for p in poses):
-        from tracker.model import ModelError
-        from tracker.offline import session_model
+        from tracker.body.model import ModelError
+        from service.offline import session_model
 
         try:
             bvh = str(write_bvh(out / "poses.bvh", session_model(session, poses[0].get("model") or "knossow40"),

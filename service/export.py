@@ -23,8 +23,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from service.messages import MessageError
-from service.records import PoseRecord
+from service.wire.messages import MessageError
+from service.wire.records import PoseRecord
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
 JOINT_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
@@ -101,7 +101,7 @@ def _params_matrix(model, records: Sequence[PoseRecord], where: str) -> tuple[np
 
 def _local_rotations(model, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Root translation (n, 3) and parent-relative rotations (n, n_parts, 3, 3) per frame."""
-    from tracker.kinematics import forward
+    from tracker.body.kinematics import forward
 
     n = params.shape[0]
     R = np.empty((n, model.n_parts, 3, 3))

@@ -19,8 +19,8 @@ from typing import Sequence
 import numpy as np
 import rerun as rr
 
-from service.messages import ChamferMessage, FrameMessage, MessageError
-from service.records import PoseRecord
+from service.wire.messages import ChamferMessage, FrameMessage, MessageError
+from service.wire.records import PoseRecord
 
 #: bones between DESIGN.md joint names (a joint missing from a record is simply not drawn)
 BONES = (("pelvis", "spine"), ("spine", "neck"), ("neck", "head"),

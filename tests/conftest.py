@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import os
+import sys
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # as the CLI does (service/cli.py)
-    os.environ.setdefault(_var, "1")
+from service.blas import pin_blas_threads
+
+pin_blas_threads()  # as every contourcap process does, before numpy is imported
 
 from pathlib import Path  # noqa: E402
 
@@ -22,6 +24,8 @@ except ImportError:  # pragma: no cover
     pass
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+if str(REPO_ROOT) not in sys.path:  # tests.support is imported from the repo root however pytest starts
+    sys.path.insert(0, str(REPO_ROOT))
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 
 

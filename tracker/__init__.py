@@ -1,6 +1,6 @@
 """Tracker: body model, kinematics, extremal contours, Jacobians, chamfer cost, solver, initialisation, renderer.
 
-The package face (names resolve lazily, so ``import tracker.model`` stays light)::
+The package face (names resolve lazily, so ``import tracker.body.model`` stays light)::
 
     model = load_model("knossow40", height_m=1.75)
     pose = forward(model, params)                                  # part2world of every part
@@ -15,24 +15,23 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "tracker.model": ("BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"),
-    "tracker.kinematics": ("Pose", "forward", "body_jacobian", "point_jacobian", "joint_centres"),
-    "tracker.contours": ("Contours", "extremal_contours"),
-    "tracker.jacobian": ("contour_jacobian",),
-    "tracker.visibility": ("hidden_points",),
-    "tracker.cost": ("ChamferCost", "CostTerms"),
-    "tracker.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
-    "tracker.tracking": ("Tracker", "TrackerOptions"),
-    "tracker.hull": ("VoxelHull", "visual_hull"),
-    "tracker.initialise": ("InitResult", "initialise"),
-    "tracker.recovery": ("LossMonitor", "recover"),
-    "tracker.mirror": ("mirror_params", "resolve_front_back"),
-    "tracker.render": ("render_labels", "render_silhouettes", "internal_edges"),
-    "tracker.scene": ("ring_cameras",),
-    "tracker.bvh": ("Bvh", "BvhError", "load_bvh"),
-    "tracker.retarget": ("retarget_bvh",),
-    "tracker.synth": ("make_synthetic_session", "bundled_motion"),
-    "tracker.offline": ("track_session",),
+    "tracker.body.model": ("BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"),
+    "tracker.body.kinematics": ("Pose", "forward", "body_jacobian", "point_jacobian", "joint_centres"),
+    "tracker.imaging.contours": ("Contours", "extremal_contours"),
+    "tracker.imaging.jacobian": ("contour_jacobian",),
+    "tracker.imaging.visibility": ("hidden_points",),
+    "tracker.fitting.cost": ("ChamferCost", "CostTerms"),
+    "tracker.fitting.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
+    "tracker.fitting.tracking": ("Tracker", "TrackerOptions"),
+    "tracker.search.hull": ("VoxelHull", "visual_hull"),
+    "tracker.search.initialise": ("InitResult", "initialise"),
+    "tracker.search.recovery": ("LossMonitor", "recover"),
+    "tracker.search.mirror": ("mirror_params", "resolve_front_back"),
+    "tracker.imaging.render": ("render_labels", "render_silhouettes", "internal_edges"),
+    "tracker.synthetic.scene": ("ring_cameras",),
+    "tracker.synthetic.bvh": ("Bvh", "BvhError", "load_bvh"),
+    "tracker.synthetic.retarget": ("retarget_bvh",),
+    "tracker.synthetic.synth": ("make_synthetic_session", "bundled_motion"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -10,7 +10,7 @@ HELP = "print live poses from a studio (one line per pose; --json for the raw re
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
-    from service.runtime import add_connection_args
+    from service.workers.runtime import add_connection_args
 
     add_connection_args(parser)
     parser.add_argument("--json", action="store_true", help="print each pose record as one JSON line")
@@ -37,10 +37,10 @@ def format_pose(rec) -> str:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from service.bus import BusError, Inbox, Keys, open_session
+    from service.wire.bus import BusError, Inbox, Keys, open_session
     from service.config import ConfigError
-    from service.records import PoseRecord
-    from service.runtime import client_settings, stop_on_signals
+    from service.wire.records import PoseRecord
+    from service.workers.runtime import client_settings, stop_on_signals
 
     stop = threading.Event()
     stop_on_signals(stop)

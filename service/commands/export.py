@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
         records = read_pose_records(args.poses)
         if not records:
             raise ExportError(f"{args.poses}: no pose records")
-        from tracker.model import ModelError, load_model
+        from tracker.body.model import ModelError, load_model
 
         name = args.model or next((r.get("model") for r in records if r.get("model")), "knossow40")
         height, lengths = args.height_m, None

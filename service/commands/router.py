@@ -21,9 +21,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from service.bus import BusError, ZenohSettings, open_session
+    from service.wire.bus import BusError, ZenohSettings, open_session
     from service.config import ConfigError, load_config
-    from service.runtime import stop_on_signals
+    from service.workers.runtime import stop_on_signals
 
     logging.basicConfig(level="INFO", stream=sys.stderr, format="%(asctime)s router %(levelname)s %(message)s")
     log = logging.getLogger("contourcap.router")
@@ -64,4 +64,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    from service.blas import pin_blas_threads
+
+    pin_blas_threads()
     sys.exit(main())

@@ -28,10 +28,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from service.bus import BusError, open_session
+    from service.wire.bus import BusError, open_session
     from service.config import ConfigError, load_config
-    from service.runtime import hub_endpoint, preflight, stop_on_signals
-    from service.supervisor import Supervisor, plan_host
+    from service.workers.runtime import hub_endpoint, preflight, stop_on_signals
+    from service.flow.supervisor import Supervisor, plan_host
 
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s run %(levelname)s %(message)s")
@@ -87,4 +87,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    from service.blas import pin_blas_threads
+
+    pin_blas_threads()
     sys.exit(main())

@@ -40,9 +40,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracker.bvh import BvhError
-    from tracker.model import ModelError
-    from tracker.synth import bundled_motion, make_synthetic_session
+    from tracker.synthetic.bvh import BvhError
+    from tracker.body.model import ModelError
+    from tracker.synthetic.synth import bundled_motion, make_synthetic_session
 
     from service.progress import Progress
 

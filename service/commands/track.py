@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from capture.session import SessionError, load_session
-from tracker.model import ModelError, available_models
-from tracker.offline import background_models, session_model, summarise, track_session
+from tracker.body.model import ModelError, available_models
+from service.offline import background_models, session_model, summarise, track_session
 
 HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
 

@@ -11,7 +11,7 @@ HELP = "show a live studio in rerun: camera frusta, images, silhouettes, 3-D ske
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
-    from service.runtime import add_connection_args
+    from service.workers.runtime import add_connection_args
 
     add_connection_args(parser)
     sink = parser.add_mutually_exclusive_group()
@@ -42,11 +42,11 @@ def _calibration_path(args):
 def run(args: argparse.Namespace) -> int:
     import rerun as rr
 
-    from service.bus import BusError, Inbox, Keys, open_session
+    from service.wire.bus import BusError, Inbox, Keys, open_session
     from service.config import ConfigError
-    from service.messages import ChamferMessage, FrameMessage, MessageError
-    from service.records import PoseRecord
-    from service.runtime import client_settings, stop_on_signals
+    from service.wire.messages import ChamferMessage, FrameMessage, MessageError
+    from service.wire.records import PoseRecord
+    from service.workers.runtime import client_settings, stop_on_signals
     from service.viewer import RerunBridge, cameras_for_view
 
     stop = threading.Event()

@@ -49,7 +49,7 @@ def _setup_errors() -> tuple[type[BaseException], ...]:
     from capture.sources import SourceError
     from capture.trigger import TriggerError
     from service.config import ConfigError
-    from tracker.model import ModelError
+    from tracker.body.model import ModelError
 
     return (ConfigError, SessionError, CalibrationError, SourceError, TriggerError, ModelError)
 
@@ -57,9 +57,9 @@ def _setup_errors() -> tuple[type[BaseException], ...]:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from service.bus import BusError, Keys, open_session
+    from service.wire.bus import BusError, Keys, open_session
     from service.config import ConfigError, load_config
-    from service.runtime import (build_fitter, build_segmenters, build_sources, needs_trigger, start_trigger,
+    from service.workers.runtime import (build_fitter, build_segmenters, build_sources, needs_trigger, start_trigger,
                                  stop_on_signals, worker_settings)
 
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
@@ -88,12 +88,12 @@ def run(args: argparse.Namespace) -> int:
         return 2
     keys = Keys(cfg.studio)
     component = "track" if args.role == "track" else f"{args.role}-{'-'.join(cams) if args.cameras else host}"
-    from service.workers import WorkerError
+    from service.workers.loops import WorkerError
 
     finished = False
     try:
         if args.role == "camera":
-            from service.workers import EpochPacer, run_camera_worker
+            from service.workers.loops import EpochPacer, run_camera_worker
 
             paced = args.epoch_ns is not None and cfg.delivery == "live"
             box = start_trigger(cfg, stop) if needs_trigger(cfg, cams) else None
@@ -111,13 +111,13 @@ def run(args: argparse.Namespace) -> int:
                     box.stop()
                     box.close()
         elif args.role == "segment":
-            from service.workers import run_segment_worker
+            from service.workers.loops import run_segment_worker
 
             stats = run_segment_worker(session, keys, build_segmenters(cfg, cams, plugin=args.plugin),
                                        mode=cfg.delivery, stop=stop, component=component,
                                        idle_exit_s=args.idle_exit_s)
         else:
-            from service.workers import run_track_worker
+            from service.workers.loops import run_track_worker
 
             fitter = build_fitter(cfg, plugin=args.plugin)
             idle = None if args.idle_exit_s is None else args.idle_exit_s
@@ -148,4 +148,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    from service.blas import pin_blas_threads
+
+    pin_blas_threads()
     sys.exit(main())

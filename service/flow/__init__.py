@@ -1,0 +1,2 @@
+"""Flow control between workers: frame-set assembly, live demand, lossless credits, process supervision.
+"""

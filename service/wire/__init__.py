@@ -1,0 +1,2 @@
+"""What goes over the wire: typed, versioned, size-bounded records and the zenoh bus they travel on.
+"""

@@ -1,0 +1,199 @@
+"""JSON wire records: the pose record, status/stats, lossless-mode credits and live-mode
+have/demand notices.
+
+All of them are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
+record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
+``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
+``latency_ms``; ``reason`` when ``ok`` is false).  Status, credit, have and demand records carry
+``"v": 1``.
+Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from service.wire.messages import MessageError, _float, _int, check_name, dumps_json, loads_json
+
+POSE_MAX_BYTES = 1024 * 1024
+STATUS_MAX_BYTES = 64 * 1024
+RECORD_VERSION = 1
+_MAX_PARAMS = 1024
+_MAX_JOINTS = 128
+
+
+def _finite_list(value: Any, key: str, *, length: int | None = None, max_len: int = _MAX_PARAMS) -> list[float]:
+    if not isinstance(value, list) or len(value) > max_len or (length is not None and len(value) != length):
+        raise MessageError(f"{key}: expected a list of {length or f'<= {max_len}'} numbers")
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise MessageError(f"{key}: non-finite or non-numeric entry {v!r:.40}")
+    return [float(v) for v in value]
+
+
+def _check_version(obj: Mapping, what: str) -> None:
+    if obj.get("v") != RECORD_VERSION:
+        raise MessageError(f"{what}: version v={obj.get('v')!r:.20} unsupported (this build reads {RECORD_VERSION})")
+
+
+@dataclass(frozen=True)
+class PoseRecord:
+    """One frame's pose (DESIGN.md pose record).  ``fields`` is the whole read-only JSON object."""
+
+    frame: int
+    timestamp_ns: int
+    ok: bool
+    fields: Mapping[str, Any] = field(repr=False)
+
+    @classmethod
+    def from_dict(cls, obj: Mapping[str, Any]) -> "PoseRecord":
+        """Validate a pose object (from the tracker or the wire); MessageError names the key."""
+        if not isinstance(obj, Mapping):
+            raise MessageError(f"pose: expected an object, got {type(obj).__name__}")
+        obj = dict(obj)
+        frame = _int(obj, "frame")
+        ts = _int(obj, "timestamp_ns")
+        ok = obj.get("ok")
+        if not isinstance(ok, bool):
+            raise MessageError(f"ok: expected true/false, got {ok!r:.40}")
+        if not ok and not isinstance(obj.get("reason"), str):
+            raise MessageError("reason: a pose with ok=false must say why (string)")
+        if "model" in obj and not isinstance(obj["model"], str):
+            raise MessageError("model: expected a string")
+        if "params" in obj:
+            obj["params"] = _finite_list(obj["params"], "params")
+        if "joints" in obj:
+            joints = obj["joints"]
+            if not isinstance(joints, dict) or len(joints) > _MAX_JOINTS:
+                raise MessageError(f"joints: expected an object of at most {_MAX_JOINTS} joints")
+            obj["joints"] = {check_name(k, "joint name"): _finite_list(v, f"joints.{k}", length=3)
+                             for k, v in joints.items()}
+        for key in ("rms_px", "latency_ms"):
+            if obj.get(key) is not None:
+                obj[key] = _float(obj, key)
+        for key in ("iterations", "cameras"):
+            if key in obj:
+                _int(obj, key)
+        return cls(frame, ts, ok, MappingProxyType(obj))
+
+    @property
+    def joints(self) -> dict[str, np.ndarray]:
+        """Joint name -> position (3,) metres, world frame."""
+        return {k: np.asarray(v, float) for k, v in self.fields.get("joints", {}).items()}
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self.fields.get(key, default)
+
+    def replace(self, **updates: Any) -> "PoseRecord":
+        """A new validated record with some fields changed (e.g. ``latency_ms``)."""
+        return PoseRecord.from_dict({**self.fields, **updates})
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.fields)
+
+    def to_bytes(self) -> bytes:
+        return dumps_json(dict(self.fields))
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = POSE_MAX_BYTES) -> "PoseRecord":
+        return cls.from_dict(loads_json(data, max_bytes=max_bytes, what="pose"))
+
+
+@dataclass(frozen=True)
+class StatusMessage:
+    """Periodic health of one component: ``state`` and numeric ``stats`` (fps, drops, errors,
+    queue_depth, latency_ms, ...: name -> finite number)."""
+
+    component: str
+    state: str
+    timestamp_ns: int
+    stats: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stats", MappingProxyType(dict(self.stats)))
+
+    def to_bytes(self) -> bytes:
+        return dumps_json({"v": RECORD_VERSION, "component": self.component, "state": self.state,
+                           "timestamp_ns": self.timestamp_ns, "stats": dict(self.stats)})
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = STATUS_MAX_BYTES) -> "StatusMessage":
+        obj = loads_json(data, max_bytes=max_bytes, what="status")
+        _check_version(obj, "status")
+        stats = obj.get("stats", {})
+        if not isinstance(stats, dict) or len(stats) > 64:
+            raise MessageError("stats: expected an object of at most 64 numbers")
+        stats = {check_name(k, "stat name"): _float(stats, k) for k in stats}
+        return cls(check_name(obj.get("component"), "component"), check_name(obj.get("state"), "state"),
+                   _int(obj, "timestamp_ns"), stats)
+
+
+@dataclass(frozen=True)
+class _ConsumerFrame:
+    """``{"v": 1, "consumer": name, "frame_id": int}`` (credits and demands share this shape)."""
+
+    consumer: str
+    frame_id: int
+
+    WHAT = "record"
+
+    def to_bytes(self) -> bytes:
+        return dumps_json({"v": RECORD_VERSION, "consumer": self.consumer, "frame_id": self.frame_id})
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = 4096):
+        obj = loads_json(data, max_bytes=max_bytes, what=cls.WHAT)
+        _check_version(obj, cls.WHAT)
+        return cls(check_name(obj.get("consumer"), "consumer"), _int(obj, "frame_id"))
+
+
+@dataclass(frozen=True)
+class CreditMessage(_ConsumerFrame):
+    """Lossless mode: ``consumer`` has finished every frame up to and including ``frame_id``."""
+
+    WHAT = "credit"
+
+
+@dataclass(frozen=True)
+class DemandMessage(_ConsumerFrame):
+    """Live mode: ``consumer`` (the tracker) wants frame ``frame_id`` of every camera segmented now
+    (``contourcap/<studio>/demand/<consumer>``); segment workers segment nothing else."""
+
+    WHAT = "demand"
+
+
+HAVE_MAX_FRAMES = 64
+
+
+@dataclass(frozen=True)
+class HaveMessage:
+    """Live mode: the frame ids of ``camera`` that its segment worker holds (undecoded, ready to be
+    segmented on demand), oldest first, at most :data:`HAVE_MAX_FRAMES`
+    (``contourcap/<studio>/cam/<camera>/have``)."""
+
+    camera: str
+    frame_ids: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frame_ids", tuple(int(f) for f in self.frame_ids))
+
+    @property
+    def newest(self) -> int | None:
+        return max(self.frame_ids) if self.frame_ids else None
+
+    def to_bytes(self) -> bytes:
+        return dumps_json({"v": RECORD_VERSION, "camera": self.camera, "frames": list(self.frame_ids)})
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = 4096) -> "HaveMessage":
+        obj = loads_json(data, max_bytes=max_bytes, what="have")
+        _check_version(obj, "have")
+        frames = obj.get("frames")
+        if not isinstance(frames, list) or len(frames) > HAVE_MAX_FRAMES:
+            raise MessageError(f"frames: expected a list of at most {HAVE_MAX_FRAMES} frame ids")
+        return cls(check_name(obj.get("camera")), tuple(_int({"frames": f}, "frames") for f in frames))

@@ -1,0 +1,104 @@
+"""Adapters between the wire messages and the real components (segmentation, tracker).
+
+- :func:`chamfer_to_message` / :func:`message_to_chamfer`: ``segmentation.ChamferImages`` <->
+  :class:`~service.wire.messages.ChamferMessage` (arrays ``silhouette`` and ``edges``, ``scale`` =
+  1 / ``resolution_px``, ``truncation_px`` = ``max_distance_px``); exact round trip.
+- :class:`BackgroundSegmenter`: the segment worker's per-camera callable.  It learns its background
+  model from ``learn_frames`` frames it is given (an empty studio at start-up) unless a model is
+  supplied (e.g. ``service.offline.background_models`` of a replayed session).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from service.wire.messages import ChamferMessage, FrameMessage, MessageError
+
+
+def chamfer_to_message(camera: str, frame_id: int, timestamp_ns: int, chamfer, *,
+                       attrs: dict[str, float] | None = None) -> ChamferMessage:
+    """Wrap ``segmentation.ChamferImages`` for the wire."""
+    return ChamferMessage(camera, int(frame_id), int(timestamp_ns), tuple(chamfer.image_size),
+                          tuple(int(v) for v in chamfer.offset_xy), float(chamfer.max_distance_px),
+                          1.0 / float(chamfer.resolution_px),
+                          (("silhouette", chamfer.silhouette_q), ("edges", chamfer.edges_q)), attrs or {})
+
+
+def message_to_chamfer(msg: ChamferMessage):
+    """``segmentation.ChamferImages`` of a received message; MessageError if it is not one."""
+    from segmentation.distance import ChamferImages
+
+    try:
+        sil, edges = msg.array("silhouette"), msg.array("edges")
+        return ChamferImages(sil, edges, msg.roi_xy, 1.0 / msg.scale, msg.truncation_px, msg.image_size)
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise MessageError(f"camera {msg.camera}: not segmentation chamfer images: {exc}") from None
+
+
+class BackgroundSegmenter:
+    """``(FrameMessage, image_bgr (h, w, 3) uint8) -> ChamferMessage | None`` for one camera.
+
+    Returns None while it is still learning its background (the first ``learn_frames`` frames).
+    ``on_result(frame, FrameSegmentation)`` is called after each segmented frame (viewer taps).
+    """
+
+    def __init__(self, *, model=None, params=None, learn_frames: int = 30,
+                 on_result: Callable | None = None) -> None:
+        self.model, self.params, self.learn_frames = model, params, int(learn_frames)
+        self.on_result = on_result
+        self._learning: list[np.ndarray] = []
+
+    def __call__(self, frame: FrameMessage, image: np.ndarray) -> ChamferMessage | None:
+        from segmentation.background import BackgroundModel
+        from segmentation.pipeline import segment_frame
+
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+            raise MessageError(f"camera {frame.camera}: segmentation needs (h, w, 3) uint8 BGR, got "
+                               f"{image.shape} {image.dtype}")
+        if self.model is None:
+            self._learning.append(image)
+            if len(self._learning) >= self.learn_frames:
+                self.model = BackgroundModel.from_frames(self._learning)
+                self._learning = []
+            return None
+        if tuple(self.model.size) != (image.shape[1], image.shape[0]):
+            raise MessageError(f"camera {frame.camera}: frame {image.shape[1]}x{image.shape[0]} does not match "
+                               f"the background model {self.model.size[0]}x{self.model.size[1]}")
+        seg = segment_frame(self.model, image, params=self.params)
+        if self.on_result is not None:
+            self.on_result(frame, seg)
+        return chamfer_to_message(frame.camera, frame.frame_id, frame.timestamp_ns, seg.chamfer,
+                                  attrs={"foreground_fraction": seg.foreground_fraction})
+
+
+def silhouette_mask(chamfer) -> np.ndarray:
+    """Full-image silhouette ``(h, w)`` uint8 0/255 from ChamferImages (distance 0 = inside)."""
+    w, h = chamfer.image_size
+    mask = np.zeros((h, w), np.uint8)
+    rh, rw = chamfer.silhouette_q.shape
+    x0, y0 = chamfer.offset_xy
+    mask[y0:y0 + rh, x0:x0 + rw] = np.where(chamfer.silhouette_q == 0, 255, 0).astype(np.uint8)
+    return mask
+
+
+class TrackerFitter:
+    """The track worker's fitter around ``tracker.fitting.tracking.Tracker``:
+    ``(frame_id, timestamp_ns, {camera: ChamferMessage}) -> pose record dict``."""
+
+    def __init__(self, tracker) -> None:
+        self.tracker = tracker
+
+    @classmethod
+    def from_session(cls, session, *, model: str = "knossow40", initial_params=None) -> "TrackerFitter":
+        from tracker.body.model import load_model
+        from tracker.fitting.tracking import Tracker
+
+        body = load_model(model, height_m=session.height_m, segment_lengths=session.segment_lengths)
+        return cls(Tracker(body, list(session.calibration), initial_params=initial_params))
+
+    def __call__(self, frame_id: int, timestamp_ns: int, chamfer: dict) -> dict:
+        images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
+        silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
+        return self.tracker.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)

@@ -1,0 +1,157 @@
+"""Wire messages: one contract for every type (round trip, garbage in -> only MessageError)."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from service.wire.messages import (HEADER, MAX_BYTES, ChamferMessage, FrameMessage, MessageError, peek_type)
+from service.wire.records import CreditMessage, PoseRecord, StatusMessage
+from tests.support.messages import mutations as _mutations
+
+
+def _frame(rng, encoding="raw"):
+    img = rng.integers(0, 255, size=(24, 32, 3), dtype=np.uint8)
+    return FrameMessage.from_image("cam0", 7, 123_456_789, img, encoding=encoding)
+
+
+def _chamfer(rng):
+    edges = rng.integers(0, 65535, size=(10, 12), dtype=np.uint16)
+    sil = rng.integers(0, 255, size=(10, 12), dtype=np.uint8)
+    return ChamferMessage("cam_1", 9, 10**12, (64, 48), (5, 6), 20.0, 8.0,
+                          (("edges", edges), ("silhouette", sil)), {"threshold": 12.5})
+
+
+def _pose(rng):
+    return PoseRecord.from_dict({
+        "frame": 12, "timestamp_ns": 400_000_000, "ok": True, "model": "knossow40",
+        "params": rng.normal(size=40).tolist(),
+        "joints": {"pelvis": [0.0, 0.1, 0.9], "head": [0.0, 0.05, 1.7]},
+        "rms_px": 0.9, "iterations": 4, "cameras": 6, "latency_ms": 21.5})
+
+
+SAMPLES = {
+    "frame_raw": lambda rng: _frame(rng, "raw"),
+    "frame_png": lambda rng: _frame(rng, "png"),
+    "chamfer": _chamfer,
+    "pose": _pose,
+    "status": lambda rng: StatusMessage("segment-cam0", "running", 5, {"fps": 49.5, "drops": 3.0}),
+    "credit": lambda rng: CreditMessage("track", 41),
+}
+
+
+def _equal(a, b) -> bool:
+    if isinstance(a, ChamferMessage):
+        return (a.camera, a.frame_id, a.image_size, a.roi_xy, dict(a.attrs)) == \
+            (b.camera, b.frame_id, b.image_size, b.roi_xy, dict(b.attrs)) and all(
+                na == nb and x.dtype == y.dtype and np.array_equal(x, y)
+                for (na, x), (nb, y) in zip(a.arrays, b.arrays))
+    if isinstance(a, PoseRecord):
+        return a.to_dict() == b.to_dict()
+    return a == b
+
+
+@pytest.mark.parametrize("kind", sorted(SAMPLES))
+def test_round_trip(kind, rng):
+    msg = SAMPLES[kind](rng)
+    back = type(msg).from_bytes(msg.to_bytes())
+    assert _equal(msg, back)
+    assert back.to_bytes() == msg.to_bytes()
+
+
+def test_frame_pixels_survive(rng):
+    img = rng.integers(0, 255, size=(24, 32, 3), dtype=np.uint8)
+    for enc in ("raw", "png"):  # both lossless
+        msg = FrameMessage.from_image("cam0", 1, 1, img, encoding=enc)
+        assert np.array_equal(FrameMessage.from_bytes(msg.to_bytes()).image(), img)
+    jpg = FrameMessage.from_image("cam0", 1, 1, np.full((16, 16), 128, np.uint8), encoding="jpeg")
+    assert np.abs(FrameMessage.from_bytes(jpg.to_bytes()).image().astype(int) - 128).max() <= 2
+
+
+def test_pose_is_plain_design_json(rng):
+    rec = _pose(rng)
+    obj = json.loads(rec.to_bytes().decode())
+    assert obj["frame"] == 12 and obj["joints"]["pelvis"] == [0.0, 0.1, 0.9]
+    failed = PoseRecord.from_dict({"frame": 3, "timestamp_ns": 1, "ok": False, "reason": "no cameras"})
+    assert PoseRecord.from_bytes(failed.to_bytes()).get("reason") == "no cameras"
+
+
+@pytest.mark.parametrize("bad, word", [
+    ({"frame": -1, "timestamp_ns": 0, "ok": True}, "frame"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": False}, "reason"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": True, "joints": {"a": [1, 2]}}, "joints.a"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": True, "joints": {"../x": [1, 2, 3]}}, "joint name"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": "yes"}, "ok"),
+])
+def test_pose_validation_names_key(bad, word):
+    with pytest.raises(MessageError, match=word):
+        PoseRecord.from_dict(bad)
+
+
+def test_non_finite_json_rejected():
+    with pytest.raises(MessageError, match="non-finite"):
+        PoseRecord.from_bytes(b'{"frame": 1, "timestamp_ns": 0, "ok": true, "rms_px": NaN}')
+
+
+def test_binary_checks_name_the_problem(rng):
+    good = _frame(rng).to_bytes()
+    magic, t, v, r, ml, pl = HEADER.unpack_from(good)
+    with pytest.raises(MessageError, match="version"):
+        FrameMessage.from_bytes(HEADER.pack(magic, t, 2, r, ml, pl) + good[HEADER.size:])
+    with pytest.raises(MessageError, match="type"):
+        ChamferMessage.from_bytes(good)
+    with pytest.raises(MessageError, match="maximum"):
+        FrameMessage.from_bytes(good, max_bytes=len(good) - 1)
+    meta = json.loads(good[HEADER.size:HEADER.size + ml])
+    meta["shape"] = [24, 32, 4]
+    m = json.dumps(meta).encode()
+    with pytest.raises(MessageError, match="payload"):
+        FrameMessage.from_bytes(HEADER.pack(magic, t, v, r, len(m), pl) + m + good[HEADER.size + ml:])
+    meta["shape"], meta["camera"] = [24, 32, 3], "../../etc"
+    m = json.dumps(meta).encode()
+    with pytest.raises(MessageError, match="camera"):
+        FrameMessage.from_bytes(HEADER.pack(magic, t, v, r, len(m), pl) + m + good[HEADER.size + ml:])
+    assert peek_type(good) == FrameMessage.TYPE and peek_type(b"xx") is None
+
+
+def test_chamfer_roi_must_fit_image(rng):
+    msg = ChamferMessage("cam0", 1, 1, (16, 16), (10, 10), 20.0, 1.0,
+                         (("d", np.zeros((8, 8), np.uint8)),))
+    with pytest.raises(MessageError, match="exceeds image"):
+        ChamferMessage.from_bytes(msg.to_bytes())
+
+
+
+@pytest.mark.parametrize("kind", sorted(SAMPLES))
+def test_fuzz_only_message_error(kind):
+    rng = np.random.default_rng(2024)
+    proto = SAMPLES[kind](rng)
+    data = proto.to_bytes()
+    decoders = [FrameMessage, ChamferMessage, PoseRecord, StatusMessage, CreditMessage]
+    accepted = rejected = 0
+    for _ in range(150):
+        for bad in _mutations(data, rng):
+            for cls in decoders:
+                try:
+                    out = cls.from_bytes(bad)
+                except MessageError:
+                    rejected += 1
+                else:
+                    accepted += 1
+                    if isinstance(out, FrameMessage):
+                        try:
+                            out.image()
+                        except MessageError:
+                            pass
+    assert rejected > 0
+    assert accepted < rejected
+
+
+def test_oversized_rejected_before_parsing():
+    with pytest.raises(MessageError, match="maximum"):
+        FrameMessage.from_bytes(b"\0" * (MAX_BYTES + 1))
+    with pytest.raises(MessageError, match="maximum"):
+        PoseRecord.from_bytes(b" " * (2 * 1024 * 1024))

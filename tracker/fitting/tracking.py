@@ -1,0 +1,399 @@
+"""The tracking loop: one pose record per frame set (DESIGN.md pose record).
+
+Per frame: keep the cameras that sent chamfer images, predict (constant velocity, or the last
+pose), fit with Levenberg–Marquardt on the chamfer cost (``tracker.fitting.cost``) from the prediction with
+a small prior towards the last fitted pose, measure quality (RMS residual against a limit relative
+to the recent frames' median, fraction of predicted contour points inside the silhouettes, and
+now and then or when those look suspect the silhouette IoU; ``TrackerOptions``) and emit the
+record.  A frame whose quality is below the thresholds is reported
+``ok: false`` ("poor fit"); after ``patience`` such frames in a row (``tracker.search.recovery.LossMonitor``)
+the pose is searched again from the silhouettes, seeded by the last good pose
+(``tracker.search.initialise.initialise(hint=...)``).  Without ``initial_params`` the first frame is
+initialised from the silhouettes.
+
+Never raises on data: a frame that cannot be solved (no camera, all silhouettes empty, no
+initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from tracker.fitting.cost import ChamferCost
+from tracker.body.kinematics import joint_centre_array
+from tracker.search.initialise import ScoreViews, initialise
+from tracker.search.mirror import hypothesis_cost, mirror_params
+from tracker.body.model import ROOT_TRANSLATION, BodyModel
+from tracker.search.recovery import LossMonitor
+from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
+
+__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Fitting options (defaults tuned on the synthetic hop session, see bench/tracker.py).
+
+    n_samples : contour points per side of a part; visibility : when occlusion is recomputed
+    (``tracker.fitting.cost.ChamferCost``); max_iterations : LM trial steps per frame;
+    ftol, xtol, rtol : LM stopping rules (relative cost change, step size, largest linearised
+    residual change in px; ``tracker.fitting.solver.levenberg_marquardt``);
+    loss, f_scale : robust loss on the pixel residuals; truncate_px : distance truncation;
+    prior_m, prior_rad : prior weights per m² (root translation) and per rad² (rotations), in
+    units of px² residual, towards the last fitted pose (not the extrapolation);
+    reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse (silhouette →
+    model) term of ``tracker.fitting.cost`` (weight 0 turns it off; hop session with the on-silhouette
+    test ``reverse_cover_px`` 1: MPJPE 7.7 mm at reverse_min_px 2, 8.2 mm and a frame flagged at
+    4, 11.7 mm at 6; without the test: 9.4 mm at 8, 10.8 mm at 2; the test costs ~26 % more time
+    per frame (hop, reverse_min_px 2, one run: 20.2 against 16.0 ms); these figures move by ±1–2 mm
+    with small changes: the right arm is lost for a few frames around 58–60 and 65–90 in some runs);
+    damping, diagonal_floor : LM initial damping and damping-diagonal floor;
+    constant_velocity : start from ``2 p_t − p_{t−1}`` (hop session: median 3 iterations instead
+    of 5, mean joint error 9.1 mm instead of 11.6 mm);
+    max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px : the RMS limit of a good frame is
+    ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median RMS of the last rms_window good
+    frames))``: the RMS level is set by the segmentation (shadows, missing edges), not by the pose
+    (hop session: median 3.5 px, correlation of per-frame RMS with joint error 0.01; a fixed 6 px
+    flagged a frame at 7.1 px whose joint error was 23 mm);
+    min_inside_fraction, min_iou : a frame worse than these (or than the RMS limit) is reported
+    ``ok: false``; the IoU of the model's silhouettes with the observed ones
+    (``tracker.search.initialise.ScoreViews`` at half resolution) catches a wrong pose that fits the
+    contours well locally (RMS, inside fraction) yet misses or overshoots whole limbs (hop
+    session: good frames ≥ 0.87; a half-followed 90° turn and 0.8 m jump, 77 mm off: 0.77);
+    iou_every, iou_check_coverage : rendering it costs ~5 ms, so it is checked (when the frame
+    brings silhouettes) every ``iou_every`` frames, after a bad frame, and whenever a cheap figure
+    is suspicious: coverage (observed silhouette boundary near the model's contour, the reverse
+    term's figure) below ``iou_check_coverage``, RMS above ¾ of its limit, or an inside fraction
+    within 0.1 of its limit (``iou_every=1``: every frame);
+    front_back_every, front_back_iterations, front_back_margin : the front/back check: silhouettes
+    hardly tell a body from its mirror (``tracker.search.mirror``), so a track can run turned round and
+    pass every figure above (or fail them, as a poor fit, until recovery).  Every
+    ``front_back_every`` frames that bring silhouettes (0: never; not on a frame that was just
+    re-initialised), the mirror of the fitted pose is fitted too (``front_back_iterations`` LM
+    steps) and both are scored by ``tracker.search.mirror.hypothesis_cost`` (RMS + 10 × (1 − IoU) + 0.1
+    per joint at a limit); when the mirror scores ``front_back_margin`` lower it is taken and
+    fitted to convergence (4 × ``front_back_iterations`` steps).  A check costs one fit and two
+    IoU renders (hop, one core shared with other work: ~60 ms, 2.4 median frames; ≈ 1 ms per
+    frame on average at 60: a turned track is found within 2 s at 30 fps).  The full check,
+    ``tracker.search.mirror.resolve_front_back`` (1–3 s), kept the mirrored pose on the test's clip: not used.
+    """
+
+    n_samples: int = 8
+    visibility: str = "step"
+    max_iterations: int = 12
+    ftol: float = 3e-2
+    xtol: float = 1e-4
+    rtol: float = 1.0
+    loss: str = "huber"
+    f_scale: float = 3.0
+    truncate_px: float = 30.0
+    prior_m: float = 200.0
+    prior_rad: float = 30.0
+    reverse_weight: float = 1.0
+    reverse_samples: int = 150
+    reverse_min_px: float = 2.0
+    reverse_cover_px: float | None = 1.0
+    damping: float = 1e-3
+    diagonal_floor: float = 0.0
+    constant_velocity: bool = True
+    max_rms_px: float = 6.0
+    rms_ratio: float = 2.5
+    rms_window: int = 30
+    max_rms_ceiling_px: float = 15.0
+    min_inside_fraction: float = 0.6
+    min_iou: float = 0.8
+    iou_every: int = 10
+    iou_check_coverage: float = 0.8
+    front_back_every: int = 60
+    front_back_iterations: int = 12
+    front_back_margin: float = 0.5
+
+
+def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
+    """Per-parameter prior weights (n_params,): ``prior_m`` on root translation, ``prior_rad`` else."""
+    return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
+
+
+def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, start: np.ndarray, *,
+              prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
+              options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
+    """Fit one frame from ``start`` (n_params,) with the prior term towards ``prediction`` (default
+    ``start``); returns the solver result and the cost object."""
+    cost = ChamferCost(model, cameras, chamfer, sliding=sliding, n_samples=options.n_samples,
+                       visibility=options.visibility, truncate_px=options.truncate_px,
+                       reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
+                       reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
+    prior = start if prediction is None else prediction
+    kw = dict(lower=model.lower, upper=model.upper, prior=model.clamp(prior),
+              prior_weight=prior_weights(model, options), loss=options.loss, f_scale=options.f_scale,
+              max_iterations=options.max_iterations, ftol=options.ftol, xtol=options.xtol)
+    lm_only = dict(damping=options.damping, diagonal_floor=options.diagonal_floor, rtol=options.rtol)
+    if solver == "lm":
+        res = levenberg_marquardt(cost.residual_fn(compact=True), start, **lm_only, **kw)
+    elif solver == "lsq":
+        res = least_squares_fd(cost.residual_fn(compact=False), start, **kw)
+    else:
+        raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
+    return res, cost
+
+
+def _silhouette_empty(chamfer, silhouette) -> bool:
+    if silhouette is not None:
+        return not np.any(silhouette)
+    q = getattr(chamfer, "silhouette_q", None)
+    if q is None:
+        return False
+    return q.size == 0 or int(q.min()) > 0
+
+
+class Tracker:
+    """Frame-to-frame tracker of one person.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera (the studio; a frame may bring any subset)
+    sliding : use the sliding term of the contour Jacobian
+    solver : ``"lm"`` (analytic Jacobian) or ``"lsq"`` (scipy, finite differences)
+    initial_params : (n_params,) start pose; without it the first frame is initialised by
+        ``tracker.search.initialise.initialise`` (the frame must bring ``silhouettes``)
+    options : TrackerOptions
+    recover : re-initialise once ``patience`` consecutive frames were bad and the frame brings
+        ``silhouettes`` (``tracker.search.recovery`` seeded by the last good pose; the T/A-pose search of
+        ``tracker.search.initialise`` when there was none)
+    clock : callable returning seconds (latency measurement), default ``time.perf_counter``
+
+    Attributes
+    ----------
+    params : (n_params,) the last fitted pose (None before initialisation)
+    last_good : (n_params,) the last pose of a good frame
+    last_result : SolverResult of the last fit
+    n_initialisations, n_front_back_checks, n_turned : searches from the silhouettes, front/back
+        checks run, and the times the mirror was taken (``TrackerOptions``)
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
+                 initial_params=None, options: TrackerOptions = TrackerOptions(), recover: bool = True,
+                 patience: int = 3, clock: Callable[[], float] = time.perf_counter) -> None:
+        if solver not in ("lm", "lsq"):
+            raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
+        self.model = model
+        self.cameras = {c.name: c for c in cameras}
+        if len(self.cameras) != len(cameras):
+            raise ValueError("cameras: names must be unique")
+        self.sliding = bool(sliding)
+        self.solver = solver
+        self.options = options
+        self.recover = bool(recover)
+        self.clock = clock
+        # the frame's own RMS limit (``rms_limit``) is applied by ``_bad``; the monitor counts bad frames
+        self.monitor = LossMonitor(max_rms_px=max(options.max_rms_px, options.max_rms_ceiling_px),
+                                   min_inside_fraction=options.min_inside_fraction, patience=patience)
+        self._good_rms: list[float] = []
+        self._since_iou = options.iou_every  # the first frame is checked
+        self._since_front_back = 0
+        self.n_front_back_checks = 0
+        self.n_turned = 0
+        self._last_bad = False
+        self.params: np.ndarray | None = None
+        self.previous: np.ndarray | None = None
+        self.last_good: np.ndarray | None = None
+        if initial_params is not None:
+            p = np.asarray(initial_params, dtype=float)
+            if p.shape != (model.n_params,) or not np.all(np.isfinite(p)):
+                raise ValueError(f"initial_params: expected a finite array of shape ({model.n_params},)")
+            self.params = model.clamp(p)
+        self.last_result: SolverResult | None = None
+        self.n_initialisations = 0
+
+    def predict(self) -> np.ndarray | None:
+        """Start pose for the next frame (n_params,) or None before initialisation."""
+        if self.params is None:
+            return None
+        if self.options.constant_velocity and self.previous is not None:
+            return self.model.clamp(2.0 * self.params - self.previous)
+        return self.params
+
+    def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
+        """Initialisation (hint None) or recovery from silhouettes; raises ValueError on failure."""
+        self.n_initialisations += 1
+        res = initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
+                         {c.name: chamfer[c.name] for c in cams}, hint=hint)
+        return self.model.clamp(np.asarray(res.params, dtype=float))
+
+    def _fit(self, cams, chs, start):
+        prior = start if self.params is None else self.params
+        res, cost = fit_frame(self.model, cams, chs, start, prediction=prior, sliding=self.sliding,
+                              solver=self.solver, options=self.options)
+        terms = cost.evaluate(np.asarray(res.params))
+        return res, terms, terms.rms_px(), terms.inside_fraction()
+
+    def rms_limit(self) -> float:
+        """RMS (px) above which the current frame is bad (see ``TrackerOptions``)."""
+        o = self.options
+        lim = o.max_rms_px
+        if self._good_rms:
+            lim = max(lim, o.rms_ratio * float(np.median(self._good_rms)))
+        return min(lim, o.max_rms_ceiling_px)
+
+    def _suspect(self, terms) -> bool:
+        """A cheap figure is near its limit: RMS above ¾ of it, inside fraction within 0.1 of it,
+        or coverage below ``iou_check_coverage`` (``TrackerOptions``)."""
+        o = self.options
+        rms, inside, cov = terms.rms_px(), terms.inside_fraction(), terms.coverage()
+        return (not rms <= 0.75 * self.rms_limit() or not inside >= o.min_inside_fraction + 0.1
+                or (np.isfinite(cov) and cov < o.iou_check_coverage))
+
+    def _iou_due(self, terms) -> bool:
+        """Whether the (costly) silhouette IoU check runs on this frame (``TrackerOptions``)."""
+        return self._last_bad or self._since_iou + 1 >= self.options.iou_every or self._suspect(terms)
+
+    def _bad(self, terms, views) -> str:
+        """Why the fit at ``terms`` is poor ("" when it is good); ``views``: a callable returning
+        ScoreViews (built on first use), or None (no IoU check)."""
+        o = self.options
+        rms, inside = terms.rms_px(), terms.inside_fraction()
+        lim = self.rms_limit()
+        why = []
+        if not (np.isfinite(rms) and rms <= lim):
+            why.append(f"rms {rms:.2f} px > {lim:.3g}")
+        if not (np.isfinite(inside) and inside >= o.min_inside_fraction):
+            why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
+        if views is not None and (why or self._iou_due(terms)):
+            iou = float(views().score(np.asarray(terms.pose.params)))
+            self._last_iou = iou
+            if not iou >= o.min_iou:
+                why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
+        return "; ".join(why)
+
+    def _front_back(self, cams, chs, res, terms, views):
+        """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
+        mirror of the fit ``res`` scores better, else None."""
+        o = self.options
+        self.n_front_back_checks += 1
+        p = np.asarray(res.params)
+        mp = self.model.clamp(mirror_params(self.model, p))
+        res_m, cost_m = fit_frame(self.model, cams, chs, mp, sliding=self.sliding, solver=self.solver,
+                                  options=replace(o, max_iterations=o.front_back_iterations))
+        pm = np.asarray(res_m.params)
+        v = views()
+        iou = self._last_iou if self._last_iou is not None else float(v.score(p))
+        kept = hypothesis_cost(self.model, p, terms.rms_px(), iou)
+        turned = hypothesis_cost(self.model, pm, cost_m.evaluate(pm).rms_px(), float(v.score(pm)))
+        if not turned < kept - o.front_back_margin:
+            return None
+        # turned: converge fully from there (the mirror of a contorted fit is itself off)
+        res_t, cost_t = fit_frame(self.model, cams, chs, pm, sliding=self.sliding, solver=self.solver,
+                                  options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0))
+        return res_t, cost_t.evaluate(np.asarray(res_t.params))
+
+    def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
+             silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
+        """Fit one frame set and return its pose record (a JSON-ready dict).
+
+        ``chamfer``: camera name -> ChamferImages (a camera absent this frame is left out);
+        ``silhouettes``: camera name -> (h, w) mask, needed for (re)initialisation only.
+        """
+        t0 = self.clock()
+        record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
+        unknown = sorted(name for name in chamfer if name not in self.cameras)
+        sils = silhouettes if silhouettes is not None else {}
+        names = [n for n in self.cameras if n in chamfer and not _silhouette_empty(chamfer[n], sils.get(n))]
+        record["cameras"] = len(names)
+
+        def fail(reason: str) -> dict:
+            record.update(ok=False, reason=reason, latency_ms=1e3 * (self.clock() - t0))
+            self.monitor.update({"ok": False, "reason": reason})
+            return record
+
+        if unknown:
+            return fail(f"unknown camera(s) {unknown}")
+        if not names:
+            return fail("no camera with a non-empty silhouette")
+        cams = [self.cameras[n] for n in names]
+        chs = [chamfer[n] for n in names]
+        can_search = silhouettes is not None and all(n in silhouettes for n in names)
+        start = self.predict()
+        if start is None:
+            if not can_search:
+                return fail("no initial pose: pass initial_params, or silhouettes for automatic initialisation")
+            try:
+                start = self._search(cams, chamfer, silhouettes, None)
+            except ValueError as exc:
+                return fail(f"initialisation failed: {exc}")
+        res, terms, rms, inside = self._fit(cams, chs, start)
+        built: list = []
+
+        def score_views() -> ScoreViews:
+            if not built:
+                built.append(ScoreViews(self.model, cams, [silhouettes[n] for n in names], scale=0.5))
+            return built[0]
+
+        views = score_views if can_search else None
+        self._last_iou = None
+        bad = self._bad(terms, views)
+        restarted = False
+        state = self.monitor.update({"ok": False, "reason": f"poor fit: {bad}"} if bad
+                                    else {"rms_px": rms, "inside_fraction": inside})
+        if bad and state.lost and self.recover and can_search:
+            try:
+                res2, terms2, rms2, inside2 = self._fit(cams, chs, self._search(cams, chamfer, silhouettes,
+                                                                                 self.last_good))
+            except ValueError:
+                pass
+            else:
+                bad2 = self._bad(terms2, views)
+                if not bad2 or rms2 < rms:
+                    res, terms, rms, inside, bad = res2, terms2, rms2, inside2, bad2
+                    if not bad:
+                        self.monitor.reset()
+                    restarted = True  # no velocity across a re-initialisation
+        if self.options.front_back_every > 0 and views is not None and not restarted:
+            self._since_front_back += 1
+            if self._since_front_back >= self.options.front_back_every:
+                self._since_front_back = 0
+                turned = self._front_back(cams, chs, res, terms, views)
+                if turned is not None:
+                    res, terms = turned
+                    rms, inside = terms.rms_px(), terms.inside_fraction()
+                    self._last_iou = None  # the IoU recorded was the other hypothesis's
+                    bad = self._bad(terms, views)
+                    if not bad:
+                        self.monitor.reset()
+                    self.n_turned += 1
+                    restarted = True  # no velocity across the turn
+        self.last_result = res
+        joints = joint_centre_array(self.model, terms.pose)
+        record.update(
+            ok=not bad, params=[float(v) for v in res.params],
+            joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
+            rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
+            coverage=_finite(terms.coverage()),
+        )
+        if self._last_iou is not None:
+            record["iou"] = self._last_iou
+        self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
+        self._last_bad = bool(bad)
+        if bad:
+            record["reason"] = f"poor fit: {bad}"
+            self.params = np.array(res.params)  # next start; the velocity reference is dropped
+            self.previous = None
+        else:
+            # no velocity across a re-initialisation or out of a suspect fit (hop: 3 frames of 120
+            # after the landing; extrapolating from them drifted 15-20 mm for ~20 frames)
+            self.previous = None if restarted or self._suspect(terms) else self.params
+            self.params = np.array(res.params)
+            self.last_good = self.params
+            if np.isfinite(rms):
+                self._good_rms = (self._good_rms + [float(rms)])[-self.options.rms_window:]
+        record["latency_ms"] = 1e3 * (self.clock() - t0)
+        return record
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None

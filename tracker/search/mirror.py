@@ -1,0 +1,236 @@
+"""Front/back ambiguity: the mirrored body and the choice between a pose and its mirror.
+
+Silhouettes hardly tell a person's front from their back: a body and the same body reflected
+in its frontal plane (the vertical plane through the pelvis holding the left–right axis) cast
+nearly the same outlines, more so at low resolution where the feet and the nose are a few
+pixels.  The reflected body is a real body once left and right are swapped: it is the pose
+turned 180° about the vertical through the pelvis with the left and right chains exchanged
+(``mirror_params``).  Which of the two is right shows in what does not mirror:
+
+* joint limits — knees bend backwards only, elbows forwards: a mirrored fit of a crouch or a
+  lean has to contort (joints at their limits, limbs and trunk off the outline);
+* the internal edges (the outlines of limbs inside the silhouette), part of the chamfer cost;
+* the feet, which reach forward of the ankles (``tracker.search.initialise.feet_direction``), when
+  the hull shows them clearly.
+
+``resolve_front_back`` refines a pose and its mirror fully (root, joints, everything: staged LM
+of ``tracker.search.initialise.refine``) and keeps the one with the lower ``front_back_cost``.
+
+Mirror algebra (the models mirror the right side's DOF axes: ``-x``/``-z`` where the left
+side has ``x``/``z``).  With S = diag(1, -1, 1) the reflection of a part frame in the body's
+sagittal plane, S Rot(a, λ) S = Rot(-S a, λ): a DOF of axis a maps to the DOF of the other side
+(or itself, on the trunk) whose axis is ±(-S a), with its value times that sign; the root
+rotation R becomes Rz(π) R and the pelvis stays in place.  For an upright body the result is
+the reflection of the original in its frontal plane; ``mirror_params`` is an involution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera, matrix_to_rodrigues
+from tracker.body.kinematics import so3_exp
+from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
+
+__all__ = ["mirror_map", "mirror_params", "mirror_joint_order", "front_back_cost", "hypothesis_cost", "FrontBack",
+           "resolve_front_back"]
+
+_S = np.diag([1.0, -1.0, 1.0])
+_RZ_PI = np.diag([-1.0, -1.0, 1.0])
+
+
+def _other_side(name: str) -> str:
+    for a, b in (("left_", "right_"), ("right_", "left_")):
+        if name.startswith(a):
+            return b + name[len(a):]
+    return name
+
+
+@lru_cache(maxsize=16)
+def _mirror_map_cached(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
+    n = model.n_params
+    index, sign = np.arange(n), np.ones(n)
+    for k in np.flatnonzero(model.param_kind == JOINT_ROTATION):
+        other = _other_side(model.param_names[k])
+        if other not in model.param_names:
+            raise ValueError(f"model {model.name!r}: DOF {model.param_names[k]!r} has no mirror {other!r}")
+        j = model.param_names.index(other)
+        want = -_S @ model.param_axis[k]
+        s = float(model.param_axis[j] @ want)
+        if not np.isclose(abs(s), 1.0, atol=1e-9):
+            raise ValueError(f"model {model.name!r}: DOF {model.param_names[j]!r} axis {model.param_axis[j]} "
+                             f"does not mirror {model.param_names[k]!r} axis {model.param_axis[k]}")
+        index[k], sign[k] = j, np.sign(s)
+    index.setflags(write=False)
+    sign.setflags(write=False)
+    return index, sign
+
+
+def mirror_map(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
+    """Joint-parameter permutation and signs of the left/right reflection: ``(index (n_params,),
+    sign (n_params,))`` with ``mirrored[index[k]] = sign[k] * params[k]`` for every joint DOF k
+    (root entries: identity).  Raises ValueError naming a DOF whose mirror is missing or whose
+    axis does not mirror."""
+    return _mirror_map_cached(model)
+
+
+def mirror_joint_order(model: BodyModel) -> np.ndarray:
+    """Permutation (n_joints,) of ``model.joint_names`` swapping ``left_*`` and ``right_*``."""
+    names = list(model.joint_names)
+    return np.array([names.index(_other_side(n)) if _other_side(n) in names else i for i, n in enumerate(names)])
+
+
+def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
+    """The same body turned 180° about the vertical through the pelvis, left and right swapped.
+
+    params : (n_params,) -> (n_params,).  The pelvis origin stays where it is; the root rotation
+    R becomes Rz(π) R; left and right joint angles are exchanged (signs from the models' mirrored
+    axes, ``mirror_map``).  Applying it twice gives ``params`` back (the root rotation vector up to
+    its 2π equivalents).
+    """
+    p = np.asarray(params, dtype=float)
+    if p.shape != (model.n_params,):
+        raise ValueError(f"params: expected shape ({model.n_params},), got {p.shape}")
+    index, sign = mirror_map(model)
+    out = p.copy()
+    joints = np.flatnonzero(model.param_kind == JOINT_ROTATION)
+    out[index[joints]] = sign[joints] * p[joints]
+    t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    r_idx = np.flatnonzero(model.param_kind == ROOT_ROTATION)
+    root = int(np.flatnonzero(model.parent < 0)[0])
+    R = so3_exp(p[r_idx])
+    R2 = _RZ_PI @ R
+    pelvis = p[t_idx] + R @ model.offset[root]
+    out[t_idx] = pelvis - R2 @ model.offset[root]
+    out[r_idx] = matrix_to_rodrigues(R2)
+    return out
+
+
+# ----------------------------------------------------------------------------- choosing
+@dataclass(frozen=True, eq=False)
+class FrontBack:
+    """The hypotheses after refinement, k = 2 (the pose, its mirror) or up to 4 (each also after
+    the ``prepare`` limb search, where that changed it).
+
+    params : (k, n_params) refined poses; mirrored : (k,) bool, started from the mirror;
+    cost : (k,) ``front_back_cost``; rms_px : (k,) RMS chamfer residual (silhouette and internal
+    edges); iou : (k,) mean silhouette IoU; at_limits : (k,) joint DOF within 1° of a limit;
+    feet : (k,) feet-cue term (0 when the cue is unclear); best : index of the lowest cost.
+    """
+
+    params: np.ndarray
+    mirrored: np.ndarray
+    cost: np.ndarray
+    rms_px: np.ndarray
+    iou: np.ndarray
+    at_limits: np.ndarray
+    feet: np.ndarray
+    best: int
+
+
+def _at_limits(model: BodyModel, params: np.ndarray, *, tol_rad: float = np.radians(1.0)) -> int:
+    j = model.param_kind == JOINT_ROTATION
+    return int(np.count_nonzero(np.minimum(params - model.lower, model.upper - params)[j] < tol_rad))
+
+
+def front_back_cost(rms_px: float, iou: float, at_limits: int, feet: float = 0.0, *, iou_weight: float = 10.0,
+                    limit_weight: float = 0.1) -> float:
+    """Cost of a refined hypothesis (lower is better): the RMS chamfer residual (pixels, the
+    silhouette and the internal-edge terms) + ``iou_weight`` × (1 − mean silhouette IoU) +
+    ``limit_weight`` per joint DOF pinned at a limit (a mirrored crouch contorts) + ``feet``."""
+    return float(rms_px + iou_weight * (1.0 - iou) + limit_weight * at_limits + feet)
+
+
+def _straight_legs(model: BodyModel, params: np.ndarray, *, max_rad: float = np.radians(20.0)) -> bool:
+    """Knees and hips within ``max_rad`` of straight: the feet cue is trustworthy (upright stance)."""
+    names = [n for n in model.param_names if n.split(".")[0].endswith(("_shank", "_thigh")) and n.endswith(".flexion")]
+    return bool(np.all(np.abs(params[[model.param_names.index(n) for n in names]]) < max_rad))
+
+
+def _heading(model: BodyModel, params: np.ndarray) -> np.ndarray:
+    """Horizontal unit vector (2,) the pelvis faces (its +x axis), zeros when it points up/down."""
+    R = so3_exp(params[model.param_kind == ROOT_ROTATION])
+    root = int(np.flatnonzero(model.parent < 0)[0])
+    x = (R @ model.rest_rotation[root])[:2, 0]
+    n = float(np.linalg.norm(x))
+    return x / n if n > 1e-6 else np.zeros(2)
+
+
+def resolve_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+                       chamfer: Mapping[str, object] | None, params, *, max_iterations: int = 15,
+                       prior_rad: float = 30.0, reverse_weight: float = 1.0, feet_direction=None,
+                       feet_weight: float = 0.5, views=None, prepared=None, prepare=None,
+                       details: bool = False):
+    """Refine ``params`` (n_params,) and ``mirror_params(params)`` fully and keep the better one.
+
+    Both run the staged LM of ``tracker.search.initialise.refine`` (root, joints, everything; with the
+    silhouette → model term at ``reverse_weight``, a weak prior ``prior_rad`` towards the start)
+    and are compared by ``front_back_cost``.  ``feet_direction`` (2,) (``tracker.search.initialise.
+    feet_direction``; None: unused) adds ``feet_weight`` × (1 − cos) between the pelvis heading
+    and where the feet point, only when both refined poses stand with straight legs (in a crouch
+    the shanks lean forward and the cue turns round).
+
+    silhouettes : dict camera name -> (h, w) mask; chamfer : dict camera name -> ChamferImages or
+    None (built from the silhouettes); views : a ``tracker.search.initialise.ScoreViews`` to reuse;
+    prepared : ``(cameras, silhouettes, chamfer)`` lists from ``prepare_inputs`` to reuse;
+    prepare : ``prepare(params, iou) -> (params, iou)``, e.g. ``tracker.search.recovery.limb_search``: its
+    result on each start is refined and compared as well (the mirror's limbs may sit better
+    elsewhere, and a limb search can also lead astray).
+    Returns an ``InitResult`` (label ``"kept"`` or ``"mirrored"``; with ``details`` the pair
+    ``(InitResult, FrontBack)``).
+    """
+    from tracker.search.initialise import InitResult, ScoreViews, prepare_inputs, refine
+
+    if prepared is None:
+        prepared = prepare_inputs(model, cameras, silhouettes, chamfer)
+    cams, sils, chs = prepared
+    p = np.asarray(params, dtype=float)
+    if p.shape != (model.n_params,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"params: expected a finite array of shape ({model.n_params},)")
+    if views is None:
+        views = ScoreViews(model, cams, sils, scale=0.5)
+    starts, mirrored = [], []
+    for flag, start in ((False, model.clamp(p)), (True, model.clamp(mirror_params(model, p)))):
+        starts.append(start)
+        mirrored.append(flag)
+        if prepare is not None:  # the limb search's start too, unless it changed nothing
+            searched, _ = prepare(start, views.score(start))
+            if not np.array_equal(searched, start):
+                starts.append(searched)
+                mirrored.append(flag)
+    outs, terms_list = [], []
+    for start in starts:
+        x, terms = refine(model, cams, chs, start, max_iterations=max_iterations, prior_rad=prior_rad,
+                          reverse_weight=reverse_weight, ftol=1e-4, n_samples=8)
+        outs.append(x)
+        terms_list.append(terms)
+    rms = np.array([t.rms_px() for t in terms_list])
+    iou = np.array([views.score(x) for x in outs])
+    lim = np.array([_at_limits(model, x) for x in outs])
+    feet = np.zeros(len(outs))
+    if feet_direction is not None and all(_straight_legs(model, x) for x in outs):
+        f = np.asarray(feet_direction, dtype=float)
+        feet = np.array([feet_weight * (1.0 - float(_heading(model, x) @ f)) for x in outs])
+    cost = np.array([front_back_cost(r, i, l, fe) for r, i, l, fe in zip(rms, iou, lim, feet)])
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    best = int(np.argmin(cost))
+    fb = FrontBack(params=np.array(outs), mirrored=np.array(mirrored), cost=cost, rms_px=rms, iou=iou, at_limits=lim,
+                   feet=feet, best=best)
+    t = terms_list[best]
+    h = _heading(model, outs[best])
+    res = InitResult(params=outs[best], score=float(iou[best]), rms_px=float(rms[best]),
+                     inside_fraction=t.inside_fraction(), heading_rad=float(np.arctan2(h[1], h[0])),
+                     label=("kept", "mirrored")[int(mirrored[best])], height_m=float(model.height_m),
+                     candidates=len(outs))
+    return (res, fb) if details else res
+
+
+def hypothesis_cost(model: BodyModel, params, rms_px: float, iou: float) -> float:
+    """``front_back_cost`` of a fitted pose ``params`` (n_params,) with its RMS chamfer residual and
+    mean silhouette IoU (the joint-limit count from ``params``, no feet cue): what the tracker's
+    periodic front/back check (``tracker.fitting.tracking.Tracker``) compares a pose and its mirror by."""
+    return front_back_cost(rms_px, iou, _at_limits(model, np.asarray(params, dtype=float)))
