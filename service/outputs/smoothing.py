@@ -1,7 +1,7 @@
 """The 1€ filter (:mod:`tracker.filters`) applied to a stream of pose records, for their consumers.
 
 Each joint coordinate and each pose parameter is filtered on its own; the time step is the frame-id
-step over the session's frame rate; a record that is not ok resets the filter (the next ok record
+step over the session's frame rate (in live mode, where the rate is not known: the timestamp step); a record that is not ok resets the filter (the next ok record
 passes unchanged), as does a change of the joint set or parameter count.  The root rotation vector
 (``params[3:6]``, :mod:`tracker.kinematics`) is unwrapped to the equivalent vector nearest the previous
 one before filtering.  The records themselves are never changed: :meth:`RecordSmoother.update` returns
@@ -27,14 +27,16 @@ class RecordSmoother:
     ----------
     min_cutoff, beta : float
         1€ parameters (Hz; Hz per unit/s).
-    fps : float
-        The session's frame rate (frames per second), for the time step between frame ids.
+    fps : float, optional
+        The session's frame rate (frames per second), for the time step between frame ids; None: the
+        step of the records' ``timestamp_ns``.
     """
 
-    def __init__(self, min_cutoff: float, beta: float, fps: float) -> None:
-        if not (fps > 0):
+    def __init__(self, min_cutoff: float, beta: float, fps: float | None) -> None:
+        if fps is not None and not (fps > 0):
             raise ValueError(f"smoothing: fps must be positive, got {fps}")
-        self.fps = float(fps)
+        self.fps = None if fps is None else float(fps)
+        self._last_ts: int | None = None
         self._joints = OneEuroFilter(min_cutoff, beta)
         self._params = OneEuroFilter(min_cutoff, beta)
         self._names: tuple | None = None
@@ -44,7 +46,7 @@ class RecordSmoother:
     def reset(self) -> None:
         self._joints.reset()
         self._params.reset()
-        self._names = self._last_frame = self._last_params = None
+        self._names = self._last_frame = self._last_params = self._last_ts = None
 
     def update(self, rec: PoseRecord) -> tuple[dict[str, list[float]] | None, list[float] | None]:
         """Smoothed ``(joints, params)`` of an ok record (None for what it lacks); a not-ok record resets
@@ -54,8 +56,16 @@ class RecordSmoother:
             return None, None
         if self._last_frame is not None and rec.frame <= self._last_frame:
             self.reset()  # a new take or a replay loop
-        dt = 1.0 / self.fps if self._last_frame is None else (rec.frame - self._last_frame) / self.fps
-        self._last_frame = rec.frame
+        if self._last_frame is None:
+            dt = 1.0  # unused: the first sample passes through
+        elif self.fps is not None:
+            dt = (rec.frame - self._last_frame) / self.fps
+        elif self._last_ts is not None and rec.timestamp_ns > self._last_ts:
+            dt = (rec.timestamp_ns - self._last_ts) / 1e9
+        else:
+            self.reset()
+            dt = 1.0
+        self._last_frame, self._last_ts = rec.frame, rec.timestamp_ns
         joints = rec.get("joints") or None
         out_j = None
         if joints:
