@@ -131,3 +131,31 @@ def test_vmc_default_smoothing_and_bad_address(take, capsys):
     assert "smoothing one-euro" in capsys.readouterr().out
     assert main(["stream", "vmc", "--to", "nohostport", "--replay", str(path)]) == 2
     assert "HOST:PORT" in capsys.readouterr().err
+
+
+def test_vmc_live_from_the_studio_pose_key(take):
+    """Live mode: poses published on a zenoh peer's pose key reach the Marionette."""
+    from service.bus import Keys, ZenohSettings, declare_publisher, free_port, open_session
+
+    _, records, _ = take
+    port, stop = free_port(), threading.Event()
+
+    def publish():
+        s = open_session(ZenohSettings.loopback(port, listen=True))
+        pub = declare_publisher(s, Keys("vmc1").pose)
+        k = 0
+        while not stop.is_set():
+            pub.put(records[k % len(records)].to_bytes())
+            k += 1
+            time.sleep(0.01)
+        s.close()
+
+    t = threading.Thread(target=publish, daemon=True)
+    t.start()
+    try:
+        bundles = _receive(["--connect", f"tcp/127.0.0.1:{port}", "--studio", "vmc1", "--count", "20"])
+    finally:
+        stop.set()
+        t.join(5)
+    assert len(bundles) == 20
+    assert sum(any(a.endswith("Bone/Pos") for a, _ in b) for b in bundles) >= 15

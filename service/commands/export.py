@@ -76,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
             records = smooth_records(records, *smooth, fps)
         if args.bvh:
             out = write_bvh(args.bvh, _model(args, records), records, fps=args.fps, up=args.up or "y")
-            print(f"wrote {out.path}: {out.frames} frames (ids {out.first_frame}..{out.first_frame + out.frames - 1}) "
-                  f"at {out.fps:.2f} fps, {out.joints} joints, {out.up.upper()} up "
+            print(f"wrote {out.path}: {out.frames} frames at {out.fps:.2f} fps (ids {out.first_frame}.."
+                  f"{out.first_frame + out.frames - 1}), {out.joints} joints, {out.up.upper()} up "
                   f"({out.repeated} frames without an ok pose hold the previous one)")
         if args.trc or args.c3d or args.csv:
             _markers(args, records)
