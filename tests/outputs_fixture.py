@@ -3,6 +3,8 @@ demo's motion), with seeded tracking noise, not-ok frames and frame-id gaps, as 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from service.records import PoseRecord
@@ -13,6 +15,7 @@ NOT_OK = (20, 21, 60)           # frame ids the tracker lost
 MISSING = (40, 41, 42, 43, 70)  # frame ids never delivered
 
 
+@functools.lru_cache(maxsize=4)  # one retargeting per test process; callers must not modify the result
 def make_take(n_frames: int = 90, *, noise_m: float = 0.003, noise_rad: float = np.radians(1.0), seed: int = 7):
     """Pose records and the noise-free joint centres.
 

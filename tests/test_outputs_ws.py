@@ -50,7 +50,7 @@ def _start_server(path, *extra):
 
 def test_ws_client_receives_every_record_in_order(take):
     path, records = take
-    proc, port = _start_server(path, "--rate", "4")
+    proc, port = _start_server(path, "--rate", "2")
     try:
         async def receive():
             got = []

@@ -16,6 +16,7 @@ Unity's left-handed frame), positions ``A · x``.  Pure numpy, no I/O.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,14 +81,25 @@ def part_frames(model, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, t
 
 
+_REST: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _rest(model) -> tuple[np.ndarray, np.ndarray]:
+    """part2world rotations (n_parts, 3, 3) and translations (n_parts, 3) at the T-pose (cached per model)."""
+    rest = _REST.get(model)
+    if rest is None:
+        R0, t0 = part_frames(model, model.zero())
+        rest = _REST[model] = (R0[0], t0[0])
+    return rest
+
+
 def joint_frames(model, params: np.ndarray, axes: np.ndarray = AXES_Z_UP) -> JointFrames:
     """T-pose-relative bone rotations of ``params`` (n, n_params) in output ``axes`` (3, 3); see the module doc."""
     A = np.asarray(axes, dtype=float)
     if A.shape != (3, 3) or not np.allclose(A @ A.T, np.eye(3), atol=1e-9):
         raise ValueError("axes must be an orthogonal 3x3 matrix")
     R, t = part_frames(model, params)
-    R0, t0 = part_frames(model, model.zero())
-    R0, t0 = R0[0], t0[0]
+    R0, t0 = _rest(model)
     D = R @ np.swapaxes(R0, -1, -2)[None]  # (n, parts, 3, 3)
     Dw = A[None, None] @ D @ A.T[None, None]
     local = Dw.copy()

@@ -114,4 +114,8 @@ def _markers(args, records) -> None:
             from service.outputs.csv import write_csv
 
             write_csv(path, tl, names, markers)
-        print(f"wrote {path}: {what}, {up.upper()} up")
+        if kind == "csv":
+            print(f"wrote {path}: {len(names)} joints, {int((tl.record >= 0).sum())} rows (one per record), "
+                  f"{args.units}, {up.upper()} up")
+        else:
+            print(f"wrote {path}: {what}, {up.upper()} up")
