@@ -30,6 +30,7 @@ COMMANDS = {
     "echo": "echo",
     "view": "view",
     "export": "export",
+    "stream": "stream",
 }
 
 

@@ -1,16 +1,21 @@
 """Pose-record files: read/write JSONL, and BVH export of the body model's motion.
 
-BVH layout written by :func:`write_bvh` (Blender: File > Import > Motion Capture (.bvh), set *Up* to Z,
-scale 1 = metres):
+BVH layout written by :func:`write_bvh` (Blender: File > Import > Motion Capture (.bvh) with its default
+settings; scale 1 = metres):
 
 - one BVH joint per model part, in the model's (topological) order, named like the part; the root has
   ``OFFSET 0 0 0`` and ``CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation``, every
-  other part ``OFFSET`` = its joint centre in the parent frame at the reference pose and
+  other part ``OFFSET`` = its joint centre minus its parent's at the model's T-pose (world axes) and
   ``CHANNELS 3 Zrotation Xrotation Yrotation``; leaves get an ``End Site`` at the cone's far end.
-- per frame: root position = part2world translation of the root; per part the local rotation
-  ``parent2world^T · part2world`` as intrinsic Z-X-Y Euler angles in degrees (BVH: ``R = Rz · Rx · Ry``).
-- world frame and units are the tracker's: metres, Z up.
-- a frame whose record is not ``ok`` (or has no ``params``) repeats the previous good pose (counted in
+  With every channel 0 the skeleton stands in that T-pose.
+- per frame: root position = the root part's origin; per part the T-pose-relative local rotation of
+  :mod:`tracker.body.joint_frames` (shared with the VMC stream) as intrinsic Z-X-Y Euler angles in degrees
+  (BVH: ``R = Rz · Rx · Ry``).
+- axes: ``up="y"`` (default, what BVH readers assume) writes tracker world ``(x, y, z)`` as
+  ``(x, z, -y)`` (−90° about X); ``up="z"`` writes the tracker's Z-up world as is.  Metres.
+- time: one BVH frame per frame id from the first record's to the last's at the session's frame rate
+  (``Frame Time`` = 1 / fps), so a take whose frame ids jump plays at its real speed.  A frame id without
+  an ok record (not ok, no ``params``, or never delivered) *holds* the previous good pose (counted in
   the result); frames before the first good one take the first good one.
 """
 
@@ -36,13 +41,16 @@ class ExportError(ValueError):
 
 @dataclass(frozen=True)
 class BvhExport:
-    """What :func:`write_bvh` wrote: frames, repeated (not-ok) frames, fps, joints (BVH joints with channels)."""
+    """What :func:`write_bvh` wrote: frames (frame ids spanned), repeated (frames holding the previous
+    good pose: not ok or missing), fps, joints (BVH joints with channels), the first frame id, the up axis."""
 
     path: Path
     frames: int
     repeated: int
     fps: float
     joints: int
+    first_frame: int = 0
+    up: str = "y"
 
 
 def read_pose_records(path) -> list[PoseRecord]:
@@ -84,48 +92,50 @@ def fps_from_records(records: Sequence[PoseRecord], default: float = 25.0) -> fl
     return float(1e9 / np.median(dts[ok] / dframe[ok]))
 
 
-def _params_matrix(model, records: Sequence[PoseRecord], where: str) -> tuple[np.ndarray, int]:
-    """(n_frames, n_params) with not-ok frames filled from the previous good one."""
-    good = [i for i, r in enumerate(records) if r.ok and len(r.get("params") or ()) == model.n_params]
-    if not good:
+def _params_matrix(model, records: Sequence[PoseRecord], rows: np.ndarray, where: str) -> tuple[np.ndarray, int]:
+    """(n_rows, n_params): row k takes record ``rows[k]`` (−1: none) if it is ok with params, else holds
+    the previous good row (the first good one before it); returns the matrix and the held-row count."""
+    good_rec = np.array([r.ok and len(r.get("params") or ()) == model.n_params for r in records], dtype=bool)
+    if not good_rec.any():
         raise ExportError(f"{where}: no ok pose with {model.n_params} params for model {model.name!r}")
-    P = np.empty((len(records), model.n_params))
-    last = np.asarray(records[good[0]].get("params"), float)
-    good_set = set(good)
-    for i, r in enumerate(records):
-        if i in good_set:
-            last = np.asarray(r.get("params"), float)
-        P[i] = last
-    return P, len(records) - len(good)
+    good_row = (rows >= 0) & good_rec[np.maximum(rows, 0)]
+    src = np.where(good_row, np.arange(rows.size), -1)
+    src = np.maximum.accumulate(src)
+    src[src < 0] = np.flatnonzero(good_row)[0]
+    recs = rows[src]
+    table = {int(i): np.asarray(records[int(i)].get("params"), float) for i in np.unique(recs)}
+    P = np.stack([table[int(i)] for i in recs])
+    return P, int(rows.size - good_row.sum())
 
 
-def _local_rotations(model, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Root translation (n, 3) and parent-relative rotations (n, n_parts, 3, 3) per frame."""
-    from tracker.body.kinematics import forward
+def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None = None,
+              up: str = "y") -> BvhExport:
+    """Write the motion of ``records`` (fitted with ``model``) as BVH; see the module docstring.
 
-    n = params.shape[0]
-    R = np.empty((n, model.n_parts, 3, 3))
-    t0 = np.empty((n, 3))
-    for f in range(n):  # one forward-kinematics call per frame (vectorised over parts inside)
-        pose = forward(model, params[f])
-        R[f] = pose.rotation
-        t0[f] = pose.translation[0]
-    local = R.copy()
-    child = np.flatnonzero(model.parent >= 0)
-    local[:, child] = np.swapaxes(R[:, model.parent[child]], -1, -2) @ R[:, child]
-    return t0, local
-
-
-def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None = None) -> BvhExport:
-    """Write the motion of ``records`` (fitted with ``model``) as BVH; see the module docstring."""
+    Parameters
+    ----------
+    fps : float, optional
+        Frame rate (default: from the records' timestamps per frame-id step).
+    up : {"y", "z"}
+        Up axis of the file.
+    """
     from scipy.spatial.transform import Rotation
+
+    from service.outputs.timeline import make_timeline
+    from tracker.body.joint_frames import axes_for, joint_frames
 
     path = Path(path)
     if not records:
         raise ExportError(f"{path}: no pose records to export")
-    fps = fps or fps_from_records(records)
-    params, repeated = _params_matrix(model, records, str(path))
-    t0, local = _local_rotations(model, params)
+    try:
+        axes = axes_for(up)
+    except ValueError as exc:
+        raise ExportError(f"{path}: {exc}") from None
+    tl = make_timeline(records, fps=fps, where=str(path))
+    fps = tl.fps
+    params, repeated = _params_matrix(model, records, tl.record, str(path))
+    jf = joint_frames(model, params, axes)
+    local = jf.local
     n, n_parts = local.shape[:2]
     euler = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_euler("ZXY", degrees=True).reshape(n, n_parts, 3)
     children = {p: [c for c in range(n_parts) if model.parent[c] == p] for p in range(n_parts)}
@@ -137,12 +147,12 @@ def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None =
             visit(c)
 
     visit(0)
-    motion = np.concatenate([t0, euler[:, order].reshape(n, -1)], axis=1)  # root pos, then ZXY per joint
+    motion = np.concatenate([jf.root_position, euler[:, order].reshape(n, -1)], axis=1)  # root pos, then ZXY per joint
     lines = ["HIERARCHY"]
 
     def emit(p: int, depth: int) -> None:
         ind = "  " * depth
-        off = np.zeros(3) if model.parent[p] < 0 else model.offset[p]
+        off = np.zeros(3) if model.parent[p] < 0 else jf.rest_offset[p]
         head = "ROOT" if model.parent[p] < 0 else "JOINT"
         chans = ROOT_CHANNELS if model.parent[p] < 0 else JOINT_CHANNELS
         lines.extend([f"{ind}{head} {model.part_names[p]}", f"{ind}{{",
@@ -151,8 +161,8 @@ def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None =
         for c in children[p]:
             emit(c, depth + 1)
         if not children[p]:
-            z2 = float(model.cones[p, 4])
-            lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET 0.000000 0.000000 {z2:.6f}",
+            e = jf.end_site[p]
+            lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}",
                           f"{ind}  }}"])
         lines.append(f"{ind}}}")
 
@@ -163,4 +173,4 @@ def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None =
         path.write_text("\n".join(lines) + "\n")
     except OSError as exc:
         raise ExportError(f"{path}: cannot write ({exc.strerror})") from None
-    return BvhExport(path, n, repeated, fps, n_parts)
+    return BvhExport(path, n, repeated, fps, n_parts, int(tl.frames[0]), str(up).lower())
