@@ -22,7 +22,7 @@ def _source_args(p: argparse.ArgumentParser, smooth_default: str) -> None:
     p.add_argument("--rate", type=float, default=1.0, help="replay speed (1.0 = the take's real time)")
     p.add_argument("--loop", action="store_true", help="replay the take over and over")
     p.add_argument("--fps", type=float, default=None, help="the take's frame rate (default: from its timestamps)")
-    p.add_argument("--count", type=int, default=None, help="live: exit after this many poses")
+    p.add_argument("--count", type=int, default=None, help="stop after this many poses (live or replay)")
     p.add_argument("--smooth", default=smooth_default, metavar="off|one-euro[:MIN_CUTOFF,BETA]",
                    help=f"{SMOOTH_HELP} (default {smooth_default})")
 
@@ -70,7 +70,11 @@ class _Source:
         if self.records is not None:
             from service.outputs.replay import iter_replay
 
-            yield from iter_replay(self.records, self.fps, rate=self.args.rate, loop=self.args.loop, stop=self.stop)
+            for n, item in enumerate(iter_replay(self.records, self.fps, rate=self.args.rate, loop=self.args.loop,
+                                                 stop=self.stop)):
+                if self.args.count is not None and n >= self.args.count:
+                    return
+                yield item
             return
         from service.bus import Inbox, Keys, open_session
         from service.records import PoseRecord
