@@ -53,6 +53,8 @@ class PoseHub:
     """
 
     def __init__(self, queue_size: int = QUEUE_SIZE) -> None:
+        if int(queue_size) < 1:
+            raise ValueError(f"queue size must be at least 1, got {queue_size}")
         self.queue_size = int(queue_size)
         self.clients: set[_Client] = set()
         self.client_seen = threading.Event()  # set at the first connection (read from any thread)
