@@ -22,7 +22,7 @@ def _source_args(p: argparse.ArgumentParser, smooth_default: str) -> None:
     p.add_argument("--rate", type=float, default=1.0, help="replay speed (1.0 = the take's real time)")
     p.add_argument("--loop", action="store_true", help="replay the take over and over")
     p.add_argument("--fps", type=float, default=None, help="the take's frame rate (default: from its timestamps)")
-    p.add_argument("--count", type=int, default=None, help="live: exit after this many poses")
+    p.add_argument("--count", type=int, default=None, help="stop after this many poses (live or replay)")
     p.add_argument("--smooth", default=smooth_default, metavar="off|one-euro[:MIN_CUTOFF,BETA]",
                    help=f"{SMOOTH_HELP} (default {smooth_default})")
 
@@ -70,7 +70,11 @@ class _Source:
         if self.records is not None:
             from service.outputs.replay import iter_replay
 
-            yield from iter_replay(self.records, self.fps, rate=self.args.rate, loop=self.args.loop, stop=self.stop)
+            for n, item in enumerate(iter_replay(self.records, self.fps, rate=self.args.rate, loop=self.args.loop,
+                                                 stop=self.stop)):
+                if self.args.count is not None and n >= self.args.count:
+                    return
+                yield item
             return
         from service.wire.bus import Inbox, Keys, open_session
         from service.wire.records import PoseRecord
@@ -132,82 +136,49 @@ def _host_port(text: str) -> tuple[str, int]:
 
 def _run_vmc(args, source, smoother) -> int:
     from service.commands.export import _model
-    from service.outputs.vmc import VmcSender
+    from service.outputs.vmc import VmcSender, run_bridge
 
     host, port = _host_port(args.to)
-    sender = None
-    for rec, t in source:
-        if sender is None:
-            name = args.model or rec.get("model") or source.model_name
-            if name is None and not rec.ok:
-                continue
-            args.model = name
-            sender = VmcSender(host, port, _model(args, [rec]))
-            print(f"streaming VMC to {host}:{port} (model {sender.frames.model.name}, smoothing {args.smooth})",
-                  flush=True)
-        joints, params = smoother.update(rec) if smoother is not None else (None, None)
-        pelvis = joints.get("pelvis") if joints else None
-        try:
-            sender.send(rec, t, params=params, pelvis=pelvis)
-        except OSError as exc:
-            raise RuntimeError(f"--to {args.to}: {exc}") from None
+
+    def sender_for(rec):
+        args.model = args.model or rec.get("model") or source.model_name
+        sender = VmcSender(host, port, _model(args, [rec]))
+        print(f"streaming VMC to {host}:{port} (model {sender.frames.model.name}, smoothing {args.smooth})",
+              flush=True)
+        return sender
+
+    try:
+        sender = run_bridge(source, sender_for, smoother=smoother)
+    except OSError as exc:
+        raise RuntimeError(f"--to {args.to}: {exc}") from None
     if sender is not None:
         print(f"sent {sender.sent} poses ({sender.lost} not ok: /VMC/Ext/OK tracking 0) to {host}:{port}")
     return 0
 
 
 def _run_ws(args, source, smoother, stop: threading.Event) -> int:
-    import asyncio
     import json
 
-    from service.outputs.ws import PoseHub, serve
+    from service.outputs.ws import run_bridge
 
-    async def main() -> int:
-        loop = asyncio.get_running_loop()
-        hub = PoseHub(args.queue)
-        done = asyncio.Event()
-        ready = threading.Event()
-        client_seen = hub.client_seen
+    def texts():
+        for rec, _ in source:
+            text = rec.to_bytes().decode()
+            joints = smoother.update(rec)[0] if smoother is not None else None
+            if joints is not None:  # the record stays raw; the smoothed joints ride along
+                obj = json.loads(text)
+                obj["joints_smoothed"] = joints
+                text = json.dumps(obj, separators=(",", ":"))
+            yield text
 
-        def on_ready(port: int) -> None:
-            print(f"serving the page at http://{args.host}:{port}/ and poses at ws://{args.host}:{port}/"
-                  + (" (the replay starts when the first client connects)" if args.replay else ""), flush=True)
-            ready.set()
-
-        server = asyncio.create_task(serve(args.host, args.port, hub, done, on_ready=on_ready))
-
-        def produce() -> None:
-            try:
-                while not ready.wait(0.05):
-                    if stop.is_set() or server.done():
-                        return
-                if args.replay:
-                    while not client_seen.wait(0.1):
-                        if stop.is_set():
-                            return
-                for rec, _ in source:
-                    text = rec.to_bytes().decode()
-                    if smoother is not None:
-                        joints, _p = smoother.update(rec)
-                        if joints is not None:
-                            obj = json.loads(text)
-                            obj["joints_smoothed"] = joints
-                            text = json.dumps(obj, separators=(",", ":"))
-                    loop.call_soon_threadsafe(hub.publish, text)
-            finally:
-                loop.call_soon_threadsafe(hub.finish)
-                loop.call_soon_threadsafe(done.set)
-
-        producer = loop.run_in_executor(None, produce)
-        try:
-            await server
-        finally:
-            stop.set()
-            await producer
-        print(f"sent {hub.sent} poses to WebSocket clients ({hub.dropped} dropped for slow clients)")
-        return 0
+    def on_ready(port: int) -> None:
+        print(f"serving the page at http://{args.host}:{port}/ and poses at ws://{args.host}:{port}/"
+              + (" (the replay starts when the first client connects)" if args.replay else ""), flush=True)
 
     try:
-        return asyncio.run(main())
+        hub = run_bridge(texts(), host=args.host, port=args.port, stop=stop, queue_size=args.queue,
+                         wait_for_client=bool(args.replay), on_ready=on_ready)
     except OSError as exc:
         raise RuntimeError(f"--host/--port: cannot listen on {args.host}:{args.port} ({exc.strerror or exc})") from None
+    print(f"sent {hub.sent} poses to WebSocket clients ({hub.dropped} dropped for slow clients)")
+    return 0

@@ -133,3 +133,25 @@ class VmcSender:
         else:
             self.lost += 1
         self.client.send(bundle.build())
+
+
+def run_bridge(poses, sender_for, *, smoother=None) -> VmcSender | None:
+    """Send ``poses`` (``(record, take_time_s)`` pairs) as VMC; returns the sender (counts) or None if
+    no pose came.
+
+    Parameters
+    ----------
+    sender_for : callable
+        ``sender_for(record) -> VmcSender`` for the first record that names a model (or is ok).
+    smoother : RecordSmoother, optional
+        Smooths params and the pelvis before sending (the records are not changed).
+    """
+    sender = None
+    for rec, t in poses:
+        if sender is None:
+            if not rec.ok and rec.get("model") is None:
+                continue
+            sender = sender_for(rec)
+        joints, params = smoother.update(rec) if smoother is not None else (None, None)
+        sender.send(rec, t, params=params, pelvis=joints.get("pelvis") if joints else None)
+    return sender

@@ -53,6 +53,8 @@ class PoseHub:
     """
 
     def __init__(self, queue_size: int = QUEUE_SIZE) -> None:
+        if int(queue_size) < 1:
+            raise ValueError(f"queue size must be at least 1, got {queue_size}")
         self.queue_size = int(queue_size)
         self.clients: set[_Client] = set()
         self.client_seen = threading.Event()  # set at the first connection (read from any thread)
@@ -126,3 +128,62 @@ async def serve(host: str, port: int, hub: PoseHub, stop: asyncio.Event, *, on_r
             on_ready(bound)
         await stop.wait()
         await hub.drain()
+
+
+def run_bridge(texts, *, host: str, port: int, stop: threading.Event, queue_size: int = QUEUE_SIZE,
+               wait_for_client: bool = False, on_ready=None) -> PoseHub:
+    """Serve the page and send every JSON text of ``texts`` to every client, until ``texts`` ends or
+    ``stop`` is set; then close the clients after their queues and return the hub (``sent``, ``dropped``).
+
+    Parameters
+    ----------
+    texts : iterable of str
+        Consumed in a worker thread (it may block: a paced replay, a live subscription).
+    wait_for_client : bool
+        Start consuming ``texts`` only once a first client has connected (a replay).
+    on_ready : callable, optional
+        Called with the bound port once the server listens.
+
+    Raises
+    ------
+    OSError
+        The address cannot be listened on.
+    """
+    async def main() -> PoseHub:
+        loop = asyncio.get_running_loop()
+        hub = PoseHub(queue_size)
+        done = asyncio.Event()
+        ready = threading.Event()
+
+        def ready_at(bound: int) -> None:
+            if on_ready is not None:
+                on_ready(bound)
+            ready.set()
+
+        server = asyncio.create_task(serve(host, port, hub, done, on_ready=ready_at))
+
+        def produce() -> None:
+            try:
+                while not ready.wait(0.05):
+                    if stop.is_set() or server.done():
+                        return
+                while wait_for_client and not hub.client_seen.wait(0.1):
+                    if stop.is_set():
+                        return
+                for text in texts:
+                    loop.call_soon_threadsafe(hub.publish, text)
+                    if stop.is_set():
+                        return
+            finally:
+                loop.call_soon_threadsafe(hub.finish)
+                loop.call_soon_threadsafe(done.set)
+
+        producer = loop.run_in_executor(None, produce)
+        try:
+            await server
+        finally:
+            stop.set()
+            await producer
+        return hub
+
+    return asyncio.run(main())

@@ -124,6 +124,15 @@ def test_vmc_replay_bones_for_ok_frames(take, capsys):
     assert worst_fk < 0.001  # float32 OSC arguments
 
 
+def test_vmc_replay_loop_keeps_time_running(take):
+    path, records, _ = take
+    bundles = _receive(["--replay", str(path), "--loop", "--rate", "10", "--count", "200"])
+    times = [dict(b)["/VMC/Ext/T"][0] for b in bundles]
+    assert 190 <= len(times) <= 200 and all(np.diff(times) > 0)  # time keeps running across the loops (UDP)
+    assert times[-1] > 2 * 90 / FPS  # 200 poses: the third pass over the 90-frame take
+    assert max(times) <= (2 * 90 + records[200 - 2 * len(records) - 1].frame - FIRST_ID) / FPS + 1e-4
+
+
 def test_vmc_default_smoothing_and_bad_address(take, capsys):
     path, records, _ = take
     bundles = _receive(["--replay", str(path), "--rate", "8"])  # one-euro by default
