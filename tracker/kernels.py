@@ -192,3 +192,180 @@ def covered_mask(cones, R, t, cam_R, cam_t, cam, directions, grow, range_m):
                 hit[i] = True
                 break
     return hit
+
+
+@njit(cache=True)
+def nearest_rows(samples, sample_cam, uv, used, per_cam):
+    """Nearest used contour row of every boundary sample, within the sample's camera.
+
+    samples (k, 2) pixels and their camera ``sample_cam`` (k,); contour pixels ``uv`` (N, 2) with
+    camera c's rows in ``[c per_cam, (c + 1) per_cam)`` and ``used`` (N,) bool.  Returns (k,) int,
+    -1 where the camera has no used row.  Per camera the used rows are sorted by u; a sample's
+    search runs outwards from its u until the u gap alone exceeds the best distance found."""
+    k = samples.shape[0]
+    out = np.full(k, -1, dtype=np.intp)
+    if k == 0:
+        return out
+    n_cams = uv.shape[0] // per_cam if per_cam > 0 else 0
+    for c in range(n_cams):
+        rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
+        if rows.size == 0:
+            continue
+        order = rows[np.argsort(uv[rows, 0])]
+        us = uv[order, 0].copy()
+        vs = uv[order, 1].copy()
+        m = order.size
+        for j in range(k):
+            if sample_cam[j] != c:
+                continue
+            y0, y1 = samples[j, 0], samples[j, 1]
+            start = np.searchsorted(us, y0)
+            best, arg = np.inf, -1
+            i = start
+            while i < m:
+                du = us[i] - y0
+                if du * du >= best:
+                    break
+                dv = vs[i] - y1
+                d2 = du * du + dv * dv
+                if d2 < best:
+                    best, arg = d2, i
+                i += 1
+            i = start - 1
+            while i >= 0:
+                du = y0 - us[i]
+                if du * du >= best:
+                    break
+                dv = vs[i] - y1
+                d2 = du * du + dv * dv
+                if d2 < best:
+                    best, arg = d2, i
+                i -= 1
+            out[j] = order[arg]
+    return out
+
+
+@njit(cache=True)
+def sample_stacked(sil, edge, placement, pad, fill, resolution, uv, cam, rows, truncate, edge_weight):
+    """Bilinear distances and gradients (``segmentation.distance.ChamferImages.sample``) of the
+    stacked quantised images of all cameras (``tracker.cost._StackedChamfer``) at contour rows
+    ``rows`` (n,) of ``uv`` (N, 2) seen by cameras ``cam`` (N,).
+
+    sil, edge (H, W) codes; placement (n_cams, 5): x, y offset, width, height of each camera's
+    array and its first row in the stack; ``fill`` the truncation code.  Distances above
+    ``truncate`` are clipped to it with zero gradient; the edge distance is scaled by
+    ``edge_weight``.  Returns d (n, 2) (silhouette, edge) and grad (n, 2, 2), pixels."""
+    n = rows.size
+    H, W = sil.shape
+    d = np.empty((n, 2))
+    grad = np.empty((n, 2, 2))
+    for j in range(n):
+        i = rows[j]
+        c = cam[i]
+        ox, oy, w, h, r0 = placement[c, 0], placement[c, 1], placement[c, 2], placement[c, 3], placement[c, 4]
+        x = min(max(uv[i, 0] - ox, -1.5), w + 0.5) + pad
+        y = min(max(uv[i, 1] - oy, -1.5), h + 0.5) + (r0 + pad)
+        xf, yf = math.floor(x), math.floor(y)
+        fx, fy = x - xf, y - yf
+        ix, iy = int(min(max(xf, -2.0), W + 1.0)), int(min(max(yf, -2.0), H + 1.0))
+        for img in range(2):
+            a = sil if img == 0 else edge
+            v00 = a[iy, ix] if 0 <= ix < W and 0 <= iy < H else fill
+            v10 = a[iy, ix + 1] if -1 <= ix < W - 1 and 0 <= iy < H else fill
+            v01 = a[iy + 1, ix] if 0 <= ix < W and -1 <= iy < H - 1 else fill
+            v11 = a[iy + 1, ix + 1] if -1 <= ix < W - 1 and -1 <= iy < H - 1 else fill
+            dx0 = float(v10) - float(v00)
+            dx1 = float(v11) - float(v01)
+            top = v00 + fx * dx0
+            bottom = v01 + fx * dx1
+            value = (top + fy * (bottom - top)) * resolution
+            gx = (dx0 + fy * (dx1 - dx0)) * resolution
+            gy = (bottom - top) * resolution
+            if value > truncate:
+                value, gx, gy = truncate, 0.0, 0.0
+            wgt = 1.0 if img == 0 else edge_weight
+            d[j, img] = value * wgt
+            grad[j, img, 0] = gx * wgt
+            grad[j, img, 1] = gy * wgt
+    return d, grad
+
+
+@njit(cache=True, inline="always")
+def _rodrigues(wx, wy, wz, out):
+    """``out (3, 3) = exp([w]×)`` (``tracker.kinematics.so3_exp`` for one vector)."""
+    theta = math.sqrt(wx * wx + wy * wy + wz * wz)
+    if theta < 1e-8:
+        A, B = 1.0 - theta * theta / 6.0, 0.5 - theta * theta / 24.0
+    else:
+        A, B = math.sin(theta) / theta, (1.0 - math.cos(theta)) / (theta * theta)
+    xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
+    out[0, 0], out[0, 1], out[0, 2] = 1.0 - B * (yy + zz), -A * wz + B * xy, A * wy + B * xz
+    out[1, 0], out[1, 1], out[1, 2] = A * wz + B * xy, 1.0 - B * (xx + zz), -A * wx + B * yz
+    out[2, 0], out[2, 1], out[2, 2] = -A * wy + B * xz, A * wx + B * yz, 1.0 - B * (xx + yy)
+
+
+@njit(cache=True)
+def forward_kinematics(params, axis, parent, dof_ptr, dof_idx, rest, offset, ti, ri):
+    """``tracker.kinematics.forward`` on plain arrays: part2world R (n_parts, 3, 3), t (n_parts, 3)
+    and the parameters' screws w, v (n_params, 3).
+
+    params (n_params,), axis (n_params, 3) joint axes (part frame); per part p in order (parents
+    first): ``parent[p]`` (-1 for the root), its joint parameters ``dof_idx[dof_ptr[p]:dof_ptr[p+1]]``,
+    ``rest[p]`` (3, 3), ``offset[p]`` (3,); ti, ri the root translation and rotation parameters."""
+    n_parts, n_params = parent.shape[0], params.shape[0]
+    R = np.empty((n_parts, 3, 3))
+    t = np.empty((n_parts, 3))
+    w = np.zeros((n_params, 3))
+    v = np.zeros((n_params, 3))
+    root_t = np.array([params[ti[0]], params[ti[1]], params[ti[2]]])
+    r0, r1, r2 = params[ri[0]], params[ri[1]], params[ri[2]]
+    R_root = np.empty((3, 3))
+    _rodrigues(r0, r1, r2, R_root)
+    Q = np.empty((3, 3))
+    Rb = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    for p in range(n_parts):
+        par = parent[p]
+        Rp = R_root if par < 0 else R[par]
+        tp = root_t if par < 0 else t[par]
+        for i in range(3):
+            for j in range(3):
+                Rb[i, j] = Rp[i, 0] * rest[p, 0, j] + Rp[i, 1] * rest[p, 1, j] + Rp[i, 2] * rest[p, 2, j]
+        tb0 = Rp[0, 0] * offset[p, 0] + Rp[0, 1] * offset[p, 1] + Rp[0, 2] * offset[p, 2] + tp[0]
+        tb1 = Rp[1, 0] * offset[p, 0] + Rp[1, 1] * offset[p, 1] + Rp[1, 2] * offset[p, 2] + tp[1]
+        tb2 = Rp[2, 0] * offset[p, 0] + Rp[2, 1] * offset[p, 1] + Rp[2, 2] * offset[p, 2] + tp[2]
+        for s in range(dof_ptr[p], dof_ptr[p + 1]):
+            kk = dof_idx[s]
+            ax0, ax1, ax2 = axis[kk, 0], axis[kk, 1], axis[kk, 2]
+            # screw: w = R_before a, v = t_before × w
+            w0 = Rb[0, 0] * ax0 + Rb[0, 1] * ax1 + Rb[0, 2] * ax2
+            w1 = Rb[1, 0] * ax0 + Rb[1, 1] * ax1 + Rb[1, 2] * ax2
+            w2 = Rb[2, 0] * ax0 + Rb[2, 1] * ax1 + Rb[2, 2] * ax2
+            w[kk, 0], w[kk, 1], w[kk, 2] = w0, w1, w2
+            v[kk, 0], v[kk, 1], v[kk, 2] = tb1 * w2 - tb2 * w1, tb2 * w0 - tb0 * w2, tb0 * w1 - tb1 * w0
+            lam = params[kk]
+            _rodrigues(ax0 * lam, ax1 * lam, ax2 * lam, Q)
+            for i in range(3):
+                for j in range(3):
+                    tmp[i, j] = Rb[i, 0] * Q[0, j] + Rb[i, 1] * Q[1, j] + Rb[i, 2] * Q[2, j]
+            Rb[:, :] = tmp
+        R[p] = Rb
+        t[p, 0], t[p, 1], t[p, 2] = tb0, tb1, tb2
+    # root screws: translation v = e_j; rotation w = column j of the left Jacobian, v = t × w
+    for j in range(3):
+        v[ti[j], j] = 1.0
+    theta = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if theta < 1e-6:
+        A, B = 0.5, 1.0 / 6.0
+    else:
+        A, B = (1.0 - math.cos(theta)) / theta ** 2, (theta - math.sin(theta)) / theta ** 3
+    K = np.array([[0.0, -r2, r1], [r2, 0.0, -r0], [-r1, r0, 0.0]])
+    for j in range(3):
+        for i in range(3):
+            kk2 = K[i, 0] * K[0, j] + K[i, 1] * K[1, j] + K[i, 2] * K[2, j]
+            w[ri[j], i] = (1.0 if i == j else 0.0) + A * K[i, j] + B * kk2
+        a0, a1, a2 = w[ri[j], 0], w[ri[j], 1], w[ri[j], 2]
+        v[ri[j], 0] = root_t[1] * a2 - root_t[2] * a1
+        v[ri[j], 1] = root_t[2] * a0 - root_t[0] * a2
+        v[ri[j], 2] = root_t[0] * a1 - root_t[1] * a0
+    return R, t, w, v
