@@ -20,7 +20,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_stacked", "warm_up"]
+__all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_stacked", "forward_kinematics",
+           "screw_rows", "image_motion"]
 
 _Q_TOL = 1e-9  # tracker.visibility: a point exactly on another part's surface is not hidden
 _AHEAD = 1e-9  # smallest camera depth of a point (or a ray's direction) counted as in front
@@ -200,47 +201,64 @@ def nearest_rows(samples, sample_cam, uv, used, per_cam):
 
     samples (k, 2) pixels and their camera ``sample_cam`` (k,); contour pixels ``uv`` (N, 2) with
     camera c's rows in ``[c per_cam, (c + 1) per_cam)`` and ``used`` (N,) bool.  Returns (k,) int,
-    -1 where the camera has no used row.  Per camera the used rows are sorted by u; a sample's
-    search runs outwards from its u until the u gap alone exceeds the best distance found."""
+    -1 where the camera has no used row.  Per camera the used rows are binned by whole pixels along
+    the image axis in which they spread most (v for an upright body, one counting sort); a
+    sample's search visits the bins outwards from its own and stops once a bin's edge is farther
+    than the best distance found (exact)."""
     k = samples.shape[0]
     out = np.full(k, -1, dtype=np.intp)
-    if k == 0:
+    if k == 0 or per_cam <= 0:
         return out
-    n_cams = uv.shape[0] // per_cam if per_cam > 0 else 0
+    n_cams = uv.shape[0] // per_cam
     for c in range(n_cams):
         rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam]) + c * per_cam
-        if rows.size == 0:
+        m = rows.size
+        if m == 0:
             continue
-        order = rows[np.argsort(uv[rows, 0])]
-        us = uv[order, 0].copy()
-        vs = uv[order, 1].copy()
-        m = order.size
+        ax = 0 if np.ptp(uv[rows, 0]) >= np.ptp(uv[rows, 1]) else 1
+        lo = uv[rows, ax].min()
+        n_bins = int(uv[rows, ax].max() - lo) + 1
+        start = np.zeros(n_bins + 1, dtype=np.intp)
+        for r in rows:
+            start[int(uv[r, ax] - lo) + 1] += 1
+        for b in range(n_bins):
+            start[b + 1] += start[b]
+        fill = start[:-1].copy()
+        us = np.empty(m)  # coordinate along the binning axis, binned order
+        vs = np.empty(m)  # the other coordinate
+        order = np.empty(m, dtype=np.intp)
+        for r in rows:
+            b = int(uv[r, ax] - lo)
+            us[fill[b]], vs[fill[b]], order[fill[b]] = uv[r, ax], uv[r, 1 - ax], r
+            fill[b] += 1
         for j in range(k):
             if sample_cam[j] != c:
                 continue
-            y0, y1 = samples[j, 0], samples[j, 1]
-            start = np.searchsorted(us, y0)
+            y0, y1 = samples[j, ax], samples[j, 1 - ax]
+            b0 = min(max(int(math.floor(y0 - lo)), 0), n_bins - 1)
             best, arg = np.inf, -1
-            i = start
-            while i < m:
-                du = us[i] - y0
-                if du * du >= best:
+            b = b0
+            while b < n_bins:
+                edge = lo + b - y0  # distance along the axis to the bin's near edge (b > b0)
+                if b > b0 and edge > 0.0 and edge * edge >= best:
                     break
-                dv = vs[i] - y1
-                d2 = du * du + dv * dv
-                if d2 < best:
-                    best, arg = d2, i
-                i += 1
-            i = start - 1
-            while i >= 0:
-                du = y0 - us[i]
-                if du * du >= best:
+                for i in range(start[b], start[b + 1]):
+                    du, dv = us[i] - y0, vs[i] - y1
+                    d2 = du * du + dv * dv
+                    if d2 < best:
+                        best, arg = d2, i
+                b += 1
+            b = b0 - 1
+            while b >= 0:
+                edge = y0 - (lo + b + 1)
+                if edge > 0.0 and edge * edge >= best:
                     break
-                dv = vs[i] - y1
-                d2 = du * du + dv * dv
-                if d2 < best:
-                    best, arg = d2, i
-                i -= 1
+                for i in range(start[b], start[b + 1]):
+                    du, dv = us[i] - y0, vs[i] - y1
+                    d2 = du * du + dv * dv
+                    if d2 < best:
+                        best, arg = d2, i
+                b -= 1
             out[j] = order[arg]
     return out
 
@@ -369,3 +387,75 @@ def forward_kinematics(params, axis, parent, dof_ptr, dof_idx, rest, offset, ti,
         v[ri[j], 1] = root_t[2] * a0 - root_t[0] * a2
         v[ri[j], 2] = root_t[0] * a1 - root_t[1] * a0
     return R, t, w, v
+
+
+@njit(cache=True)
+def screw_rows(motion, part, screws, affects):
+    """Rows of per-screw motion times the parameters' screws of their parts (``tracker.jacobian.
+    apply_screws``): ``J[i, k] = motion[i] · screws[:, k]`` where ``affects[part[i], k]``, else 0.
+
+    motion (n, 6), part (n,), screws (6, n_params), affects (n_parts, n_params) bool."""
+    n, n_params = motion.shape[0], screws.shape[1]
+    J = np.zeros((n, n_params))
+    for i in range(n):
+        p = part[i]
+        m0, m1, m2, m3, m4, m5 = motion[i, 0], motion[i, 1], motion[i, 2], motion[i, 3], motion[i, 4], motion[i, 5]
+        for k in range(n_params):
+            if affects[p, k]:
+                J[i, k] = (m0 * screws[0, k] + m1 * screws[1, k] + m2 * screws[2, k]
+                           + m3 * screws[3, k] + m4 * screws[4, k] + m5 * screws[5, k])
+    return J
+
+
+@njit(cache=True)
+def image_motion(Y, JI, cam, part, z, theta, cones, R, t, centres, sliding):
+    """``J_I (A + B)`` of contour points (``tracker.jacobian``): (n, d, 6).
+
+    Y (n, 3) world points, JI (n, d, 3) their projection Jacobians (d = 2; the identity, d = 3,
+    gives A + B itself); per point its camera, part, height z and ruling angle θ; cones
+    (n_parts, 5); R, t part2world; centres (n_cams, 3).  Rows without a real ruling (f_θ² below
+    its threshold) get no sliding term."""
+    n, dim = Y.shape[0], JI.shape[1]
+    M = np.empty((n, dim, 6))
+    for i in range(n):
+        y0, y1, y2 = Y[i, 0], Y[i, 1], Y[i, 2]
+        for r in range(dim):
+            j0, j1, j2 = JI[i, r, 0], JI[i, r, 1], JI[i, r, 2]
+            M[i, r, 0] = y1 * j2 - y2 * j1
+            M[i, r, 1] = y2 * j0 - y0 * j2
+            M[i, r, 2] = y0 * j1 - y1 * j0
+            M[i, r, 3], M[i, r, 4], M[i, r, 5] = j0, j1, j2
+        if not sliding:
+            continue
+        p, c = part[i], cam[i]
+        a, b, k = cones[p, 0], cones[p, 1], cones[p, 2]
+        cos, sin = math.cos(theta[i]), math.sin(theta[i])
+        C0, C1, C2 = centres[c, 0], centres[c, 1], centres[c, 2]
+        dx, dy, dz = C0 - t[p, 0], C1 - t[p, 1], C2 - t[p, 2]
+        m0 = R[p, 0, 0] * dx + R[p, 1, 0] * dy + R[p, 2, 0] * dz
+        m1 = R[p, 0, 1] * dx + R[p, 1, 1] * dy + R[p, 2, 1] * dz
+        m2 = R[p, 0, 2] * dx + R[p, 1, 2] * dy + R[p, 2, 2] * dz
+        f_theta = b * m0 * sin - a * m1 * cos
+        F, G, H = -b * m0, -a * m1, a * b * (1.0 + k * m2)
+        if f_theta * f_theta <= 1e-12 * (F * F + G * G + H * H):
+            continue
+        scale = (1.0 + k * z[i]) / f_theta
+        # e = R X_θ / (-f_θ) (X_θ = (1 + k z) (-a sin, b cos, 0)); nw = R n; w = (C × nw, nw)
+        ca, cb = a * sin * scale, b * cos * scale
+        e0 = R[p, 0, 0] * ca - R[p, 0, 1] * cb
+        e1 = R[p, 1, 0] * ca - R[p, 1, 1] * cb
+        e2 = R[p, 2, 0] * ca - R[p, 2, 1] * cb
+        n0, n1, n2 = b * cos, a * sin, -a * b * k
+        nw0 = R[p, 0, 0] * n0 + R[p, 0, 1] * n1 + R[p, 0, 2] * n2
+        nw1 = R[p, 1, 0] * n0 + R[p, 1, 1] * n1 + R[p, 1, 2] * n2
+        nw2 = R[p, 2, 0] * n0 + R[p, 2, 1] * n1 + R[p, 2, 2] * n2
+        w0, w1, w2 = C1 * nw2 - C2 * nw1, C2 * nw0 - C0 * nw2, C0 * nw1 - C1 * nw0
+        for r in range(dim):
+            je = JI[i, r, 0] * e0 + JI[i, r, 1] * e1 + JI[i, r, 2] * e2
+            M[i, r, 0] += je * w0
+            M[i, r, 1] += je * w1
+            M[i, r, 2] += je * w2
+            M[i, r, 3] += je * nw0
+            M[i, r, 4] += je * nw1
+            M[i, r, 5] += je * nw2
+    return M
