@@ -40,9 +40,9 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera, project_many_with_jacobian
-from tracker.contours import Contours, camera_centres
-from tracker.kernels import image_motion, screw_rows
+from capture.camera import Camera, stack_cameras
+from tracker.contours import Contours
+from tracker.kernels import image_motion, projection_jacobians, screw_rows
 from tracker.kinematics import Pose
 from tracker.model import BodyModel
 
@@ -76,9 +76,10 @@ def _motion(model, pose, cameras, contours, r, JI, sliding):
     (``tracker.kernels.image_motion``: the sliding term B = e ⊗ w with ``e = R X_θ / (-f_θ)`` and
     ``w = (C × R n, R n)``; none where f_θ² is below its threshold: no real ruling, those rows are
     not valid)."""
+    st = stack_cameras(cameras)
     return image_motion(np.ascontiguousarray(contours.points[r]), np.ascontiguousarray(JI), contours.cam[r],
                         contours.part[r], contours.z[r], contours.theta[r], model.cones, pose.rotation,
-                        pose.translation, camera_centres(cameras), bool(sliding))
+                        pose.translation, st.rotation, st.translation, bool(sliding))
 
 
 def contour_motion(
@@ -143,7 +144,9 @@ def contour_image_motion(
     _check(model, pose, cameras, contours)
     r = _select(contours, rows)
     # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
-    JI = project_many_with_jacobian(cameras, contours.points[r], cam_index=contours.cam[r])[1]  # invalid rows: junk
+    st = stack_cameras(cameras)
+    JI = projection_jacobians(st.rotation, st.translation, st.intrinsics, st.distortion,
+                              np.ascontiguousarray(contours.points[r]), contours.cam[r])  # invalid rows: junk
     return _motion(model, pose, cameras, contours, r, JI, sliding)
 
 
