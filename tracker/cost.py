@@ -48,7 +48,7 @@ import numpy as np
 from capture.camera import Camera, stack_cameras
 from tracker.contours import Contours, extremal_contours
 from tracker.jacobian import apply_screws, contour_image_motion
-from tracker.kernels import nearest_rows, sample_stacked
+from tracker.kernels import nearest_rows, sample_chamfer
 from tracker.kinematics import Pose, forward
 from tracker.model import BodyModel
 from tracker.visibility import covered_rays, hidden_points
@@ -87,22 +87,14 @@ def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
 
 
 class _StackedChamfer:
-    """The quantised ``ChamferImages`` of all cameras stacked into one, so that one ``sample`` call
-    serves every camera (one call per evaluation instead of one per camera).
-
-    Camera c's arrays sit in a block of rows of their own, 2 pixels inside a border of the
-    truncation code; a point is clipped to 1.5 pixels outside its camera's array first, so its
-    2x2 stencil never reaches another camera's block and it reads exactly what
+    """The quantised ``ChamferImages`` of all cameras behind one ``sample`` call: each camera's
+    points are sampled by one compiled call on its own arrays (no copy), reading exactly what its
     ``ChamferImages.sample`` reads (the truncation value, zero gradient, off the stored array).
-    ``build`` returns None unless every object is a ``ChamferImages`` with the same
-    resolution, truncation and dtype."""
+    ``build`` returns None unless every object is a ``ChamferImages`` with the same resolution,
+    truncation and dtype."""
 
-    PAD = 2
-
-    def __init__(self, images, chamfer_cls, placement) -> None:
-        self.images = images
-        self.chamfer_cls = chamfer_cls
-        self.placement = placement  # (n_cams, 6): ox, oy, w, h, block row, 0
+    def __init__(self, chamfer) -> None:
+        self.chamfer = list(chamfer)
 
     @classmethod
     def build(cls, chamfer: Sequence):
@@ -114,19 +106,7 @@ class _StackedChamfer:
         if any(ch.resolution_px != first.resolution_px or ch.max_distance_px != first.max_distance_px
                or ch.silhouette_q.dtype != first.silhouette_q.dtype for ch in chamfer):
             return None
-        pad = cls.PAD
-        hs = [ch.silhouette_q.shape[0] for ch in chamfer]
-        ws = [ch.silhouette_q.shape[1] for ch in chamfer]
-        rows0 = np.concatenate([[0], np.cumsum([h + 2 * pad for h in hs])])
-        sil = np.full((int(rows0[-1]), max(ws) + 2 * pad), first.max_code, dtype=first.silhouette_q.dtype)
-        edge = sil.copy()
-        for ch, r0, h, w in zip(chamfer, rows0, hs, ws):
-            sil[r0 + pad:r0 + pad + h, pad:pad + w] = ch.silhouette_q
-            edge[r0 + pad:r0 + pad + h, pad:pad + w] = ch.edges_q
-        images = ChamferImages(sil, edge, (0, 0), first.resolution_px, first.max_distance_px, first.image_size)
-        placement = np.array([[ch.offset_xy[0], ch.offset_xy[1], w, h, r0] for ch, r0, h, w
-                              in zip(chamfer, rows0, hs, ws)], dtype=float)
-        return cls(images, ChamferImages, placement)
+        return cls(chamfer)
 
     def sample(self, uv: np.ndarray, cam: np.ndarray):
         """``ChamferImages.sample`` of camera ``cam`` (n,) at its pixels ``uv`` (n, 2)."""
@@ -137,12 +117,30 @@ class _StackedChamfer:
                     edge_weight: float = 1.0):
         """Distances (n, 2) (silhouette, edge) and gradients (n, 2, 2) at rows ``rows`` (n,) of
         ``uv`` (N, 2), ``cam`` (N,); distances above ``truncate_px`` clipped with zero gradient,
-        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_stacked``)."""
-        im = self.images
-        return sample_stacked(im.silhouette_q, im.edges_q, self.placement, float(self.PAD), float(im.max_code),
-                              float(im.resolution_px), np.ascontiguousarray(uv, dtype=float),
-                              np.asarray(cam, dtype=np.intp), np.asarray(rows, dtype=np.intp),
-                              np.inf if truncate_px is None else float(truncate_px), float(edge_weight))
+        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``)."""
+        rows = np.asarray(rows, dtype=np.intp)
+        cr = np.asarray(cam)[rows]
+        order = None
+        if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
+            order = np.argsort(cr, kind="stable")
+            rows, cr = rows[order], cr[order]
+        bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
+        d = np.empty((rows.size, 2))
+        grad = np.empty((rows.size, 2, 2))
+        uv = np.ascontiguousarray(uv, dtype=float)
+        trunc = np.inf if truncate_px is None else float(truncate_px)
+        for c, ch in enumerate(self.chamfer):
+            b0, b1 = bounds[c], bounds[c + 1]
+            if b1 > b0:
+                sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
+                sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
+                               float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
+                               float(edge_weight), d[b0:b1], grad[b0:b1])
+        if order is not None:
+            inv = np.empty_like(order)
+            inv[order] = np.arange(order.size)
+            d, grad = d[inv], grad[inv]
+        return d, grad
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_stacked", "forward_kinematics",
+__all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_chamfer", "forward_kinematics",
            "screw_rows", "image_motion"]
 
 _Q_TOL = 1e-9  # tracker.visibility: a point exactly on another part's surface is not hidden
@@ -268,36 +268,33 @@ def nearest_rows(samples, sample_cam, uv, used, per_cam):
 
 
 @njit(cache=True)
-def sample_stacked(sil, edge, placement, pad, fill, resolution, uv, cam, rows, truncate, edge_weight):
-    """Bilinear distances and gradients (``segmentation.distance.ChamferImages.sample``) of the
-    stacked quantised images of all cameras (``tracker.cost._StackedChamfer``) at contour rows
-    ``rows`` (n,) of ``uv`` (N, 2) seen by cameras ``cam`` (N,).
+def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, truncate, edge_weight, d, grad):
+    """Bilinear distances and gradients of one camera's quantised chamfer images
+    (``segmentation.distance.ChamferImages.sample``: pixel centres at integer (u, v), the arrays
+    extended with the truncation code ``fill``) at rows ``rows`` (n,) of ``uv`` (N, 2), written to
+    ``d`` (n, 2) (silhouette, edge) and ``grad`` (n, 2, 2), pixels.
 
-    sil, edge (H, W) codes; placement (n_cams, 5): x, y offset, width, height of each camera's
-    array and its first row in the stack; ``fill`` the truncation code.  Distances above
-    ``truncate`` are clipped to it with zero gradient; the edge distance is scaled by
-    ``edge_weight``.  Returns d (n, 2) (silhouette, edge) and grad (n, 2, 2), pixels."""
-    n = rows.size
-    H, W = sil.shape
-    d = np.empty((n, 2))
-    grad = np.empty((n, 2, 2))
-    for j in range(n):
+    sil, edge (h, w) codes stored at ``offset_x, offset_y`` of the image; ``resolution`` pixels
+    per code.  Distances above ``truncate`` are clipped to it with zero gradient; the edge
+    distance is scaled by ``edge_weight``."""
+    h, w = sil.shape
+    for j in range(rows.size):
         i = rows[j]
-        c = cam[i]
-        ox, oy, w, h, r0 = placement[c, 0], placement[c, 1], placement[c, 2], placement[c, 3], placement[c, 4]
-        x = min(max(uv[i, 0] - ox, -1.5), w + 0.5) + pad
-        y = min(max(uv[i, 1] - oy, -1.5), h + 0.5) + (r0 + pad)
+        x = uv[i, 0] - offset_x
+        y = uv[i, 1] - offset_y
         xf, yf = math.floor(x), math.floor(y)
         fx, fy = x - xf, y - yf
-        ix, iy = int(min(max(xf, -2.0), W + 1.0)), int(min(max(yf, -2.0), H + 1.0))
+        ix, iy = int(min(max(xf, -2.0), w + 1.0)), int(min(max(yf, -2.0), h + 1.0))
+        in_x0, in_x1 = 0 <= ix < w, -1 <= ix < w - 1
+        in_y0, in_y1 = 0 <= iy < h, -1 <= iy < h - 1
         for img in range(2):
             a = sil if img == 0 else edge
-            v00 = a[iy, ix] if 0 <= ix < W and 0 <= iy < H else fill
-            v10 = a[iy, ix + 1] if -1 <= ix < W - 1 and 0 <= iy < H else fill
-            v01 = a[iy + 1, ix] if 0 <= ix < W and -1 <= iy < H - 1 else fill
-            v11 = a[iy + 1, ix + 1] if -1 <= ix < W - 1 and -1 <= iy < H - 1 else fill
-            dx0 = float(v10) - float(v00)
-            dx1 = float(v11) - float(v01)
+            v00 = float(a[iy, ix]) if in_x0 and in_y0 else fill
+            v10 = float(a[iy, ix + 1]) if in_x1 and in_y0 else fill
+            v01 = float(a[iy + 1, ix]) if in_x0 and in_y1 else fill
+            v11 = float(a[iy + 1, ix + 1]) if in_x1 and in_y1 else fill
+            dx0 = v10 - v00
+            dx1 = v11 - v01
             top = v00 + fx * dx0
             bottom = v01 + fx * dx1
             value = (top + fy * (bottom - top)) * resolution
@@ -309,7 +306,6 @@ def sample_stacked(sil, edge, placement, pad, fill, resolution, uv, cam, rows, t
             d[j, img] = value * wgt
             grad[j, img, 0] = gx * wgt
             grad[j, img, 1] = gy * wgt
-    return d, grad
 
 
 @njit(cache=True, inline="always")
