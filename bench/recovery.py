@@ -40,6 +40,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from tracker.search.initialise import rendered_views  # noqa: E402
 from tracker.body.kinematics import forward, joint_centre_array  # noqa: E402
 from tracker.synthetic.scene import ring_cameras  # noqa: E402
@@ -190,6 +192,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tracker", action="store_true", help="also run the Tracker through dropped frames")
     ap.add_argument("--drops", type=int, nargs="+", default=[20, 50, 80])
     args = ap.parse_args(argv)
+    ref_ms = machine_ref_ms()
     mot = hop_motion()
     rows = []
     if "hop" not in args.skip:
@@ -204,7 +207,8 @@ def main(argv=None) -> int:
         rows += [bench_tracker(n, args.size, gap, args.drops, args.ok_mm, mot)
                  for n in args.cameras for gap in args.gaps]
     lines = ("  ".join(f"{k}={v}" for k, v in r.items()) for r in rows)
-    print(json.dumps(rows, indent=1) if args.json else "\n".join(lines))
+    print(json.dumps({"machine_ref_ms": ref_ms, "rows": rows}, indent=1) if args.json
+          else "\n".join([f"machine_ref_ms={ref_ms:.2f}", *lines]))
     return 0
 
 

@@ -52,6 +52,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
@@ -133,6 +135,7 @@ def main(argv=None) -> int:
     ap.add_argument("--auto-init", action="store_true", help="initialise from the silhouettes, not the truth")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)
+    ref_ms = machine_ref_ms()
     w, h = (int(v) for v in args.size.lower().split("x"))
     with tempfile.TemporaryDirectory() as tmp:
         root = args.session or Path(tmp) / "hop"
@@ -163,6 +166,7 @@ def main(argv=None) -> int:
     lm_ms = median(lm_sub, "latency_ms")
     lsq_ms = median(lsq_sub, "latency_ms")
     result = {
+        "machine_ref_ms": ref_ms,
         "model": model.name, "dof": model.n_params, "frames": len(main_run), "cameras": len(cameras),
         "size": [w, h], "init": "auto" if args.auto_init else "ground_truth_frame0",
         "iterations_median": median(main_run, "iterations"),

@@ -48,6 +48,7 @@ import numpy as np
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours, extremal_contours
 from tracker.imaging.jacobian import apply_screws, contour_image_motion
+from tracker.kernels import nearest_rows, sample_chamfer
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
 from tracker.imaging.visibility import covered_rays, hidden_points
@@ -86,22 +87,14 @@ def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
 
 
 class _StackedChamfer:
-    """The quantised ``ChamferImages`` of all cameras stacked into one, so that one ``sample`` call
-    serves every camera (one call per evaluation instead of one per camera).
-
-    Camera c's arrays sit in a block of rows of their own, 2 pixels inside a border of the
-    truncation code; a point is clipped to 1.5 pixels outside its camera's array first, so its
-    2x2 stencil never reaches another camera's block and it reads exactly what
+    """The quantised ``ChamferImages`` of all cameras behind one ``sample`` call: each camera's
+    points are sampled by one compiled call on its own arrays (no copy), reading exactly what its
     ``ChamferImages.sample`` reads (the truncation value, zero gradient, off the stored array).
-    ``build`` returns None unless every object is a ``ChamferImages`` with the same
-    resolution, truncation and dtype."""
+    ``build`` returns None unless every object is a ``ChamferImages`` with the same resolution,
+    truncation and dtype."""
 
-    PAD = 2
-
-    def __init__(self, images, chamfer_cls, placement) -> None:
-        self.images = images
-        self.chamfer_cls = chamfer_cls
-        self.placement = placement  # (n_cams, 6): ox, oy, w, h, block row, 0
+    def __init__(self, chamfer) -> None:
+        self.chamfer = list(chamfer)
 
     @classmethod
     def build(cls, chamfer: Sequence):
@@ -113,26 +106,41 @@ class _StackedChamfer:
         if any(ch.resolution_px != first.resolution_px or ch.max_distance_px != first.max_distance_px
                or ch.silhouette_q.dtype != first.silhouette_q.dtype for ch in chamfer):
             return None
-        pad = cls.PAD
-        hs = [ch.silhouette_q.shape[0] for ch in chamfer]
-        ws = [ch.silhouette_q.shape[1] for ch in chamfer]
-        rows0 = np.concatenate([[0], np.cumsum([h + 2 * pad for h in hs])])
-        sil = np.full((int(rows0[-1]), max(ws) + 2 * pad), first.max_code, dtype=first.silhouette_q.dtype)
-        edge = sil.copy()
-        for ch, r0, h, w in zip(chamfer, rows0, hs, ws):
-            sil[r0 + pad:r0 + pad + h, pad:pad + w] = ch.silhouette_q
-            edge[r0 + pad:r0 + pad + h, pad:pad + w] = ch.edges_q
-        images = ChamferImages(sil, edge, (0, 0), first.resolution_px, first.max_distance_px, first.image_size)
-        placement = np.array([[ch.offset_xy[0], ch.offset_xy[1], w, h, r0] for ch, r0, h, w
-                              in zip(chamfer, rows0, hs, ws)], dtype=float)
-        return cls(images, ChamferImages, placement)
+        return cls(chamfer)
 
     def sample(self, uv: np.ndarray, cam: np.ndarray):
         """``ChamferImages.sample`` of camera ``cam`` (n,) at its pixels ``uv`` (n, 2)."""
-        ox, oy, w, h, r0 = self.placement[cam].T
-        x = np.clip(uv[:, 0] - ox, -1.5, w + 0.5) + self.PAD
-        y = np.clip(uv[:, 1] - oy, -1.5, h + 0.5) + (r0 + self.PAD)
-        return self.images.sample(np.stack([x, y], axis=1))
+        d, grad = self.sample_rows(uv, cam, np.arange(len(uv)))
+        return d[:, 0], grad[:, 0], d[:, 1], grad[:, 1]
+
+    def sample_rows(self, uv: np.ndarray, cam: np.ndarray, rows: np.ndarray, *, truncate_px: float | None = None,
+                    edge_weight: float = 1.0):
+        """Distances (n, 2) (silhouette, edge) and gradients (n, 2, 2) at rows ``rows`` (n,) of
+        ``uv`` (N, 2), ``cam`` (N,); distances above ``truncate_px`` clipped with zero gradient,
+        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``)."""
+        rows = np.asarray(rows, dtype=np.intp)
+        cr = np.asarray(cam)[rows]
+        order = None
+        if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
+            order = np.argsort(cr, kind="stable")
+            rows, cr = rows[order], cr[order]
+        bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
+        d = np.empty((rows.size, 2))
+        grad = np.empty((rows.size, 2, 2))
+        uv = np.ascontiguousarray(uv, dtype=float)
+        trunc = np.inf if truncate_px is None else float(truncate_px)
+        for c, ch in enumerate(self.chamfer):
+            b0, b1 = bounds[c], bounds[c + 1]
+            if b1 > b0:
+                sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
+                sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
+                               float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
+                               float(edge_weight), d[b0:b1], grad[b0:b1])
+        if order is not None:
+            inv = np.empty_like(order)
+            inv[order] = np.arange(order.size)
+            d, grad = d[inv], grad[inv]
+        return d, grad
 
 
 @dataclass(frozen=True, eq=False)
@@ -259,9 +267,7 @@ class ChamferCost:
             self.boundary = [np.zeros((0, 2)) for _ in chamfer]
         self.n_reverse = sum(len(b) for b in self.boundary)
         self._boundary_all = np.concatenate(self.boundary) if self.n_reverse else np.zeros((0, 2))
-        # nearest contour point of a boundary sample y: argmin over x of |x|² − 2 y·x (|y|² is the
-        # same for every x), one product (k, 3) @ (3, n) per camera with (−2 y, 1) and (x, |x|²)
-        self._boundary_aug = [np.concatenate([-2.0 * b, np.ones((len(b), 1))], axis=1) for b in self.boundary]
+        self._boundary_cam = np.repeat(np.arange(len(self.boundary)), [len(b) for b in self.boundary])
         self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
         self._rays = _pixel_rays(cameras, self.boundary) if self.reverse_cover_px is not None else None
         self._stacked = _StackedChamfer.build(chamfer)
@@ -285,20 +291,18 @@ class ChamferCost:
     def _sample_rows(self, contours: Contours, rows: np.ndarray):
         """Distances (n, 2) and gradients (n, 2, 2) (silhouette, edge) at contour rows ``rows`` (n,),
         truncated and weighted."""
+        if self._stacked is not None:
+            return self._stacked.sample_rows(contours.uv, contours.cam, rows, truncate_px=self.truncate_px,
+                                             edge_weight=self.edge_weight)
         d = np.zeros((rows.size, 2))
         grad = np.zeros((rows.size, 2, 2))
-        if self._stacked is not None:
-            ds, gs, de, ge = self._stacked.sample(contours.uv[rows], contours.cam[rows])
-            d[:, 0], d[:, 1] = ds, de
-            grad[:, 0], grad[:, 1] = gs, ge
-        else:
-            cam = contours.cam[rows]
-            for c, ch in enumerate(self.chamfer):
-                sel = np.flatnonzero(cam == c)
-                if sel.size:
-                    ds, gs, de, ge = ch.sample(contours.uv[rows[sel]])
-                    d[sel, 0], d[sel, 1] = ds, de
-                    grad[sel, 0], grad[sel, 1] = gs, ge
+        cam = contours.cam[rows]
+        for c, ch in enumerate(self.chamfer):  # other chamfer objects: one call per camera
+            sel = np.flatnonzero(cam == c)
+            if sel.size:
+                ds, gs, de, ge = ch.sample(contours.uv[rows[sel]])
+                d[sel, 0], d[sel, 1] = ds, de
+                grad[sel, 0], grad[sel, 1] = gs, ge
         if self.truncate_px is not None:
             over = d > self.truncate_px
             d[over] = self.truncate_px
@@ -310,21 +314,9 @@ class ChamferCost:
     def _reverse(self, pose: Pose, contours: Contours, used: np.ndarray):
         """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)
         (0 for a sample on the predicted silhouette)."""
-        K = self.n_reverse
-        nearest = np.full(K, -1)  # matched contour row of each boundary sample (-1: camera has none)
         per_cam = contours.n_points // max(len(self.cameras), 1)
-        xa = np.empty((contours.n_points, 3))  # (u, v, u² + v²) per contour row
-        xa[:, :2] = contours.uv
-        xa[:, 2] = np.einsum("ij,ij->i", contours.uv, contours.uv)
-        k0 = 0
-        for c, ya in enumerate(self._boundary_aug):
-            k1 = k0 + len(ya)
-            if k1 > k0:
-                rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam])
-                if rows.size:
-                    rows += c * per_cam
-                    nearest[k0:k1] = rows[np.argmin(ya @ xa[rows].T, axis=1)]
-            k0 = k1
+        # matched contour row of each boundary sample (-1: its camera has no used row)
+        nearest = nearest_rows(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam)
         has = nearest >= 0
         diff = self._boundary_all - contours.uv[nearest]
         dist = np.linalg.norm(diff, axis=1)
