@@ -8,7 +8,7 @@ now and then or when those look suspect the silhouette IoU; ``TrackerOptions``) 
 record.  A frame whose quality is below the thresholds is reported
 ``ok: false`` ("poor fit"); after ``patience`` such frames in a row (``tracker.search.recovery.LossMonitor``)
 the pose is searched again from the silhouettes, seeded by the last good pose
-(``tracker.search.initialise.initialise(hint=...)``).  Without ``initial_params`` the first frame is
+(``tracker.search.recovery.recover``).  Without ``initial_params`` the first frame is
 initialised from the silhouettes.
 
 Never raises on data: a frame that cannot be solved (no camera, all silhouettes empty, no
@@ -24,13 +24,15 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from capture.camera import Camera
-from tracker.fitting.cost import ChamferCost
 from tracker.body.kinematics import joint_centre_array
-from tracker.search.initialise import ScoreViews, initialise
-from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
-from tracker.search.recovery import LossMonitor
+from tracker.fitting.cost import ChamferCost
+from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
+from tracker.search.initialise import SearchOptions, initialise
+from tracker.search.mirror import hypothesis_cost, mirror_params
+from tracker.search.recovery import LossMonitor, recover
+from tracker.search.scoring import ScoreViews
 
 __all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
 
@@ -112,6 +114,9 @@ class TrackerOptions:
     front_back_every: int = 60
     front_back_iterations: int = 12
     front_back_margin: float = 0.5
+    initialise_search: SearchOptions = SearchOptions()
+    # three refined candidates, as the initialisation (the recovery default is two)
+    recover_search: SearchOptions = SearchOptions.for_recovery(keep=3)
 
 
 def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
@@ -119,12 +124,12 @@ def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
     return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
 
 
-def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, start: np.ndarray, *,
+def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
               prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
               options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
     """Fit one frame from ``start`` (n_params,) with the prior term towards ``prediction`` (default
     ``start``); returns the solver result and the cost object."""
-    cost = ChamferCost(model, cameras, chamfer, sliding=sliding, n_samples=options.n_samples,
+    cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
                        visibility=options.visibility, truncate_px=options.truncate_px,
                        reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
                        reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
@@ -222,8 +227,12 @@ class Tracker:
     def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
         """Initialisation (hint None) or recovery from silhouettes; raises ValueError on failure."""
         self.n_initialisations += 1
-        res = initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
-                         {c.name: chamfer[c.name] for c in cams}, hint=hint)
+        sils = {c.name: silhouettes[c.name] for c in cams}
+        chs = {c.name: chamfer[c.name] for c in cams}
+        if hint is None:
+            res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
+        else:
+            res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
         return self.model.clamp(np.asarray(res.params, dtype=float))
 
     def _fit(self, cams, chs, start):
@@ -316,7 +325,7 @@ class Tracker:
         if not names:
             return fail("no camera with a non-empty silhouette")
         cams = [self.cameras[n] for n in names]
-        chs = [chamfer[n] for n in names]
+        chs = {n: chamfer[n] for n in names}
         can_search = silhouettes is not None and all(n in silhouettes for n in names)
         start = self.predict()
         if start is None:

@@ -33,7 +33,6 @@ import numpy as np
 from capture.camera import Camera
 from tracker.body.kinematics import Pose
 from tracker.body.model import BodyModel
-from tracker.synthetic.scene import ring_cameras
 
 __all__ = [
     "cone_points",
@@ -43,7 +42,6 @@ __all__ = [
     "render_silhouettes",
     "internal_edges",
     "fill_convex_hulls",
-    "ring_cameras",
     "BACKGROUND",
 ]
 
