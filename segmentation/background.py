@@ -16,23 +16,14 @@ the nearest point of the segment ``{s * mu : s in shadow_range}``::
     s = clip(B / A, *shadow_range),   d = (C - 2 s B + s^2 A) / min(s, 1)^2        (d >= 0)
 
 The division by ``s^2`` (the same scaling as OpenCV's MOG2 shadow test) makes a darker
-"shadow" match the background's colour more closely; measured on random synthetic scenes it
-raises the frames with IoU >= 0.95 from 77 % to 88 % when clothing may be a darker copy of the
-wall colour, and keeps every cast-shadow pixel background.
+"shadow" match the background's colour more closely.  For neutral (grey / white) background
+colours this axis is exactly the Y axis, i.e. the paper's relaxation; for coloured backgrounds
+(a green floor) it is the physically right one.  With ``shadow_range = (1, 1)`` it is the plain
+Mahalanobis distance.
 
-For neutral (grey / white) background colours this axis is exactly the Y axis, i.e. the
-paper's relaxation; for coloured backgrounds (a green floor) it is the physically right one.
-With ``shadow_range = (1, 1)`` it is the plain Mahalanobis distance.  Measured on the synthetic
-scenes (green floor, shadows 30-50 % darker): Y relaxation alone (``shadow_range = (1, 1)``,
-``luma_relax`` up to 8) left 100 % of the shadow pixels foreground; the brightness axis makes them
-background, and with it ``luma_relax = 2`` only lowered the worst-frame IoU (0.949 -> 0.938 over
-20 frames), hence the default 1.
-
-Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only; the default, by
-measurement in ``bench/segmentation.py``): on uu_studio the MPEG-4 background is almost noiseless
-(median per-pixel sd Y 0.4, U 0, V 0 levels; ~1 % of pixels have sd > 0.5 in all three), so the
-variance floor ``min_sigma`` dominates and the cross terms change nothing measurable (held-out
-foreground 0.000 % with both, identical synthetic IoU), while ``"full"`` costs ~10-40 % more.
+Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only; the default: the
+variance floor ``min_sigma`` dominates on nearly noiseless backgrounds and the cross terms change
+nothing measurable).  Measurements behind these choices: docs/tuning.md, "Segmentation".
 All per-frame work is a handful of OpenCV float32 array operations into reused buffers.
 ``BGR2YUV`` has OpenCV's YUV coefficients without the +128 offsets and without uint8 clipping.
 """

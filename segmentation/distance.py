@@ -142,6 +142,9 @@ class ChamferImages:
     max_distance_px : truncation distance (a whole number of steps); outside the arrays
         every distance is this value.
     image_size : (w, h) of the full image.
+
+    A ``tracker.fitting.sampler.ChamferSampler`` (``sample``) with the silhouette array the
+    tracker's reverse term reads (``SilhouetteChamfer``).
     """
 
     silhouette_q: np.ndarray
@@ -199,8 +202,9 @@ def chamfer_images(silhouette: np.ndarray, edges: np.ndarray, *, max_distance_px
     ``max_distance_px`` must be a whole number of ``resolution_px`` steps; uint8 storage when that
     number is <= 255, else uint16 (<= 65535).  ``crop=True`` keeps only the content's box grown
     by ``max_distance_px`` (exact: everything outside is at the truncation value).
-    ``precise``: exact L2 for the silhouette distance, else the 5x5 chamfer mask (max error ~2 % of
-    the distance); ``precise_edges``: the same for the edge distance (None: as ``precise``).
+    ``precise``: exact L2 for the silhouette distance, else the 5x5 chamfer mask (approximate:
+    docs/tuning.md, "Segmentation"); ``precise_edges``: the same for the edge distance (None: as
+    ``precise``).
     """
     sil = check_mask(silhouette, "silhouette")
     edg = check_mask(edges, "edges", shape=sil.shape)

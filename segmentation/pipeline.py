@@ -20,21 +20,31 @@ __all__ = ["FrameSegmentation", "SegmentationParams", "segment_frame"]
 class SegmentationParams:
     """Options of :func:`segment_frame` (defaults tuned on uu_studio and the synthetic scenes).
 
-    low, high : hysteresis pair on the squared Mahalanobis distance.
-    person_area_px : expected person area in pixels (None: 2 % of the image).
-    min_area_fraction : components below this fraction of ``person_area_px`` are dropped.
-    max_hole_fraction : holes below this fraction of their component's area are filled.
-    open_px, close_px : radii of the morphological opening / closing.
-    max_components : keep only the largest N components (None: all that pass; 1 suits one person in
-        a cluttered studio and keeps the chamfer crop small).
-    canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
-    auto_roi, auto_roi_margin_px : when no ``roi`` is given, find one with a half-resolution pass
-        (:meth:`BackgroundModel.coarse_distance` + clean-up) and process only the box around what it
-        finds, grown by the margin (full resolution there); nothing found: an empty segmentation.
-        On uu_studio the result equals the full-image one (IoU 1.0) at about half the cost.
-    max_distance_px, resolution_px, precise, precise_edges : chamfer images (see
-        :func:`chamfer_images`); by default the silhouette distance is exact L2 and the edge distance
-        uses the 5x5 chamfer mask (error <= 0.9 px at 48 px, 2.5x cheaper; edges are noisy anyway).
+    Measurements behind the defaults: docs/tuning.md, "Segmentation".
+
+    Parameters
+    ----------
+    low, high : float
+        Hysteresis pair on the squared Mahalanobis distance.
+    person_area_px : float or None
+        Expected person area in pixels (None: a fiftieth of the image).
+    min_area_fraction : float
+        Components below this fraction of ``person_area_px`` are dropped.
+    max_hole_fraction : float
+        Holes below this fraction of their component's area are filled.
+    open_px, close_px : int
+        Radii of the morphological opening / closing, pixels.
+    max_components : int or None
+        Keep only the largest N components (None: all that pass; 1 suits one person in a
+        cluttered studio and keeps the chamfer crop small).
+    canny_low, canny_high, edge_dilate_px, blur_sigma : float, float, int, float
+        Edge detection inside the silhouette (:func:`silhouette_edges`).
+    auto_roi, auto_roi_margin_px : bool, int
+        Without a ``roi``, find one with a half-resolution pass and process only the box around
+        what it finds, grown by the margin in pixels; nothing found: an empty segmentation.
+    max_distance_px, resolution_px, precise, precise_edges : float, float, bool, bool
+        Chamfer images (:func:`chamfer_images`); by default the edge distance uses the cheaper
+        5x5 chamfer mask (edges are noisy anyway).
     """
 
     low: float = 16.0

@@ -2,7 +2,7 @@
 
 A textured background (smooth colour field, tiles, stripes and blobs), a person-like shape
 made of ellipses and polygons in clothing / skin colours, a cast shadow beside the person (the
-background's B, G, R scaled by 0.5-0.7, i.e. darkened 30-50 %), and Gaussian sensor noise.
+background's B, G, R scaled by a factor in 0.5-0.7), and Gaussian sensor noise.
 """
 
 from __future__ import annotations
@@ -91,8 +91,8 @@ def synthetic_scene(rng: np.random.Generator, *, size: tuple[int, int] = (640, 4
                     n_frames: int = 8, noise_sigma: float = 3.0, avoid_shadow_like: bool = True) -> SyntheticScene:
     """A seeded scene of ``size = (w, h)``; the person walks left to right over ``n_frames``.
 
-    ``avoid_shadow_like``: redraw clothing colours that equal a 40-110 % brightness copy of more
-    than 2 % of the background (there colour alone cannot separate a person from a shadow, so a
+    ``avoid_shadow_like``: redraw clothing colours that equal a copy at 0.4-1.1 times the
+    brightness of more than a fiftieth of the background (there colour alone cannot separate a person from a shadow, so a
     known-answer scene would not be solvable); ``False`` keeps any random colour (the benchmark
     measures how often such scenes fail).
     """

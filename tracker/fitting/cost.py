@@ -11,8 +11,9 @@ is the image gradient of the distance times the contour-point Jacobian (IJCV 200
 Distances are truncated at ``truncate_px`` (zero gradient beyond), so clutter and a missing limb
 add a bounded constant; the solver's robust loss (IRLS) does the rest.
 
-``chamfer`` objects are anything with ``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2),
-d_edge (n,), grad_edge (n, 2))`` in pixels, e.g. ``segmentation.distance.ChamferImages``.
+``chamfer`` objects are ``tracker.fitting.sampler.ChamferSampler``: anything with
+``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2), d_edge (n,), grad_edge (n, 2))`` in pixels,
+e.g. ``segmentation.distance.ChamferImages``.
 
 **Reverse term** (optional, ``reverse_weight > 0``): the chamfer cost above is model → image
 only, so a limb whose contour lies inside the silhouette (e.g. over the torso) is not pulled
@@ -179,11 +180,9 @@ class CostTerms:
         """RMS of the used residuals (both terms), pixels (NaN if none); with ``max_px``, of those
         at most ``max_px`` only (the inliers: see ``outlier_fraction``).
 
-        The tracker's quality figure is the plain RMS: a few large residuals dominate it (hop
-        session at the true poses: 3.4 px; 6.5 % of the edge residuals above 5 px make 71 % of the
-        sum of squares — upper arms and torso where the model's contour crosses the silhouette and
-        the image shows no edge, and feet that the segmentation lost in 1–2 cameras (0.8 % of the
-        residuals truncated at 30 px make 33 %)); the inlier RMS measures the fit on the rest."""
+        The tracker's quality figure is the plain RMS: a few large residuals dominate it (contour
+        crossing the torso where the image shows no edge, feet the segmentation lost; measured
+        shares: docs/tuning.md, "Cost"); the inlier RMS measures the fit on the rest."""
         n = self.n_used
         if not n:
             return float("nan")
@@ -211,7 +210,8 @@ class ChamferCost:
     ----------
     model : BodyModel
     cameras : sequence of Camera, length n_cams (only the cameras with an image this frame)
-    chamfer : sequence, length n_cams, of objects with ``sample(uv)`` (see module docstring)
+    chamfer : sequence, length n_cams, of ChamferSampler (``tracker.fitting.sampler``), aligned with
+        ``cameras`` (``in_camera_order`` of the mapping the rest of the tracker takes)
     sliding : use the sliding term B of the contour Jacobian (IJCV 2008 §5, ``tracker.imaging.jacobian``)
     n_samples : contour points per side of each part
     truncate_px : distances above it are clipped (zero gradient); None keeps the images' own
@@ -219,7 +219,7 @@ class ChamferCost:
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse term (module
         docstring); off at weight 0.  Boundary samples come from the chamfer objects'
         ``silhouette_q``; ``reverse_cover_px`` None (the default) turns the on-silhouette test
-        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.initialise.refine`` leaves it
+        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.refine.refine`` leaves it
         off: its searches from far-off poses rely on the pull of all far samples).
     visibility : ``"step"`` (default): occlusion is recomputed where the Jacobian is evaluated
         (each linearisation point) and that set of rows is kept for the trial steps from it;

@@ -181,8 +181,23 @@ def common_view_bounds(cameras: Sequence[Camera], *, z_range=(0.0, 2.5), step_m:
 
     Samples a grid over the cameras' horizontal footprint (their centres' box grown by half its
     size) and keeps points in front of and inside every image.  The box depends on the
-    calibration alone and is cached per camera set (~25 ms for six cameras, paid once, not on
-    every hull of a recovery).
+    calibration alone and is cached per camera set (paid once, not on every hull of a recovery;
+    its cost: docs/tuning.md, "Search").
+
+    Parameters
+    ----------
+    cameras : sequence of Camera
+    z_range : (float, float)
+        Heights of the box, metres.
+    step_m : float
+        Spacing of the sampled floor grid, metres.
+    margin_m : float
+        Growth of the box around the points kept, metres.
+
+    Returns
+    -------
+    ndarray, shape (2, 3)
+        ``[lower, upper]`` corners, world metres.
     """
     key = (tuple((c.matrix.tobytes(), c.distortion.tobytes(), c.rotation.tobytes(), c.translation.tobytes(), c.size)
                  for c in cameras), tuple(float(z) for z in z_range), float(step_m), float(margin_m))

@@ -45,58 +45,57 @@ __all__ = ["SearchOptions", "initialise", "search_views", "search_candidates"]
 class SearchOptions:
     """Options of a pose search from silhouettes (``initialise``; ``recover`` via ``for_recovery``).
 
+    Each field's meaning and unit is commented where it is declared.
+
     Parameters
     ----------
-    n_headings : int
-        Evenly spaced headings searched (plus the two from the hull's floor axes).
-    arm_abduction_deg : tuple of float
-        Arm poses searched, degrees (0 = T, -45 = A).
-    keep : int
-        Candidates refined with LM.
-    min_voxel_m : float
-        Finest voxel size of the visual hull, metres.
-    hull_tolerance : int
-        Views a hull point may fall outside of (``visual_hull``).
-    score_scale : float
-        Image scale of the IoU scoring views.
-    max_iterations : int
-        LM steps per refinement stage.
-    prior_rad : float
-        Joint-angle prior of the candidates' refinement, px² per rad² (weaker: rougher hypotheses).
-    search_limbs : bool
-        Limb-search each refined candidate first, and the winner once more (any-pose search).
-    use_feet : bool
-        The feet cue: with ``front_back`` a term of the front/back choice when the legs are
-        straight; without, only the headings the feet point to are searched.
-    front_back : bool
-        Refine the winner and its mirror fully and keep the better (``resolve_front_back``).
-    limb_search_both : bool
-        Limb-search the pose and its mirror before refining them.
-    elbows : bool
-        Try bent elbows on the result (``elbow_search``).
-    local : bool
-        Recovery only: try the cheap ``local_search`` first.
-    accept_iou : float
-        Recovery only: mean IoU at which the local stage is accepted.
-    iou_margin : float
-        Recovery only: or this far below ``ScoreViews.expected_iou``, whichever is lower.
+    n_headings, arm_abduction_deg, keep
+        The candidates and how many are refined.
+    min_voxel_m, hull_tolerance, score_scale
+        The visual hull and the IoU scoring views.
+    max_iterations, prior_rad, search_limbs
+        The candidates' refinement.
+    use_feet, front_back, limb_search_both, elbows
+        The front/back choice and the elbow search after it.
+    local, accept_iou, iou_margin
+        Recovery only: the cheap local stage.
     """
 
+    #: evenly spaced headings searched (plus the two from the hull's major floor axis)
     n_headings: int = 12
+    #: arm poses searched, degrees (0 = T, -45 = A), each arm on its own
     arm_abduction_deg: tuple[float, ...] = ARM_POSES_DEG
+    #: candidates refined with LM (the best by IoU)
     keep: int = 3
+    #: finest voxel size of the visual hull, metres
     min_voxel_m: float = 0.03
+    #: views a hull point may fall outside of (``visual_hull``)
     hull_tolerance: int = 0
+    #: image scale of the IoU scoring views
     score_scale: float = 0.5
+    #: LM steps per refinement stage
     max_iterations: int = 10
+    #: joint-angle prior of the candidates' refinement towards the candidate, px² per rad²
+    #: (weaker for rougher hypotheses)
     prior_rad: float = 500.0
+    #: limb-search each kept candidate before refining it, and the winner once more (any-pose search)
     search_limbs: bool = False
+    #: the feet cue (``feet_direction``): with ``front_back`` a term of the front/back choice when the
+    #: legs are straight; without, only the headings the feet point to are searched (unreliable in a
+    #: crouch, where the shanks lean forward)
     use_feet: bool = True
+    #: refine the winner and its mirror fully and keep the better (``resolve_front_back``): the
+    #: candidate search alone picks the wrong one on a crouch or at low resolution
     front_back: bool = True
+    #: limb-search the pose and its mirror before refining them
     limb_search_both: bool = True
+    #: try bent elbows on the result (``elbow_search``)
     elbows: bool = True
+    #: recovery only: try the cheap ``local_search`` first
     local: bool = True
+    #: recovery only: mean IoU at which the local stage is accepted ...
     accept_iou: float = 0.87
+    #: ... or this far below ``ScoreViews.expected_iou``, whichever is lower
     iou_margin: float = 0.02
 
     def __post_init__(self) -> None:

@@ -239,41 +239,29 @@ def compare_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
                        prior_rad: float = 30.0, reverse_weight: float = 1.0, feet_direction=None,
                        feet_weight: float = 0.5, views: ScoreViews | None = None,
                        prepared: SearchInputs | None = None, prepare: Prepare | None = None) -> FrontBack:
-    """Refine a pose and its mirror fully and score both (``resolve_front_back`` keeps the better).
-
-    Both run the staged LM of ``tracker.search.refine.refine`` (root, joints, everything) and are
-    compared by ``front_back_cost``.
+    """Refine a pose and its mirror fully (staged LM of ``refine``) and score them by ``front_back_cost``.
 
     Parameters
     ----------
-    model : BodyModel
-    cameras : sequence of Camera
+    model, cameras
     silhouettes : mapping str -> ndarray, shape (h, w)
         Camera name -> mask, non-zero = body.
     chamfer : mapping str -> ChamferSampler, or None
         Camera name -> sampler; None: built from the silhouettes.
     params : ndarray, shape (n_params,)
         The pose; must be finite.
-    max_iterations : int
-        LM steps per refinement stage.
-    prior_rad : float
-        Weak joint-angle prior towards each start, px² per rad².
-    reverse_weight : float
-        Weight of the silhouette -> model term.
+    max_iterations, prior_rad, reverse_weight : int, float, float
+        ``refine``: LM steps per stage, weak joint-angle prior towards each start (px² per rad²),
+        weight of the silhouette -> model term.
     feet_direction : ndarray, shape (2,), optional
-        ``tracker.search.candidates.feet_direction``: adds ``feet_weight`` × (1 - cos) between the
-        pelvis heading and it, only when both refined poses stand with straight legs (in a crouch
-        the shanks lean forward and the cue turns round).
+        ``feet_direction`` of the hull: adds ``feet_weight`` × (1 - cos) between the pelvis heading
+        and it, only when every refined pose has straight legs (in a crouch the cue turns round).
     feet_weight : float
-        Weight of the feet cue.
-    views : ScoreViews, optional
-        Scoring views to reuse (default: built at half resolution).
-    prepared : SearchInputs, optional
-        ``prepare_inputs`` of these views, to reuse.
+    views, prepared : ScoreViews, SearchInputs, optional
+        Scoring views and ``prepare_inputs`` of these views, to reuse.
     prepare : callable, optional
-        ``prepare(params, iou) -> (params, iou)``, e.g. ``tracker.search.candidates.limb_search``: its
-        result on each start is refined and compared as well (the mirror's limbs may sit better
-        elsewhere, and a limb search can also lead astray).
+        ``prepare(params, iou) -> (params, iou)``, e.g. ``limb_search``: its result on each start is
+        refined and compared as well (the mirror's limbs may sit better elsewhere).
 
     Returns
     -------

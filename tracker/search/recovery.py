@@ -131,37 +131,25 @@ def local_search(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
     """The cheap first stage of ``recover``: a local re-fit seeded from the last good pose.
 
     The last good pose as it was, and moved onto the hull at ``n_headings`` headings, is scored by
-    IoU; the best gets a limb search and one staged LM refinement (root, joints, everything).  With
-    ``mirror_check`` its front/back mirror is refined the same way when its IoU is within
-    ``mirror_margin`` of the result's, and the lower ``front_back_cost`` is kept.
+    IoU; the best gets a limb search and one staged LM refinement (root, joints, everything), and
+    the lower ``front_back_cost`` of it and its mirror is kept.
 
     Parameters
     ----------
-    model : BodyModel
-    cameras : sequence of Camera
+    model, cameras, views, hull
+        The frame set's model, cameras, IoU scoring views and visual hull.
     chamfer : mapping str -> ChamferSampler
-    views : ScoreViews
-    hull : VoxelHull
     last : ndarray, shape (n_params,)
         The last good pose.
     n_headings : int
         Turns about the vertical tried on the hull.
-    accept_iou : float
-        Least mean IoU of an accepted result.
-    min_inside_fraction : float
-        Least fraction of contour points on the silhouettes of an accepted result.
-    max_iterations : int
-        LM steps per refinement stage.
-    n_samples : int
-        Contour points per side of a part.
-    prior_rad : float
-        Joint-angle prior towards the start, px² per rad².
-    reverse_weight : float
-        Weight of the silhouette -> model term.
-    mirror_check : bool
-        Refine the mirror too where it explains the silhouettes about as well.
-    mirror_margin : float
-        IoU margin of that test.
+    accept_iou, min_inside_fraction : float
+        Least mean IoU and least fraction of contour points on the silhouettes of an accepted result.
+    max_iterations, n_samples, prior_rad, reverse_weight : int, int, float, float
+        ``refine``: LM steps per stage, contour points per side, joint-angle prior (px² per rad²),
+        weight of the silhouette -> model term.
+    mirror_check, mirror_margin : bool, float
+        Refine the mirror too where its IoU is within ``mirror_margin`` of the result's.
 
     Returns
     -------

@@ -115,22 +115,16 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, p
         The start; clamped to the limits.
     stages : sequence of ndarray of int, optional
         Parameter indices refined in turn (default: root, joints, everything).
-    max_iterations : int
-        LM steps per stage.
-    n_samples : int
-        Contour points per side of a part.
-    f_scale : float
-        Huber loss scale, pixels.
-    truncate_px : float
-        Distance truncation, pixels.
+    max_iterations, n_samples, ftol : int, int, float
+        LM steps per stage, contour points per side of a part, relative cost change to stop at.
+    f_scale, truncate_px : float
+        Huber loss scale and distance truncation, pixels.
     prior_rad : float
         Weight (px² per rad²) holding the joint angles towards ``params``: a straight T-pose arm
         cannot tell clavicle from shoulder rotation, and the hypothesis is the better guess.
     reverse_weight : float
-        Weight of the silhouette -> model term of the cost (0: off); it pulls a limb back onto
-        silhouette it left uncovered.
-    ftol : float
-        LM relative cost change to stop at.
+        Weight of the silhouette -> model term (0: off); it pulls a limb back onto silhouette it
+        left uncovered.
 
     Returns
     -------

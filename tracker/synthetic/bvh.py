@@ -22,14 +22,12 @@ Format (Biovision hierarchy)::
     Frame Time: 0.008333
     <N lines, one value per channel in hierarchy order>
 
-Conventions used here (those of the common exporters and of CMU's files):
-rotations are in degrees and compose in the order listed, each about the
-joint's *local* (parent-relative) axis, so ``Zrotation Yrotation
-Xrotation`` means ``R = Rz · Ry · Rx``; position channels add to the
-joint's OFFSET.  A joint's local transform is ``Trans(offset + position) ·
-R``, and ``joint2world = parent2world · local``.  End sites become joints
-named ``<parent>_End`` with no channels.  Units are whatever the file uses
-(CMU files here: metres, Y up).
+Conventions used here (those of the common exporters and of CMU's files): rotations are in
+degrees and compose in the order listed, each about the joint's *local* (parent-relative) axis,
+so ``Zrotation Yrotation Xrotation`` means ``R = Rz · Ry · Rx``; position channels add to the
+joint's OFFSET.  A joint's local transform is ``Trans(offset + position) · R``, and
+``joint2world = parent2world · local``.  End sites become joints named ``<parent>_End`` with no
+channels.  Units are whatever the file uses (CMU files here: metres, Y up).
 """
 
 from __future__ import annotations

@@ -2,24 +2,19 @@
 
 Steps (``retarget_bvh``):
 
-1. **Axes.** BVH world (Y up) -> contourcap world (Z up) by the proper
-   rotation ``(x, y, z)_world = (z, x, y)_bvh``; a subject facing +Z in the
-   BVH faces +X in the world, the model's reference heading.  No heading is
-   imposed: the root rotation follows the motion.
-2. **Correspondences.** Each model joint centre (``model.joint_names``) is
-   the mean of one or more BVH joints, first match in ``JOINT_MAP``
-   (CMU names and the common ``LeftUpLeg``/``LeftArm`` style).  For CMU:
-   pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm
-   above the hip joints), spine = Chest, neck = Neck, head = midpoint of
-   Head and its end site (the head's centre), shoulder = LeftShoulder
-   (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist,
-   hip, knee, ankle by name.
-3. **Size.** Subject height by a least-squares scale fit of the model's
-   segment lengths (at height 1) to the BVH's in its rest pose:
-   ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper arm, forearm
-   (left and right), shoulder width and pelvis-to-neck.  With
-   ``fit_segments=True`` the limb segments (thigh, shank, upper arm,
-   forearm) also get the BVH's own lengths (``segment_lengths``).
+1. **Axes.** BVH world (Y up) -> contourcap world (Z up) by the proper rotation
+   ``(x, y, z)_world = (z, x, y)_bvh``; a subject facing +Z in the BVH faces +X in the world, the
+   model's reference heading.  No heading is imposed: the root rotation follows the motion.
+2. **Correspondences.** Each model joint centre (``model.joint_names``) is the mean of one or
+   more BVH joints, first match in ``JOINT_MAP`` (CMU names and the common ``LeftUpLeg``/``LeftArm``
+   style).  For CMU: pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm above
+   the hip joints), spine = Chest, neck = Neck, head = midpoint of Head and its end site,
+   shoulder = LeftShoulder (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist, hip,
+   knee, ankle by name.
+3. **Size.** Subject height by a least-squares scale fit of the model's segment lengths (at
+   height 1) to the BVH's in its rest pose: ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper
+   arm, forearm (left and right), shoulder width and pelvis-to-neck.  With ``fit_segments=True``
+   the limb segments also get the BVH's own lengths (``segment_lengths``).
 4. **Time.** Joint targets are linearly interpolated at ``t_k = start_s +
    k / fps`` from the BVH's frames.
 5. **Inverse kinematics.** Per frame, ``scipy.optimize.least_squares``
