@@ -79,7 +79,7 @@ class SegmentationParams:
                 raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)!r}")
 
     def min_area_px(self, image_size: tuple[int, int]) -> float:
-        """Smallest component kept, in pixels, for an image of ``(w, h)``."""
+        """Smallest component kept, pixels, for an image of ``image_size = (w, h)``."""
         person = self.person_area_px if self.person_area_px is not None else 0.02 * image_size[0] * image_size[1]
         return self.min_area_fraction * person
 
@@ -88,11 +88,17 @@ class SegmentationParams:
 class FrameSegmentation:
     """Result of :func:`segment_frame` for one camera frame.
 
-    silhouette, edges : (h, w) uint8 0/255, full image (zero outside the ROI).
-    chamfer : the quantised distance images (cropped, with offset).
-    foreground_fraction : silhouette pixels / image pixels.
-    roi : (x0, y0, x1, y1) that was processed at full resolution ((0, 0, 0, 0): nothing found by
-        the automatic ROI's first pass).
+    Attributes
+    ----------
+    silhouette, edges : ndarray, shape (h, w), uint8
+        0 / 255, full image (zero outside the ROI).
+    chamfer : ChamferImages
+        The quantised distance images (cropped, with offset).
+    foreground_fraction : float
+        Silhouette pixels / image pixels.
+    roi : (int, int, int, int)
+        ``(x0, y0, x1, y1)`` processed at full resolution ((0, 0, 0, 0): the automatic ROI's first
+        pass found nothing).
     """
 
     silhouette: np.ndarray
@@ -104,8 +110,22 @@ class FrameSegmentation:
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
                   params: SegmentationParams | None = None) -> FrameSegmentation:
-    """Segment one BGR uint8 frame ``(h, w, 3)`` against ``model``; only ``roi = (x0, y0, x1, y1)``
-    is processed when given.  Does not adapt the model (call ``model.update`` for that)."""
+    """Segment one frame against a background model: silhouette, edges and chamfer images.
+
+    Does not adapt the model (call ``model.update`` for that).
+
+    Parameters
+    ----------
+    model : BackgroundModel
+    image_bgr : ndarray, shape (h, w, 3), uint8
+    roi : (int, int, int, int), optional
+        ``(x0, y0, x1, y1)``: only that box is processed (default: the automatic ROI of ``params``).
+    params : SegmentationParams, optional
+
+    Returns
+    -------
+    FrameSegmentation
+    """
     params = params or SegmentationParams()
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w, h = model.size
