@@ -140,14 +140,22 @@ class _StackedChamfer:
 class CostTerms:
     """The cost evaluated at one pose.
 
-    pose : Pose; contours : Contours (N rows over the cost's cameras)
-    used : (N,) bool, rows that contribute
-    d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
-    residuals : (2 N + K,), or fewer when compact (module docstring; K reverse residuals)
-    jacobian : (len(residuals), n_params) or None
-    boundary_dist : (K,) distance in pixels from each observed boundary sample to the nearest used
-        contour point of its camera (0 where the sample lies on the predicted silhouette, inf where
-        that camera has no contour point), or None without the reverse term
+    Attributes
+    ----------
+    pose : Pose
+    contours : Contours
+        N rows over the cost's cameras.
+    used : ndarray of bool, shape (N,)
+        Rows that contribute.
+    d_sil, d_edge : ndarray, shape (N,)
+        Truncated distances, pixels (0 where not used).
+    residuals : ndarray, shape (2 N + K,)
+        Or fewer when compact (module docstring; K reverse residuals).
+    jacobian : ndarray, shape (len(residuals), n_params), or None
+    boundary_dist : ndarray, shape (K,), or None
+        Distance in pixels from each observed boundary sample to the nearest used contour point of
+        its camera (0 on the predicted silhouette, inf where that camera has no contour point);
+        None without the reverse term.
     """
 
     pose: Pose
@@ -358,7 +366,20 @@ class ChamferCost:
         return np.maximum(depth, 0.0) / focal[:, None]
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
-        """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""
+        """Residuals (and Jacobian) at a pose; see the module docstring for the layout.
+
+        Parameters
+        ----------
+        params : ndarray, shape (n_params,)
+        jacobian : bool
+            Also the Jacobian (a new linearisation point: occlusion recomputed with ``"step"``).
+        compact : bool
+            Keep only the residuals that can be non-zero (what the LM solver takes).
+
+        Returns
+        -------
+        CostTerms
+        """
         params = np.asarray(params, dtype=float)
         fresh = self.visibility == "always" or (self.visibility in ("frame", "step") and self._frozen_visible is None)
         if self.visibility == "step" and jacobian and not (self._cache is not None and self._cache[-1]
@@ -438,7 +459,7 @@ class ChamferCost:
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):
-        """``fun(x, jacobian) -> (r, J | None)`` for ``tracker.fitting.solver``."""
+        """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` as ``evaluate``."""
 
         def fun(x, jacobian):
             t = self.evaluate(x, jacobian=jacobian, compact=compact)

@@ -133,15 +133,46 @@ class TrackerOptions:
 
 
 def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
-    """Per-parameter prior weights (n_params,): ``prior_m`` on root translation, ``prior_rad`` else."""
+    """Per-parameter prior weights: ``prior_m`` on the root translation, ``prior_rad`` on rotations.
+
+    Parameters
+    ----------
+    model : BodyModel
+    options : TrackerOptions
+
+    Returns
+    -------
+    ndarray, shape (n_params,)
+        px² per m² or per rad².
+    """
     return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
 
 
 def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
               prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
               options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
-    """Fit one frame from ``start`` (n_params,) with the prior term towards ``prediction`` (default
-    ``start``); returns the solver result and the cost object."""
+    """Fit one frame from ``start`` with the prior term towards ``prediction``.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera
+    chamfer : mapping str -> ChamferSampler
+        Camera name -> sampler (``tracker.fitting.sampler``), at least every camera of ``cameras``.
+    start : ndarray, shape (n_params,)
+    prediction : ndarray, shape (n_params,), optional
+        Centre of the prior (default ``start``).
+    sliding : bool
+        Use the sliding term of the contour Jacobian.
+    solver : {"lm", "lsq"}
+        Analytic LM, or scipy with finite differences.
+    options : TrackerOptions
+
+    Returns
+    -------
+    result : SolverResult
+    cost : ChamferCost
+    """
     cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
                        visibility=options.visibility, truncate_px=options.truncate_px,
                        reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
@@ -230,7 +261,7 @@ class Tracker:
         self.n_initialisations = 0
 
     def predict(self) -> np.ndarray | None:
-        """Start pose for the next frame (n_params,) or None before initialisation."""
+        """Start pose for the next frame (constant velocity when enabled), shape (n_params,); None before initialisation."""
         if self.params is None:
             return None
         if self.options.constant_velocity and self.previous is not None:
@@ -256,7 +287,7 @@ class Tracker:
         return res, terms, terms.rms_px(), terms.inside_fraction()
 
     def rms_limit(self) -> float:
-        """RMS (px) above which the current frame is bad (see ``TrackerOptions``)."""
+        """RMS (pixels) above which the current frame is bad (``TrackerOptions.max_rms_px``)."""
         o = self.options
         lim = o.max_rms_px
         if self._good_rms:
@@ -316,10 +347,22 @@ class Tracker:
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
-        """Fit one frame set and return its pose record (a JSON-ready dict).
+        """Fit one frame set and return its pose record (a JSON-ready dict, DESIGN.md).
 
-        ``chamfer``: camera name -> ChamferImages (a camera absent this frame is left out);
-        ``silhouettes``: camera name -> (h, w) mask, needed for (re)initialisation only.
+        Parameters
+        ----------
+        frame_id : int
+        timestamp_ns : int
+        chamfer : mapping str -> ChamferSampler
+            Camera name -> sampler; a camera absent this frame is left out.
+        silhouettes : mapping str -> ndarray, shape (h, w), optional
+            Camera name -> mask; needed for (re)initialisation and the IoU checks.
+
+        Returns
+        -------
+        dict
+            ``frame, timestamp_ns, model, ok, cameras, latency_ms`` and, when solved, ``params, joints,
+            rms_px, iterations, inside_fraction, coverage`` (``iou`` when checked); ``reason`` when not ok.
         """
         t0 = self.clock()
         record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
