@@ -232,7 +232,18 @@ def turn_about_vertical(model: BodyModel, params: np.ndarray, angle_rad: float, 
 
 
 def body_centroid(model: BodyModel, params: np.ndarray) -> np.ndarray:
-    """Mean of points spread over the model's surface at ``params`` (n_params,): shape (3,), metres."""
+    """Mean of points spread over the model's surface.
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        World metres.
+    """
     return body_points(model, forward(model, params), n_theta=8, n_z=2).reshape(-1, 3).mean(0)
 
 

@@ -110,8 +110,16 @@ class SearchOptions:
     def for_recovery(cls, **changes) -> "SearchOptions":
         """The any-pose search's defaults (``recover``), with ``changes`` applied.
 
-        Two refined candidates, a weaker prior, limb searches on them, no feet cue and no
-        elbow search.
+        Two refined candidates, a weaker prior, limb searches on them, no feet cue, no elbow search.
+
+        Parameters
+        ----------
+        **changes
+            Field values to override.
+
+        Returns
+        -------
+        SearchOptions
         """
         return replace(cls(keep=2, prior_rad=50.0, search_limbs=True, use_feet=False, elbows=False), **changes)
 

@@ -75,15 +75,29 @@ def _mirror_map_cached(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mirror_map(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
-    """Joint-parameter permutation and signs of the left/right reflection: ``(index (n_params,),
-    sign (n_params,))`` with ``mirrored[index[k]] = sign[k] * params[k]`` for every joint DOF k
-    (root entries: identity).  Raises ValueError naming a DOF whose mirror is missing or whose
-    axis does not mirror."""
+    """Joint-parameter permutation and signs of the left/right reflection.
+
+    ``mirrored[index[k]] = sign[k] * params[k]`` for every joint DOF k (root entries: identity).
+
+    Parameters
+    ----------
+    model : BodyModel
+
+    Returns
+    -------
+    index : ndarray of int, shape (n_params,)
+    sign : ndarray, shape (n_params,)
+
+    Raises
+    ------
+    ValueError
+        A DOF whose mirror is missing or whose axis does not mirror (named).
+    """
     return _mirror_map_cached(model)
 
 
 def mirror_joint_order(model: BodyModel) -> np.ndarray:
-    """Permutation (n_joints,) of ``model.joint_names`` swapping ``left_*`` and ``right_*``."""
+    """Permutation of ``model.joint_names`` swapping ``left_*`` and ``right_*``, shape (n_joints,)."""
     names = list(model.joint_names)
     return np.array([names.index(_other_side(n)) if _other_side(n) in names else i for i, n in enumerate(names)])
 
@@ -91,10 +105,18 @@ def mirror_joint_order(model: BodyModel) -> np.ndarray:
 def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
     """The same body turned 180° about the vertical through the pelvis, left and right swapped.
 
-    params : (n_params,) -> (n_params,).  The pelvis origin stays where it is; the root rotation
-    R becomes Rz(π) R; left and right joint angles are exchanged (signs from the models' mirrored
-    axes, ``mirror_map``).  Applying it twice gives ``params`` back (the root rotation vector up to
-    its 2π equivalents).
+    The pelvis origin stays where it is; the root rotation R becomes Rz(π) R; left and right joint
+    angles are exchanged (signs from the models' mirrored axes, ``mirror_map``).  Applying it twice
+    gives ``params`` back (the root rotation vector up to its 2π equivalents).
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+
+    Returns
+    -------
+    ndarray, shape (n_params,)
     """
     p = np.asarray(params, dtype=float)
     if p.shape != (model.n_params,):
@@ -116,13 +138,36 @@ def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- choosing
 def joints_at_limits(model: BodyModel, params: np.ndarray, *, tol_rad: float = np.radians(1.0)) -> int:
-    """Joint DOF within ``tol_rad`` (radians) of a limit at ``params`` (n_params,)."""
+    """Joint DOF within ``tol_rad`` of a limit.
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+    tol_rad : float
+        Radians.
+
+    Returns
+    -------
+    int
+    """
     j = model.param_kind == JOINT_ROTATION
     return int(np.count_nonzero(np.minimum(params - model.lower, model.upper - params)[j] < tol_rad))
 
 
 def pelvis_heading(model: BodyModel, params: np.ndarray) -> np.ndarray:
-    """Horizontal unit vector, shape (2,), the pelvis faces (its +x axis); zeros when it points up or down."""
+    """Horizontal unit vector the pelvis faces (its +x axis).
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        Zeros when the axis points up or down.
+    """
     R = so3_exp(params[model.param_kind == ROOT_ROTATION])
     root = int(np.flatnonzero(model.parent < 0)[0])
     x = (R @ model.rest_rotation[root])[:2, 0]
@@ -225,7 +270,17 @@ class FrontBack:
     best: int
 
     def choice(self, model: BodyModel) -> InitResult:
-        """The best hypothesis as an ``InitResult`` (label ``"kept"`` or ``"mirrored"``)."""
+        """The lowest-cost hypothesis as an ``InitResult`` (label ``"kept"`` or ``"mirrored"``).
+
+        Parameters
+        ----------
+        model : BodyModel
+            The model the hypotheses were fitted with (its height is recorded).
+
+        Returns
+        -------
+        InitResult
+        """
         b = self.best
         h = pelvis_heading(model, self.params[b])
         return InitResult(params=self.params[b], score=float(self.iou[b]), rms_px=float(self.rms_px[b]),

@@ -53,8 +53,14 @@ OK, SUSPECT, LOST = "ok", "suspect", "lost"
 class LossState:
     """What the monitor concluded for a frame.
 
-    state : ``"ok"``, ``"suspect"`` (bad, fewer than ``patience`` in a row) or ``"lost"``;
-    bad_frames : consecutive bad frames so far; reason : why the frame is bad ("" when good).
+    Attributes
+    ----------
+    state : str
+        ``"ok"``, ``"suspect"`` (bad, fewer than ``patience`` in a row) or ``"lost"``.
+    bad_frames : int
+        Consecutive bad frames so far.
+    reason : str
+        Why the frame is bad ("" when good).
     """
 
     state: str
@@ -81,9 +87,12 @@ class LossMonitor:
 
     Parameters
     ----------
-    max_rms_px : RMS chamfer residual above which a frame is bad (pixels)
-    min_inside_fraction : fraction of contour points on the silhouettes below which a frame is bad
-    patience : consecutive bad frames before the track is lost (>= 1)
+    max_rms_px : float
+        RMS chamfer residual above which a frame is bad, pixels.
+    min_inside_fraction : float
+        Fraction of contour points on the silhouettes below which a frame is bad.
+    patience : int
+        Consecutive bad frames before the track is lost (>= 1).
     """
 
     def __init__(self, *, max_rms_px: float = 6.0, min_inside_fraction: float = 0.6, patience: int = 3) -> None:
@@ -99,11 +108,22 @@ class LossMonitor:
         self.bad_frames = 0
 
     def reset(self) -> None:
+        """Forget the bad frames counted so far."""
         self.bad_frames = 0
 
     def update(self, quality) -> LossState:
-        """Take one frame's quality: a pose record (``rms_px``, ``inside_fraction``, optional
-        ``ok``), a ``tracker.fitting.cost.CostTerms``, or an object with those attributes."""
+        """Take one frame's quality and say whether the track is ok, suspect or lost.
+
+        Parameters
+        ----------
+        quality : mapping, CostTerms or object
+            A pose record (``rms_px``, ``inside_fraction``, optional ``ok`` and ``reason``), a
+            ``tracker.fitting.cost.CostTerms``, or an object with those attributes.
+
+        Returns
+        -------
+        LossState
+        """
         rms = _quality(quality, "rms_px")
         inside = _quality(quality, "inside_fraction")
         reasons = []

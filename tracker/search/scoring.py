@@ -142,7 +142,17 @@ class ScoreViews:
 
     def score(self, params: np.ndarray, parts: np.ndarray | None = None,
               base: Sequence[np.ndarray] | None = None) -> float:
-        """Mean IoU over the cameras (higher is better); ``parts``, ``base`` as ``render``."""
+        """Mean IoU over the cameras (higher is better).
+
+        Parameters
+        ----------
+        params, parts, base
+            As ``render``.
+
+        Returns
+        -------
+        float
+        """
         return float(self.ious(params, parts, base).mean())
 
 

@@ -35,7 +35,22 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 
 
 def bundled_motion(name: str = "scaled_131_03") -> Path:
-    """Path of a BVH shipped in ``tracker/data`` (CMU subject 131; see CREDITS.md there)."""
+    """Path of a BVH shipped in ``tracker/synthetic/data`` (CMU subject 131; see CREDITS.md there).
+
+    Parameters
+    ----------
+    name : str
+        ``scaled_131_01`` or ``scaled_131_03`` (``.bvh`` optional).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        No such motion (the available ones listed).
+    """
     path = DATA_DIR / (name if name.endswith(".bvh") else f"{name}.bvh")
     if not path.is_file():
         known = sorted(p.stem for p in DATA_DIR.glob("*.bvh"))
@@ -45,14 +60,33 @@ def bundled_motion(name: str = "scaled_131_03") -> Path:
 
 @dataclass(frozen=True, eq=False)
 class Palette:
-    """Per-part BGR colours (n_parts, 3) float and the light direction (3,) (unit, pointing down)."""
+    """Colours and light of a synthetic subject.
+
+    Attributes
+    ----------
+    colours : ndarray, shape (n_parts, 3)
+        BGR per part, float.
+    light : ndarray, shape (3,)
+        Unit direction of the light, pointing down.
+    """
 
     colours: np.ndarray
     light: np.ndarray
 
 
 def make_palette(model: BodyModel, rng: np.random.Generator) -> Palette:
-    """Skin on head, hands and forearms; a shirt on the trunk and upper arms; trousers; shoes."""
+    """Skin on head, hands and forearms; a shirt on the trunk and upper arms; trousers; shoes.
+
+    Parameters
+    ----------
+    model : BodyModel
+    rng : numpy.random.Generator
+        Draws the clothing colours and the light's azimuth.
+
+    Returns
+    -------
+    Palette
+    """
     skin = np.array([120.0, 150.0, 200.0]) * rng.uniform(0.8, 1.1)
     shirt = rng.uniform(30, 220, 3)
     trousers = rng.uniform(20, 110, 3)
@@ -93,7 +127,30 @@ def render_frame(
     shadow: bool = True,
     shadow_strength: float = 0.4,
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Noise-free colour images (BGR uint8 (h, w, 3)) and part labels ((h, w) int16) of one pose."""
+    """Noise-free colour images and part labels of one pose (the module docstring's pipeline).
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+    cameras : sequence of Camera
+    backgrounds : sequence of ndarray, each shape (h, w, 3), uint8
+        The empty room per camera.
+    floor_masks : sequence of ndarray, each shape (h, w), float32
+        1 where the floor is seen (where the shadow may fall).
+    palette : Palette
+    shadow : bool
+        Cast the body's shadow on the floor.
+    shadow_strength : float
+        Darkening of the floor in the shadow's core (0: none, 1: black).
+
+    Returns
+    -------
+    images : list of ndarray, each shape (h, w, 3), uint8
+        BGR.
+    labels : list of ndarray, each shape (h, w), int16
+        Part index per pixel, ``BACKGROUND`` where no part is.
+    """
     labels = render_label_images(model, pose, cameras)
     axis = pose.rotation[:, :, 2]  # part z axes in world, (n_parts, 3)
     # Lambert on a cylinder about each axis, averaged over the lit half: ∝ sin(angle(axis, light))
@@ -176,7 +233,18 @@ class SyntheticStudio:
     floors: list
 
     def render(self, frame: int, *, shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """``render_frame`` of frame ``frame``: noise-free images and part labels per camera."""
+        """``render_frame`` of one frame: noise-free images and part labels per camera.
+
+        Parameters
+        ----------
+        frame : int
+        shadow : bool
+
+        Returns
+        -------
+        images, labels
+            As ``render_frame``.
+        """
         return render_frame(self.motion.model, self.poses[frame], self.cameras, self.backgrounds, self.floors,
                             self.palette, shadow=shadow)
 
