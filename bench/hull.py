@@ -130,7 +130,8 @@ def main(argv=None) -> int:
     if not args.no_init:
         from tracker.search.initialise import initialise
         from tracker.body.kinematics import joint_centre_array
-        from tracker.search.recovery import recover, turn_about_vertical
+        from tracker.search.candidates import turn_about_vertical
+        from tracker.search.recovery import recover
 
         views = {c.name: s for c, s in zip(cams, sils)}
         ref = model.zero()

@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT))
 
 from machine_ref import machine_ref_ms  # noqa: E402
 
-from tracker.search.initialise import rendered_views  # noqa: E402
+from tracker.search.scoring import rendered_views  # noqa: E402
 from tracker.body.kinematics import forward, joint_centre_array  # noqa: E402
 from tracker.synthetic.scene import ring_cameras  # noqa: E402
 
@@ -59,7 +59,7 @@ def run_case(model, cams, sils, chamfer, last, truth) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     res = recover(model, cams, sils, chamfer, last)
     dt, cpu = time.perf_counter() - t0, time.process_time() - c0
-    fit, _ = fit_frame(model, cams, [chamfer[c.name] for c in cams], np.asarray(res.params))  # the Tracker's fit next
+    fit, _ = fit_frame(model, cams, chamfer, np.asarray(res.params))  # the Tracker's fit next
     return {"s": dt, "cpu_s": cpu, "err_m": joint_error_m(model, res.params, truth), "label": res.label,
             "iou": res.score, "fit_err_m": joint_error_m(model, fit.params, truth)}
 
@@ -101,9 +101,9 @@ def bench_hop_drop(n_cams: int, size, gaps, every: int, ok_mm: float, mot) -> di
 
 
 def bench_turn(ok_mm: float, seeds=(21, 22, 23, 24, 25)) -> dict:
-    from tracker.search.initialise import chamfer_from_silhouette
+    from tracker.search.scoring import chamfer_from_silhouette
     from tracker.body.model import load_model
-    from tracker.search.recovery import turn_about_vertical
+    from tracker.search.candidates import turn_about_vertical
     from tracker.imaging.render import render_silhouettes
 
     model = load_model("knossow40")

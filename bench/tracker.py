@@ -1,6 +1,6 @@
 """Tracker benchmark on a synthetic session (hop, CMU 131_03): iterations, accuracy, speed.
 
-A session is rendered with ``tracker.synthetic.synth.make_synthetic_session`` (6 ring cameras, 800x600,
+A session is rendered with ``service.synthetic_session.make_synthetic_session`` (6 ring cameras, 800x600,
 textured room, shadows, pixel noise; FFV1 video) into a temporary folder (or ``--session``), each
 frame is segmented once (``segmentation.pipeline.segment_frame`` against a background model from
 the session's background videos) and the same chamfer images are then tracked three ways:
@@ -58,7 +58,8 @@ from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
 from service.offline import background_models, session_model  # noqa: E402
-from tracker.synthetic.synth import bundled_motion, make_synthetic_session  # noqa: E402
+from service.synthetic_session import make_synthetic_session  # noqa: E402
+from tracker.synthetic.synth import bundled_motion  # noqa: E402
 from tracker.fitting.cost import ChamferCost  # noqa: E402
 from tracker.fitting.tracking import Tracker, TrackerOptions  # noqa: E402
 

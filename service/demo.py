@@ -1,6 +1,6 @@
 """``contourcap demo``: a synthetic studio end to end over zenoh on loopback.
 
-1. A demo session is rendered once from a CMU BVH bundled with the package (``tracker.synthetic.synth``) and
+1. A demo session is rendered once from a CMU BVH bundled with the package (``service.synthetic_session``) and
    cached under ``cache_dir`` (keyed by its options).
 2. A studio config for it is written to ``out_dir`` (replay cameras, loopback peer hub, multicast
    off); the camera, segment and track workers run as processes under the :class:`Supervisor`.
@@ -86,7 +86,8 @@ class DemoSummary:
 
 def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> Path:
     """The cached synthetic session for ``opts`` (rendered on first use)."""
-    from tracker.synthetic.synth import bundled_motion, make_synthetic_session
+    from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.synth import bundled_motion
 
     key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps], sort_keys=True)
     root = Path(opts.cache_dir) / f"demo-{hashlib.sha1(key.encode()).hexdigest()[:12]}"

@@ -18,7 +18,7 @@ LONG_DOC_MODULES = {
     "tracker.imaging.jacobian", "tracker.imaging.contours", "tracker.body.kinematics", "tracker.fitting.cost",
     "tracker.body.model", "service.wire.messages", "service.wire.records", "service.flow.demand",
 }
-FIGURE = re.compile(r"\d(?:[\d.,]*\d)?\s*(?:ms|mm|px|%|×)(?![A-Za-z])")
+FIGURE = re.compile(r"\d(?:[\d.,]*\d)?\s*(?:ms|mm|px|%|×)(?![A-Za-z0-9])")
 
 
 def modules() -> dict[str, Path]:

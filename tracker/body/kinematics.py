@@ -56,7 +56,17 @@ def _skew(w: np.ndarray) -> np.ndarray:
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotation vectors (..., 3) -> matrices (..., 3, 3)."""
+    """Rodrigues' formula: rotation vectors to matrices.
+
+    Parameters
+    ----------
+    w : ndarray, shape (..., 3)
+        Rotation vectors, radians.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
     w = np.asarray(w, dtype=float)
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
     K = _skew(w)
@@ -68,7 +78,17 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 
 
 def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
-    """Left Jacobian of SO(3) at rotation vector w (3,): ``[J_l(w) dw]× = d exp(w) exp(w)ᵀ``."""
+    """Left Jacobian of SO(3): ``[J_l(w) dw]× = d exp(w) exp(w)ᵀ``.
+
+    Parameters
+    ----------
+    w : ndarray, shape (3,)
+        Rotation vector, radians.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
     w = np.asarray(w, dtype=float)
     theta = float(np.linalg.norm(w))
     K = _skew(w)
@@ -103,7 +123,12 @@ class Pose:
     screw_v: np.ndarray
 
     def part2world(self) -> np.ndarray:
-        """Homogeneous transforms, shape (n_parts, 4, 4)."""
+        """Homogeneous part2world transforms.
+
+        Returns
+        -------
+        ndarray, shape (n_parts, 4, 4)
+        """
         n = self.rotation.shape[0]
         T = np.zeros((n, 4, 4))
         T[:, :3, :3] = self.rotation
@@ -112,7 +137,18 @@ class Pose:
         return T
 
     def to_world(self, part: np.ndarray, points_part: np.ndarray) -> np.ndarray:
-        """Points (n, 3) given in the frames of parts ``part`` (n,) -> world (n, 3)."""
+        """Points given in part frames, in world coordinates.
+
+        Parameters
+        ----------
+        part : ndarray of int, shape (n,)
+        points_part : ndarray, shape (n, 3)
+            Metres, in the frame of ``part``.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+        """
         return np.einsum("nij,nj->ni", self.rotation[part], points_part) + self.translation[part]
 
 
@@ -146,7 +182,12 @@ def forward(model: BodyModel, params: np.ndarray) -> Pose:
 
     Parameters
     ----------
+    model : BodyModel
     params : ndarray, shape (n_params,)
+
+    Returns
+    -------
+    Pose
     """
     params = np.asarray(params, dtype=float)
     if params.shape != (model.n_params,):
@@ -158,7 +199,17 @@ def forward(model: BodyModel, params: np.ndarray) -> Pose:
 
 
 def body_jacobian(model: BodyModel, pose: Pose) -> np.ndarray:
-    """J_H for every part: kinematic screws (ω; v) per parameter, shape (n_parts, 6, n_params)."""
+    """J_H for every part: the kinematic screws (ω; v) of the parameters that move it.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    ndarray, shape (n_parts, 6, n_params)
+    """
     screws = np.concatenate([pose.screw_w, pose.screw_v], axis=1).T  # (6, n_params)
     return screws[None, :, :] * model.affects[:, None, :]
 
@@ -183,11 +234,33 @@ def point_jacobian(model: BodyModel, pose: Pose, part: np.ndarray, points_world:
 
 
 def joint_centres(model: BodyModel, pose: Pose) -> dict[str, np.ndarray]:
-    """Named joint centres in world coordinates (metres), each shape (3,)."""
+    """Named joint centres in world coordinates.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    dict str -> ndarray, shape (3,)
+        Metres.
+    """
     pts = pose.to_world(model.joint_part, model.joint_point)
     return {name: pts[i] for i, name in enumerate(model.joint_names)}
 
 
 def joint_centre_array(model: BodyModel, pose: Pose) -> np.ndarray:
-    """Joint centres in ``model.joint_names`` order, shape (n_joints, 3)."""
+    """Joint centres in ``model.joint_names`` order.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    ndarray, shape (n_joints, 3)
+        Metres, world.
+    """
     return pose.to_world(model.joint_part, model.joint_point)

@@ -11,8 +11,9 @@ is the image gradient of the distance times the contour-point Jacobian (IJCV 200
 Distances are truncated at ``truncate_px`` (zero gradient beyond), so clutter and a missing limb
 add a bounded constant; the solver's robust loss (IRLS) does the rest.
 
-``chamfer`` objects are anything with ``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2),
-d_edge (n,), grad_edge (n, 2))`` in pixels, e.g. ``segmentation.distance.ChamferImages``.
+``chamfer`` objects are ``tracker.fitting.sampler.ChamferSampler``: anything with
+``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2), d_edge (n,), grad_edge (n, 2))`` in pixels,
+e.g. ``segmentation.distance.ChamferImages``.
 
 **Reverse term** (optional, ``reverse_weight > 0``): the chamfer cost above is model → image
 only, so a limb whose contour lies inside the silhouette (e.g. over the torso) is not pulled
@@ -147,14 +148,22 @@ class _StackedChamfer:
 class CostTerms:
     """The cost evaluated at one pose.
 
-    pose : Pose; contours : Contours (N rows over the cost's cameras)
-    used : (N,) bool, rows that contribute
-    d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
-    residuals : (2 N + K,), or fewer when compact (module docstring; K reverse residuals)
-    jacobian : (len(residuals), n_params) or None
-    boundary_dist : (K,) distance in pixels from each observed boundary sample to the nearest used
-        contour point of its camera (0 where the sample lies on the predicted silhouette, inf where
-        that camera has no contour point), or None without the reverse term
+    Attributes
+    ----------
+    pose : Pose
+    contours : Contours
+        N rows over the cost's cameras.
+    used : ndarray of bool, shape (N,)
+        Rows that contribute.
+    d_sil, d_edge : ndarray, shape (N,)
+        Truncated distances, pixels (0 where not used).
+    residuals : ndarray, shape (2 N + K,)
+        Or fewer when compact (module docstring; K reverse residuals).
+    jacobian : ndarray, shape (len(residuals), n_params), or None
+    boundary_dist : ndarray, shape (K,), or None
+        Distance in pixels from each observed boundary sample to the nearest used contour point of
+        its camera (0 on the predicted silhouette, inf where that camera has no contour point);
+        None without the reverse term.
     """
 
     pose: Pose
@@ -187,11 +196,9 @@ class CostTerms:
         """RMS of the used residuals (both terms), pixels (NaN if none); with ``max_px``, of those
         at most ``max_px`` only (the inliers: see ``outlier_fraction``).
 
-        The tracker's quality figure is the plain RMS: a few large residuals dominate it (hop
-        session at the true poses: 3.4 px; 6.5 % of the edge residuals above 5 px make 71 % of the
-        sum of squares — upper arms and torso where the model's contour crosses the silhouette and
-        the image shows no edge, and feet that the segmentation lost in 1–2 cameras (0.8 % of the
-        residuals truncated at 30 px make 33 %)); the inlier RMS measures the fit on the rest."""
+        The tracker's quality figure is the plain RMS: a few large residuals dominate it (contour
+        crossing the torso where the image shows no edge, feet the segmentation lost; measured
+        shares: docs/tuning.md, "Cost"); the inlier RMS measures the fit on the rest."""
         n = self.n_used
         if not n:
             return float("nan")
@@ -219,7 +226,8 @@ class ChamferCost:
     ----------
     model : BodyModel
     cameras : sequence of Camera, length n_cams (only the cameras with an image this frame)
-    chamfer : sequence, length n_cams, of objects with ``sample(uv)`` (see module docstring)
+    chamfer : sequence, length n_cams, of ChamferSampler (``tracker.fitting.sampler``), aligned with
+        ``cameras`` (``in_camera_order`` of the mapping the rest of the tracker takes)
     sliding : use the sliding term B of the contour Jacobian (IJCV 2008 §5, ``tracker.imaging.jacobian``)
     n_samples : contour points per side of each part
     truncate_px : distances above it are clipped (zero gradient); None keeps the images' own
@@ -227,7 +235,7 @@ class ChamferCost:
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse term (module
         docstring); off at weight 0.  Boundary samples come from the chamfer objects'
         ``silhouette_q``; ``reverse_cover_px`` None (the default) turns the on-silhouette test
-        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.initialise.refine`` leaves it
+        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.refine.refine`` leaves it
         off: its searches from far-off poses rely on the pull of all far samples).
     visibility : ``"step"`` (default): occlusion is recomputed where the Jacobian is evaluated
         (each linearisation point) and that set of rows is kept for the trial steps from it;
@@ -350,7 +358,20 @@ class ChamferCost:
         return np.maximum(depth, 0.0) / focal[:, None]
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
-        """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""
+        """Residuals (and Jacobian) at a pose; see the module docstring for the layout.
+
+        Parameters
+        ----------
+        params : ndarray, shape (n_params,)
+        jacobian : bool
+            Also the Jacobian (a new linearisation point: occlusion recomputed with ``"step"``).
+        compact : bool
+            Keep only the residuals that can be non-zero (what the LM solver takes).
+
+        Returns
+        -------
+        CostTerms
+        """
         params = np.asarray(params, dtype=float)
         fresh = self.visibility == "always" or (self.visibility in ("frame", "step") and self._frozen_visible is None)
         if self.visibility == "step" and jacobian and not (self._cache is not None and self._cache[-1]
@@ -430,7 +451,7 @@ class ChamferCost:
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):
-        """``fun(x, jacobian) -> (r, J | None)`` for ``tracker.fitting.solver``."""
+        """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` as ``evaluate``."""
 
         def fun(x, jacobian):
             t = self.evaluate(x, jacobian=jacobian, compact=compact)

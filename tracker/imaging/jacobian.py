@@ -93,6 +93,11 @@ def contour_motion(
 ) -> np.ndarray:
     """A + B per contour point: the point's velocity per unit screw of its part.
 
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
     Returns
     -------
     ndarray, shape (n, 3, 6)
@@ -117,7 +122,18 @@ def contour_point_jacobian(
     sliding: bool = True,
     rows=None,
 ) -> np.ndarray:
-    """dY/dΦ = (A + B) J_H of the contour points in the world, shape (n, 3, n_params)."""
+    """dY/dΦ = (A + B) J_H of the contour points in the world.
+
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
+    Returns
+    -------
+    ndarray, shape (n, 3, n_params)
+        Metres per unit parameter; n = N or len(rows).
+    """
     r = _select(contours, rows)
     V = contour_motion(model, pose, cameras, contours, sliding=sliding, rows=r)
     return apply_screws(model, pose, V.reshape(-1, 6), np.repeat(contours.part[r], 3)).reshape(r.size, 3, model.n_params)
@@ -134,12 +150,18 @@ def contour_image_motion(
 ) -> np.ndarray:
     """J_I (A + B) of the contour points: image velocity per unit screw of the point's part.
 
+    ``contour_jacobian`` is this times the part's screws (``apply_screws``); a caller that combines
+    rows (image gradients, directions) can do so here, on 6 columns instead of n_params.
+
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
     Returns
     -------
     ndarray, shape (n, 2, 6)
-        Pixels per unit screw ``(ω; v)`` (world); n = N or len(rows).  ``contour_jacobian``
-        is this times the part's screws (``apply_screws``); a caller that combines rows (image
-        gradients, directions) can do so here, on 6 columns instead of n_params.
+        Pixels per unit screw ``(ω; v)`` (world); n = N or len(rows).
     """
     _check(model, pose, cameras, contours)
     r = _select(contours, rows)
@@ -151,11 +173,23 @@ def contour_image_motion(
 
 
 def apply_screws(model: BodyModel, pose: Pose, motion: np.ndarray, part: np.ndarray) -> np.ndarray:
-    """Rows of per-screw motion times J_H of their parts: ``motion (n, 6) -> (n, n_params)``.
+    """Rows of per-screw motion times J_H of their parts.
 
     ``motion`` row i is a linear functional of the screw of part ``part[i]`` (e.g. one row of
     ``contour_image_motion``); the result is its derivative with respect to the parameters
-    (``J_H`` = the parameters' screws, masked by ``model.affects``)."""
+    (``J_H`` = the parameters' screws, masked by ``model.affects``).
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+    motion : ndarray, shape (n, 6)
+    part : ndarray of int, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n, n_params)
+    """
     return screw_rows(np.ascontiguousarray(motion, dtype=float), np.asarray(part, dtype=np.intp),
                       np.ascontiguousarray(_screws(model, pose)), model.affects)
 
