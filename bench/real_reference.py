@@ -15,9 +15,9 @@ Per frame set (every ``--stride``-th frame):
    are undistorted to normalised image coordinates (``cv2.undistortPoints``) and triangulated by a
    linear DLT whose two rows per view are weighted by the visibility;
 3. reprojection check: the point is projected into each used view with the full camera model
-   (distortion included); while the worst view is more than ``--max-reproj-px`` off and more than
-   two views remain, that view is dropped and the point re-triangulated; a joint left with fewer
-   than two views or still off is left out (``null``) for that frame.
+   (distortion included); while a view is more than ``--max-reproj-px`` off and more than two views
+   remain, the view whose removal leaves the best-fitting subset (smallest worst error) is dropped;
+   a joint left with fewer than two views or still off is left out (``null``) for that frame.
 
 Joint mapping (BlazePose → contourcap): shoulders, elbows, wrists, hips, knees, ankles one to one;
 ``neck`` = mid-shoulders and ``head`` = mid-ears (approximate: reported apart).  BlazePose's hip
@@ -83,6 +83,7 @@ JOINT_LANDMARKS: dict[str, tuple[int, ...]] = {
     "left_ankle": (27,), "right_ankle": (28,),
 }
 JOINTS: tuple[str, ...] = tuple(JOINT_LANDMARKS)
+CACHE_VERSION = 2  # bump when the reference method changes (invalidates cached references)
 JUDGED: tuple[str, ...] = tuple(f"{s}_{j}" for j in ("shoulder", "elbow", "wrist", "knee", "ankle")
                                 for s in ("left", "right"))
 HIPS: tuple[str, ...] = ("left_hip", "right_hip")
@@ -162,19 +163,27 @@ def triangulate_joint(cameras: Sequence[Camera], uv: np.ndarray, vis: np.ndarray
     """
     use = [i for i in range(len(cameras)) if vis[i] >= min_visibility and np.all(np.isfinite(uv[i]))]
     xy = {i: undistort_normalised(cameras[i], uv[i])[0] for i in use}
-    while len(use) >= 2:
-        ext = np.stack([cameras[i].world2cam[:3] for i in use])
-        X = triangulate_dlt(ext, np.stack([xy[i] for i in use]), np.asarray([vis[i] for i in use]))
+
+    def solve(views):
+        ext = np.stack([cameras[i].world2cam[:3] for i in views])
+        X = triangulate_dlt(ext, np.stack([xy[i] for i in views]), np.asarray([vis[i] for i in views]))
         if not np.all(np.isfinite(X)):
-            break
-        depth = np.array([cameras[i].depth(X) for i in use])
-        err = np.array([np.linalg.norm(cameras[i].project(X) - uv[i]) for i in use])
-        err[depth <= 0] = np.inf
-        if err.max() <= max_reproj_px:
-            return X, use, float(err.mean())
-        if len(use) == 2:
-            break
-        use = [i for k, i in enumerate(use) if k != int(np.argmax(err))]
+            return X, np.full(len(views), np.inf)
+        err = np.array([np.linalg.norm(cameras[i].project(X) - uv[i]) for i in views])
+        err[np.array([cameras[i].depth(X) for i in views]) <= 0] = np.inf
+        return X, err
+
+    if len(use) < 2:
+        return np.full(3, np.nan), [], float("nan")
+    X, err = solve(use)
+    while err.max() > max_reproj_px and len(use) > 2:
+        # leave one view out: keep the subset whose worst view fits best
+        trials = [[i for i in use if i != k] for k in use]
+        solved = [solve(t) for t in trials]
+        best = int(np.argmin([e.max() for _, e in solved]))
+        use, (X, err) = trials[best], solved[best]
+    if err.max() <= max_reproj_px:
+        return X, use, float(err.mean())
     return np.full(3, np.nan), [], float("nan")
 
 
@@ -434,7 +443,7 @@ def make_sheet(session, reference: list[dict], poses: list[dict] | None, path: P
 # ---------------------------------------------------------------------------------- main
 def _cache_key(session, frames: range | None, stride: int, static: bool, min_vis: float, max_px: float) -> str:
     text = json.dumps([str(session.root.resolve()), None if frames is None else [frames.start, frames.stop],
-                       stride, static, min_vis, max_px, list(JOINTS)])
+                       stride, static, min_vis, max_px, list(JOINTS), CACHE_VERSION])
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 

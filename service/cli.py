@@ -28,6 +28,7 @@ COMMANDS = {
     "echo": "echo",
     "view": "view",
     "export": "export",
+    "review": "review",
 }
 
 
