@@ -475,8 +475,15 @@ def make_sheet(session, reference: list[dict], poses: list[dict] | None, path: P
     sheet = np.concatenate(tiles, axis=0)
     scale = min(1.0, width / sheet.shape[1])
     sheet = cv2.resize(sheet, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    legend = np.zeros((26, sheet.shape[1], 3), np.uint8)
+    x = 6
+    for text, colour in (("reference: left", _LEFT), ("right", _RIGHT), ("centre", _CENTRE),
+                         ("+ detector keypoints", (255, 255, 255)), ("contourcap joints", (255, 0, 255))):
+        cv2.putText(legend, text, (x, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv2.LINE_AA)
+        x += cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] + 18
+    sheet = np.concatenate([sheet, legend], axis=0)
     path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), sheet)
+    cv2.imwrite(str(path), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 6])
 
 
 # ---------------------------------------------------------------------------------- main
@@ -563,8 +570,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         st, tm = result["reference"], timing
         print(f"reference: {st['frames']} sets, median reprojection {st['median_reproj_px']} px "
               f"(p90 {st['p90_reproj_px']}), {st['mean_views']} views per joint; "
-              f"{tm['sets_per_s']:.2f} sets/s wall, {tm.get('sets_per_cpu_s') or float('nan'):.2f} per CPU s (detect {tm['detect_ms_per_set']:.0f} ms/set); "
-              f"machine_ref_ms {ref_ms:.1f}")
+              f"{tm['sets_per_s']:.2f} sets/s wall, {tm.get('sets_per_cpu_s') or float('nan'):.2f} per CPU s "
+              f"(detect {tm['detect_ms_per_set']:.0f} ms/set; machine_ref_ms {tm.get('machine_ref_ms')} when "
+              f"measured, {ref_ms:.1f} now)")
         if poses is not None:
             c = result["contourcap"]
             if track_timing is not None:
