@@ -61,3 +61,23 @@ def test_compare_groups_hips_apart(rr):
     assert res["judged_mean_mm"] == pytest.approx(100.0 / len(rr.JUDGED))
     assert res["hips_mean_mm"] == pytest.approx(25.0)
     assert res["ok_only_judged_mean_mm"] is None
+
+
+@pytest.mark.slow
+def test_reference_on_real_footage_is_consistent_across_views(rr, shared_data, tmp_path):
+    """uu_studio, 5 frame sets: every judged joint triangulated from >= 3 views, a few px reprojection."""
+    pytest.importorskip("mediapipe.python.solutions.pose", reason="the [eval] extra (mediapipe) is not installed")
+    from capture.session import load_session
+    from capture.uu_studio import import_uu_studio
+
+    out = tmp_path / "uu"
+    import_uu_studio(shared_data / "uu_studio", out)
+    records, timing = rr.build_reference(load_session(out), range(0, 5), 1, static=False, min_visibility=0.5,
+                                         max_reproj_px=12.0, progress=False)
+    assert len(records) == 5 and timing["sets"] == 5
+    stats = rr.reference_stats(records)
+    assert all(stats["coverage_percent"][j] == 100.0 for j in rr.JUDGED)
+    assert stats["mean_views"] >= 3.0 and stats["median_reproj_px"] < 3.0
+    for r in records:  # a seated subject: knees above the floor, ankles below the knees, head on top
+        z = {j: r["joints"][j][2] for j in rr.JOINTS if r["joints"][j] is not None}
+        assert 0.2 < z["left_knee"] < 0.8 and z["left_ankle"] < z["left_knee"] and z["head"] > z["neck"] > z["left_hip"]
