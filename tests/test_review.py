@@ -58,6 +58,19 @@ def test_video_and_sheet_from_the_cli(session_dir, tmp_path, capsys):
     img = cv2.imread(str(sheet))
     assert img is not None and 200 < img.shape[1] <= 1600
     assert f"reviewed {N_FRAMES} frames" in capsys.readouterr().out
+    part = tmp_path / "part.avi"
+    assert main(["review", str(session_dir), str(session_dir / "ground_truth.jsonl"), "--out", str(part),
+                 "--frames", "1:3", "--quiet"]) == 0
+    assert len(_read_video(part)) == 2 and _read_video(part)[0].shape == frames[0].shape
+
+
+def test_frames_without_a_record_are_kept_and_marked(session_dir, tmp_path):
+    recs = [r for r in _truth(session_dir) if r["frame"] != 2]
+    summary = write_review(load_session(session_dir), recs, video=tmp_path / "gap.avi", sheet=tmp_path / "gap.png",
+                           sheet_frames=2)
+    assert (summary.frames, summary.with_record) == (N_FRAMES, N_FRAMES - 1)
+    assert len(_read_video(tmp_path / "gap.avi")) == N_FRAMES
+    assert cv2.imread(str(tmp_path / "gap.png")) is not None
 
 
 def _nearest_palette(pixels: np.ndarray) -> np.ndarray:
