@@ -9,8 +9,9 @@ downloaded at run time (model complexity 2 would be, so it is not offered).
 
 Per frame set (every ``--stride``-th frame):
 
-1. per camera, 33 BlazePose landmarks in pixels with a visibility in [0, 1] (one detector per
-   camera, in video mode: it tracks its region of interest from the previous frame);
+1. per camera, 33 BlazePose landmarks in pixels with a visibility in [0, 1], every image detected
+   from scratch (``--video-mode``: one detector per camera tracks its region of interest from the
+   previous frame, faster but less consistent across views);
 2. per contourcap joint, the views whose visibility is at least ``--min-visibility``; keypoints
    are undistorted to normalised image coordinates (``cv2.undistortPoints``) and triangulated by a
    linear DLT whose two rows per view are weighted by the visibility;
@@ -505,7 +506,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--stride", type=int, default=1, help="use every k-th frame (default 1)")
     ap.add_argument("--min-visibility", type=float, default=0.5, help="detector visibility a view needs")
     ap.add_argument("--max-reproj-px", type=float, default=12.0, help="largest reprojection error of a kept view")
-    ap.add_argument("--static", action="store_true", help="detect every image from scratch (no ROI tracking)")
+    ap.add_argument("--video-mode", action="store_true",
+                    help="let each camera's detector track its region of interest from the previous frame "
+                         "(faster, less consistent; default: every image detected from scratch)")
     ap.add_argument("--all-cores", action="store_true", help="do not pin the process to one core")
     ap.add_argument("--recompute", action="store_true", help="ignore a cached reference.jsonl")
     ap.add_argument("--sheet-rows", type=int, default=3, help="frames on the sheet")
@@ -528,7 +531,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from machine_ref import machine_ref_ms
     ref_ms = machine_ref_ms()
-    key = _cache_key(session, frames, args.stride, args.static, args.min_visibility, args.max_reproj_px)
+    static = not args.video_mode
+    key = _cache_key(session, frames, args.stride, static, args.min_visibility, args.max_reproj_px)
     cache, meta_path = out / "reference.jsonl", out / "reference.meta.json"
     timing = None
     if not args.recompute and cache.exists() and meta_path.exists():
@@ -537,7 +541,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             reference, timing = read_jsonl(cache, "reference"), meta.get("timing")
             print(f"reference: cached {cache} ({len(reference)} sets)", file=sys.stderr)
     if timing is None:
-        reference, timing = build_reference(session, frames, args.stride, static=args.static,
+        reference, timing = build_reference(session, frames, args.stride, static=static,
                                             min_visibility=args.min_visibility, max_reproj_px=args.max_reproj_px)
         timing["machine_ref_ms"] = round(ref_ms, 2)
         timing["one_core"] = not args.all_cores
