@@ -14,7 +14,7 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -27,8 +27,7 @@ from tracker.model import BodyModel, available_models
 from tracker.offline import session_model
 from tracker.overlay import draw_contours, draw_skeleton, draw_text, resize_to_width, side_colours, tile_images
 
-__all__ = ["ReviewError", "load_records", "status_lines", "FrameOverlay", "ReviewSummary", "write_review",
-           "iter_review_frames"]
+__all__ = ["ReviewError", "load_records", "status_lines", "FrameOverlay", "ReviewSummary", "write_review"]
 
 
 class ReviewError(ValueError):
@@ -347,16 +346,3 @@ def _write_sheet(path: Path, overlay: FrameOverlay, kept: dict[int, tuple[dict, 
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 6]):
         raise ReviewError(f"{path}: cannot write the sheet (a .png path is expected)")
-
-
-def iter_review_frames(session: Session, records: Sequence[dict], *, names: bool = False
-                       ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
-    """``(frame_id, {camera: drawn image})`` for every session frame that has a record (full size,
-    no text): the drawing without the files, for tests and other front ends."""
-    overlay = FrameOverlay(session, names=names)
-    by_frame = {r["frame"]: r for r in records}
-    for r in by_frame.values():
-        overlay.check(r, f"frame {r['frame']}")
-    for fid, group in iter_frame_sets(session, frames=range(min(by_frame), max(by_frame) + 1)):
-        if fid in by_frame:
-            yield fid, overlay.draw({n: f.image for n, f in group.items()}, by_frame[fid])[0]
