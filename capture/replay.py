@@ -21,6 +21,10 @@ Pacing:
 (pass ``k`` adds ``k * (last_id - first_id + 1)`` to ids and
 ``k * (last_ts - first_ts + 1e9 / fps)`` to timestamps) so a synchroniser
 downstream never sees an id twice.
+
+``preload=True`` decodes the camera's footage into memory when opened and serves
+it from there (a stand-in for a camera that delivers decoded frames: decoding is
+then a cost of opening, not of reading).
 """
 
 from __future__ import annotations
@@ -143,6 +147,33 @@ class _Reader:
             self.capture = None
 
 
+class _Preloaded:
+    """A ``_Reader`` pass decoded into memory: the same ``next()`` / ``close()``, plus ``rewind()``."""
+
+    def __init__(self, reader: _Reader):
+        self.where = reader.where
+        self.items: list = []
+        try:
+            while (item := reader.next()) is not None:
+                self.items.append(item)
+        finally:
+            reader.close()
+        self.index = 0
+
+    def next(self):
+        if self.index >= len(self.items):
+            return None
+        self.index += 1
+        return self.items[self.index - 1]
+
+    def rewind(self) -> "_Preloaded":
+        self.index = 0
+        return self
+
+    def close(self):
+        self.items = []
+
+
 class _VideoChain:
     """Video segment files read back to back (one file = one segment).
 
@@ -220,6 +251,8 @@ class ReplaySource(SourceBase):
         Replay the camera's background media instead of its footage.
     step_timeout_s : float or None
         How long ``read()`` waits for ``step()`` in ``step`` pacing (None = forever).
+    preload : bool
+        Decode the footage into memory in ``open()`` and read from there.
     """
 
     def __init__(
@@ -234,6 +267,7 @@ class ReplaySource(SourceBase):
         frames: range | None = None,
         background: bool = False,
         step_timeout_s: float | None = None,
+        preload: bool = False,
     ):
         if pacing not in PACINGS:
             raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
@@ -249,7 +283,8 @@ class ReplaySource(SourceBase):
         self.frames = frames
         self.background = background
         self.step_timeout_s = step_timeout_s
-        self._reader: _Reader | None = None
+        self.preload = preload
+        self._reader: _Reader | _Preloaded | None = None
         self._ended = False
         self._pass = 0
         self._first: tuple[int, int] | None = None  # (frame_id, timestamp_ns) of a pass's first frame
@@ -261,8 +296,12 @@ class ReplaySource(SourceBase):
     def open(self) -> None:
         """Open the camera's media; raises ``OpenError`` naming the file."""
         self.close()
-        self._reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        self._reader = self._new_reader()
         self._ended = False
+
+    def _new_reader(self) -> _Reader | _Preloaded:
+        reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        return _Preloaded(reader) if self.preload else reader
 
     def close(self) -> None:
         if self._reader is not None:
@@ -279,8 +318,11 @@ class ReplaySource(SourceBase):
         item = self._reader.next()
         if item is not None or not self.loop or self._first is None:
             return item
-        self._reader.close()
-        self._reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        if isinstance(self._reader, _Preloaded):
+            self._reader.rewind()
+        else:
+            self._reader.close()
+            self._reader = self._new_reader()
         self._pass += 1
         return self._reader.next()
 

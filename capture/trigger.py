@@ -48,6 +48,7 @@ from __future__ import annotations
 import errno
 import math
 import struct
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Protocol
@@ -73,6 +74,7 @@ __all__ = [
     "Trigger",
     "TriggerBox",
     "SoftwareTrigger",
+    "start_trigger_box",
 ]
 
 VENDOR_ID = 0x1209
@@ -407,3 +409,61 @@ class SoftwareTrigger:
 
     def close(self) -> None:
         self._t0 = None
+
+
+def start_trigger_box(fps: float, *, stop: threading.Event, resync_s: float = 2.0,
+                      on_lost: Callable[[TriggerError], None] | None = None, backend=None,
+                      clock: Callable[[], int] | None = None) -> TriggerBox:
+    """Open the USB trigger box, run it at ``fps`` and keep its clock anchored.
+
+    The box is started, given two periods to pulse, and its clock anchored (``refresh``); a
+    daemon thread re-anchors it every ``resync_s`` until ``stop`` is set.  A box lost later
+    calls ``on_lost(error)`` and sets ``stop``.
+
+    Parameters
+    ----------
+    fps : float
+        Pulse rate (pulses per second).
+    stop : threading.Event
+        Ends the re-anchoring thread; set by it when the box is lost.
+    resync_s : float
+        Seconds between re-anchorings.
+    on_lost : callable (TriggerError) -> None, optional
+        Told why the box was lost (from the re-anchoring thread).
+    backend : pyusb backend, optional
+        For tests (a fake device).
+    clock : callable () -> int, optional
+        Host nanosecond clock the box's pulses are mapped to (default ``time.monotonic_ns``).
+
+    Returns
+    -------
+    TriggerBox
+        Running; the caller stops and closes it.
+
+    Raises
+    ------
+    TriggerError
+        The box is absent or failed to start; it is closed before this is raised.
+    """
+    box = TriggerBox.find(backend=backend, **({} if clock is None else {"clock": clock}))
+    try:
+        box.set_rate(fps)
+        box.start()
+        time.sleep(2.0 / fps)
+        box.refresh()
+    except BaseException:
+        box.close()  # the caller never sees this box: release the device here
+        raise
+
+    def resync() -> None:
+        while not stop.wait(resync_s):
+            try:
+                box.refresh()
+            except TriggerError as exc:
+                if on_lost is not None:
+                    on_lost(exc)
+                stop.set()
+                return
+
+    threading.Thread(target=resync, name="trigger-resync", daemon=True).start()
+    return box

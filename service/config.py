@@ -20,7 +20,7 @@
 
     [trigger]                         # optional USB trigger box
     backend = "none"                  # none | usb
-    fps = 50.0
+    fps = 50.0                        # default: the replay session's fps, else 30 (capture.studio)
 
     [tracker]
     host = "host-a"
@@ -49,12 +49,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from capture.sources import parse_source_specs
-from capture.tomlio import tomllib
+from capture.studio import DEFAULT_FPS, parse_studio_capture, read_studio_toml
 from service.wire.bus import MODES, ZenohSettings
 from service.wire.messages import ENCODINGS, check_name, MessageError
 
-BACKENDS = ("replay", "opencv")
 
 
 class ConfigError(ValueError):
@@ -77,7 +75,7 @@ class CameraConfig:
 @dataclass(frozen=True)
 class TriggerConfig:
     backend: str = "none"
-    fps: float = 50.0
+    fps: float = DEFAULT_FPS
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -194,35 +192,18 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     r.unknown(data, {"studio", "zenoh", "trigger", "tracker", "router", "camera"}, "")
     s = r.get(data, "studio", "", (dict,))
     r.unknown(s, {"name", "delivery", "session", "calibration", "model", "jpeg_quality"}, "studio")
-    cams_raw = r.get(data, "camera", "", (list,))
-    if not cams_raw:
-        raise r.err("camera", "at least one [[camera]] is needed")
-    cams, seen = [], set()
-    for i, c in enumerate(cams_raw):
+    r.get(data, "camera", "", (list,))
+    try:  # the capture part (cameras, session, trigger) is read as `contourcap record` reads it
+        cap = parse_studio_capture(data, where=where, base=base)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    cams = []
+    for i, (c, spec) in enumerate(zip(data["camera"], cap.cameras)):
         p = f"camera[{i}]"
-        if not isinstance(c, dict):
-            raise r.err(p, "expected a table")
-        r.unknown(c, {"name", "host", "backend", "source", "encoding", "width", "height", "fps", "exposure"}, p)
-        try:  # the capture keys are validated as `contourcap record` does, so one studio.toml serves both
-            (spec,) = parse_source_specs([{k: v for k, v in c.items() if k != "encoding"}], where=r.where)
-        except ValueError as exc:
-            raise ConfigError(str(exc)) from None
-        cam = CameraConfig(r.name(c, "name", p), r.name(c, "host", p),
-                           r.get(c, "backend", p, (str,), "replay", choices=BACKENDS),
-                           str(r.get(c, "source", p, (str, int), "")),
-                           r.get(c, "encoding", p, (str,), "raw", choices=ENCODINGS),
-                           width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure)
-        if cam.name in seen:
-            raise r.err(f"{p}.name", f"duplicate camera {cam.name!r}")
-        seen.add(cam.name)
-        cams.append(cam)
-    session = r.path(s, "session", "studio")
-    if session is None and any(c.backend == "replay" for c in cams):
-        raise r.err("studio.session", "replay cameras need a session directory")
-    t = r.get(data, "trigger", "", (dict,), {})
-    trigger = TriggerConfig(r.get(t, "backend", "trigger", (str,), "none", choices=("none", "usb")),
-                            float(r.get(t, "fps", "trigger", (int, float), 50.0)),
-                            {k: v for k, v in t.items() if k not in ("backend", "fps")})
+        cams.append(CameraConfig(r.name(c, "name", p), r.name(c, "host", p), spec.backend, str(spec.source),
+                                 r.get(c, "encoding", p, (str,), "raw", choices=ENCODINGS),
+                                 width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure))
+    trigger = TriggerConfig(cap.trigger, cap.fps, dict(cap.trigger_options))
     tr = r.get(data, "tracker", "", (dict,), {})
     r.unknown(tr, {"host", "set_timeout_ms", "window"}, "tracker")
     ro = r.get(data, "router", "", (dict,), None)
@@ -244,8 +225,7 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     return StudioConfig(
         path=Path(where) if base is not None else None, studio=r.name(s, "name", "studio"),
         delivery=r.get(s, "delivery", "studio", (str,), "live", choices=MODES),
-        session=Path(session) if session else None,
-        calibration=Path(c) if (c := r.path(s, "calibration", "studio")) else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
+        session=cap.session, calibration=cap.calibration, model=r.get(s, "model", "studio", (str,), "knossow40"),
         jpeg_quality=quality, zenoh=zen, trigger=trigger,
         tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
         router_host=r.name(ro, "host", "router") if ro is not None else None,
@@ -257,9 +237,7 @@ def load_config(path) -> StudioConfig:
     """Read and validate ``studio.toml``; ConfigError names the file and key."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+        data = read_studio_toml(path)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     return parse_config(data, where=str(path), base=path.resolve().parent)

@@ -16,14 +16,14 @@ import collections
 import threading
 from typing import Callable
 
-from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, _int, _unpack, check_name
+from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, meta_int, unpack_message, check_name
 
 
 def frame_header(data: bytes) -> tuple[str, int]:
     """``(camera, frame_id)`` of a FrameMessage's bytes: header, sizes and meta validated, the
     pixels left alone (they are validated by ``FrameMessage.from_bytes`` when demanded)."""
-    meta, _ = _unpack(data, TYPE_FRAME, MAX_BYTES)
-    return check_name(meta.get("camera")), _int(meta, "frame_id")
+    meta, _ = unpack_message(data, TYPE_FRAME, MAX_BYTES)
+    return check_name(meta.get("camera")), meta_int(meta, "frame_id")
 
 
 class FrameRing:

@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from service.wire.messages import MessageError, _float, _int, check_name, dumps_json, loads_json
+from service.wire.messages import MessageError, meta_float, meta_int, check_name, dumps_json, loads_json
 
 POSE_MAX_BYTES = 1024 * 1024
 STATUS_MAX_BYTES = 64 * 1024
@@ -56,8 +56,8 @@ class PoseRecord:
         if not isinstance(obj, Mapping):
             raise MessageError(f"pose: expected an object, got {type(obj).__name__}")
         obj = dict(obj)
-        frame = _int(obj, "frame")
-        ts = _int(obj, "timestamp_ns")
+        frame = meta_int(obj, "frame")
+        ts = meta_int(obj, "timestamp_ns")
         ok = obj.get("ok")
         if not isinstance(ok, bool):
             raise MessageError(f"ok: expected true/false, got {ok!r:.40}")
@@ -75,10 +75,10 @@ class PoseRecord:
                              for k, v in joints.items()}
         for key in ("rms_px", "latency_ms"):
             if obj.get(key) is not None:
-                obj[key] = _float(obj, key)
+                obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):
             if key in obj:
-                _int(obj, key)
+                meta_int(obj, key)
         return cls(frame, ts, ok, MappingProxyType(obj))
 
     @property
@@ -128,9 +128,9 @@ class StatusMessage:
         stats = obj.get("stats", {})
         if not isinstance(stats, dict) or len(stats) > 64:
             raise MessageError("stats: expected an object of at most 64 numbers")
-        stats = {check_name(k, "stat name"): _float(stats, k) for k in stats}
+        stats = {check_name(k, "stat name"): meta_float(stats, k) for k in stats}
         return cls(check_name(obj.get("component"), "component"), check_name(obj.get("state"), "state"),
-                   _int(obj, "timestamp_ns"), stats)
+                   meta_int(obj, "timestamp_ns"), stats)
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ class _ConsumerFrame:
     def from_bytes(cls, data: bytes, *, max_bytes: int = 4096):
         obj = loads_json(data, max_bytes=max_bytes, what=cls.WHAT)
         _check_version(obj, cls.WHAT)
-        return cls(check_name(obj.get("consumer"), "consumer"), _int(obj, "frame_id"))
+        return cls(check_name(obj.get("consumer"), "consumer"), meta_int(obj, "frame_id"))
 
 
 @dataclass(frozen=True)
@@ -196,4 +196,4 @@ class HaveMessage:
         frames = obj.get("frames")
         if not isinstance(frames, list) or len(frames) > HAVE_MAX_FRAMES:
             raise MessageError(f"frames: expected a list of at most {HAVE_MAX_FRAMES} frame ids")
-        return cls(check_name(obj.get("camera")), tuple(_int({"frames": f}, "frames") for f in frames))
+        return cls(check_name(obj.get("camera")), tuple(meta_int({"frames": f}, "frames") for f in frames))

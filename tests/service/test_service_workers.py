@@ -284,11 +284,9 @@ def test_free_running_cameras_share_frame_ids_across_processes_and_restarts(tmp_
 
 
 def test_preloaded_replay_serves_what_a_looping_replay_reads(tmp_path, rng):
-    from service.workers.runtime import PreloadedReplay
-
     session = make_session(tmp_path / "s", rng, n_frames=5)
     for loop in (True, False):
-        pre = PreloadedReplay(ReplaySource(session, "cam1"), fps=session.fps, loop=loop)
+        pre = ReplaySource(session, "cam1", loop=loop, preload=True)
         with pre, ReplaySource(session, "cam1", loop=loop) as ref:
             for _ in range(12 if loop else 5):
                 a, b = pre.read(), ref.read()
