@@ -148,12 +148,8 @@ def open_source(spec: SourceSpec, *, session: Session | None = None, clock: Call
     Returns
     -------
     ReplaySource or OpenCVSource
-        Enter it (``with``) or call ``open()`` before reading.
-
-    Raises
-    ------
-    OpenError
-        A replay camera without a session.
+        Enter it (``with``) or call ``open()`` before reading; ``OpenError`` for a replay camera
+        without a session.
     """
     clock = time.monotonic_ns if clock is None else clock
     if spec.backend == "replay":

@@ -41,16 +41,26 @@ import numpy as np
 from capture.session import Session, image_frame_ids, image_path, read_timestamps
 from capture.sources import EndOfStream, Frame, OpenError, SourceBase, SourceError, SourceTimeout
 
-__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "PACINGS"]
+__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "count_frames", "PACINGS"]
 
 PACINGS = ("fast", "realtime", "step")
 _IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm"}
 
 
 def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | None:
-    """``"START:STOP"`` (STOP excluded; either may be empty) -> ``range``; ``None``/``""`` -> ``None``.
+    """The frame ids of a ``--frames`` option.
 
-    Raises ``ValueError`` naming ``option`` on anything else.
+    Parameters
+    ----------
+    text : str or None
+        ``"START:STOP"`` (STOP excluded; either may be empty: from 0 / to the end).
+    option : str
+        Option name for the error message.
+
+    Returns
+    -------
+    range or None
+        None for ``None`` or ``""`` (every frame); ``ValueError`` naming ``option`` on anything else.
     """
     if not text:
         return None
@@ -65,6 +75,26 @@ def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | 
     if start < 0 or stop <= start:
         raise ValueError(f"{option}: need 0 <= START < STOP, got {text!r}")
     return range(start, stop)
+
+
+def count_frames(session: Session, camera: str, frames: range | None = None) -> int | None:
+    """How many frames ``read_frames(session, camera, frames=frames)`` will give, for progress and ETA.
+
+    Image sequences are counted exactly; videos by their containers' frame counts (summed over
+    segment files, clipped to ``frames``).  None when unknown (a container without a count).
+    """
+    cam = session.camera(camera)
+    if cam.images is not None:
+        ids = image_frame_ids(cam.images)
+        return int(sum(int(i) in frames for i in ids)) if frames is not None else int(ids.size)
+    total = 0
+    for path in cam.video_files:
+        cap = cv2.VideoCapture(str(path))
+        total += max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+        cap.release()
+    if frames is not None:
+        total = max(0, min(total, frames.stop) - max(frames.start, 0))
+    return total or None
 
 
 class _Reader:

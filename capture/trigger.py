@@ -438,12 +438,8 @@ def start_trigger_box(fps: float, *, stop: threading.Event, resync_s: float = 2.
     Returns
     -------
     TriggerBox
-        Running; the caller stops and closes it.
-
-    Raises
-    ------
-    TriggerError
-        The box is absent or failed to start; it is closed before this is raised.
+        Running; the caller stops and closes it.  ``TriggerError`` if the box is absent or fails
+        to start (it is closed first).
     """
     box = TriggerBox.find(backend=backend, **({} if clock is None else {"clock": clock}))
     try:

@@ -1,8 +1,8 @@
 """Track a recorded session in one process: background models → segmentation → tracker.
 
 The offline twin of the live pipeline (``contourcap track``).  Per camera a YUV background model
-is learned from the session's background video when it has one, else from the temporal median of
-up to ``median_frames`` session frames spread over the clip (the person must move); every frame is
+is learned by :func:`service.backgrounds.learn_background` (background media, else a temporal
+median of session frames); every frame is
 segmented with ``segmentation.pipeline.segment_frame`` and each frame set is fitted by
 ``tracker.fitting.tracking.Tracker``.  Yields one DESIGN.md pose record per frame id.
 """
@@ -15,11 +15,12 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from capture.replay import iter_frame_sets, read_frames
+from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
 from tracker.body.model import BodyModel, load_model
+from service.backgrounds import background_models
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
 __all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
@@ -38,32 +39,6 @@ def _check_cameras(session: Session, cameras: Sequence[str] | None) -> list[str]
     if not names:
         raise SessionError(f"{session.root}: no camera selected")
     return names
-
-
-def background_models(session: Session, cameras: Sequence[str], *, frames: range | None = None,
-                      median_frames: int = 25) -> tuple[dict[str, BackgroundModel], dict[str, str]]:
-    """One background model per camera and how each was made (``"video"`` or ``"median"``)."""
-    models, how = {}, {}
-    for name in cameras:
-        cam = session.camera(name)
-        if cam.background is not None:
-            models[name] = BackgroundModel.from_frames(f.image for f in read_frames(session, name, background=True))
-            how[name] = "video"
-            continue
-        # keep an evenly strided subset while reading (never the whole clip in memory)
-        images, stride = [], 1
-        for i, f in enumerate(read_frames(session, name, frames=frames)):
-            if i % stride == 0:
-                images.append(f.image)
-            if len(images) >= 2 * median_frames:
-                images, stride = images[::2], stride * 2
-        if len(images) < 3:
-            raise SessionError(f"{session.root}: camera {name!r} has no background video and only "
-                               f"{len(images)} frame(s), too few for a median background")
-        pick = np.unique(np.linspace(0, len(images) - 1, min(median_frames, len(images))).round().astype(int))
-        models[name] = BackgroundModel.from_median([images[i] for i in pick])
-        how[name] = "median"
-    return models, how
 
 
 def track_session(session: Session, *, model: str | BodyModel = "knossow40", sliding: bool = True,

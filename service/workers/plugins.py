@@ -37,7 +37,7 @@ def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str
 
     A plug-in factory ``f(camera) -> Segmenter``, else
     :class:`~service.workers.components.BackgroundSegmenter` with the session's background model as
-    ``service.offline`` builds it (replay cameras: so lossless replay gives the offline poses) or
+    ``service.backgrounds`` builds it (replay cameras: so lossless replay gives the offline poses) or
     learnt from the first frames (live cameras: the studio must be empty at start-up).
     """
     if plugin:
@@ -48,7 +48,7 @@ def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str
     replayed = [c for c in cameras if cfg.camera(c).backend == "replay"]
     models = {}
     if replayed:
-        from service.offline import background_models
+        from service.backgrounds import background_models
 
         models, _ = background_models(studio_session(cfg), replayed)
     return {c: BackgroundSegmenter(model=models.get(c)) for c in cameras}
