@@ -131,8 +131,8 @@ def parse_studio_capture(data: Mapping[str, Any], *, where: str = "<config>",
         if replay:
             try:
                 fps = load_session(session, require_calibration=False).fps
-            except SessionError as exc:
-                raise ValueError(f"{where}: studio.session: {exc}") from None
+            except SessionError as exc:  # names the session's file
+                raise ValueError(str(exc)) from None
     if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0:
         raise ValueError(f"{where}: trigger.fps: must be a positive number, got {fps!r}")
     name = studio.get("name", "studio")

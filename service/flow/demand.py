@@ -7,7 +7,7 @@ those notices — the newest id held by the most live cameras — and demands it
 ``demand/track``); segment workers decode and segment that frame only.  So every camera segments the
 same frame id (sets complete), the CPU goes to frames the tracker can take, and the tracker demands
 the next set before fitting the current one, so segmentation of one set overlaps the fit of the
-previous one.  No I/O here (clocks injected); the zenoh wiring is in :mod:`service.workers.loops.loops`.
+previous one.  No I/O here (clocks injected); the zenoh wiring is in :mod:`service.workers.segment` and :mod:`service.workers.track`.
 """
 
 from __future__ import annotations
