@@ -19,7 +19,7 @@ from typing import Callable
 
 import zenoh
 
-from service.flow.assembler import FrameSetAssembler
+from capture.sync import FrameSetAssembler
 from service.flow.demand import DemandPlanner
 from service.wire.bus import Inbox, Keys, StatusReporter, declare_publisher, wait_any
 from service.wire.messages import ChamferMessage, MessageError
@@ -79,10 +79,11 @@ class TrackWorker:
         self.planner = None if lossless else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
-        self.asm: FrameSetAssembler = (
-            FrameSetAssembler(cameras, mode=mode, absent_after_s=1.0,
-                              timeout_s=max(set_timeout_s, LOSSLESS_SET_TIMEOUT_S)) if lossless
-            else FrameSetAssembler(cameras, mode=mode, absent_after_s=absent_after_s, timeout_s=set_timeout_s))
+        # lossless: every camera is waited for (absent_after_s None); "cameras" reports those heard within 1 s
+        self.absent_after_s = 1.0 if lossless else absent_after_s
+        self.asm: FrameSetAssembler = FrameSetAssembler(
+            cameras, mode=mode, absent_after_s=None if lossless else absent_after_s,
+            timeout_s=max(set_timeout_s, LOSSLESS_SET_TIMEOUT_S) if lossless else set_timeout_s)
         self.pose_pub = declare_publisher(session, keys.pose, mode=mode)
         self.credit_pub = (declare_publisher(session, keys.credit(TRACK_CONSUMER), mode="lossless") if lossless
                            else None)
@@ -96,7 +97,7 @@ class TrackWorker:
         asm, inbox = self.asm, self.inbox
         out = {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
                "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
-               "cameras": len(asm.present(self.clock()))}
+               "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
             out.update(bad=inbox.bad + self.haves.bad, demands=self.planner.demands,
                        demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
