@@ -9,8 +9,8 @@
 3. This process is the hub and the client: it records every pose (``poses.jsonl``), bridges poses,
    images and silhouettes to rerun (``demo.rrd``) and exports ``poses.bvh``.  Lossless, it taps
    every camera's frames; live, only the first ``live_image_cameras`` cameras' (a tap decodes every
-   frame of its cameras in this process: all six at 800x600 cost ~24 % of a core beside the
-   pipeline), every ``image_every``-th frame logged.  Silhouettes (small chamfer images) and poses
+   frame of its cameras in this process, which competes with the pipeline: docs/tuning.md), every
+   ``image_every``-th frame logged.  Silhouettes (small chamfer images) and poses
    of every camera, always.
 4. The summary: frames, ``fps_out`` (between the first and the last pose: a burst after a slow start
    reads as real time), ``poses_per_s`` (live: poses over the replay window), latency p50/p99, median
