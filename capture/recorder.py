@@ -68,17 +68,36 @@ class DiskFullError(RecorderError):
 
 @dataclass(frozen=True)
 class CameraRecording:
+    """What one camera stored.
+
+    Attributes
+    ----------
+    name : str
+    frames : int
+        Frames stored.
+    first_frame_id, last_frame_id : int or None
+        Ids of the first and last stored frame (None: nothing stored).
+    dropped : int
+        Gaps in frame ids between the first and last stored frame.
+    rejected : int
+        Frames whose id was not above the previous one (not stored).
+    error : str or None
+        Why this camera's source stopped early.
+    """
+
     name: str
     frames: int
     first_frame_id: int | None
     last_frame_id: int | None
-    dropped: int  # gaps in frame ids between the first and last stored frame
-    rejected: int  # frames whose id was not above the previous one (not stored)
-    error: str | None = None  # why this camera's source stopped early
+    dropped: int
+    rejected: int
+    error: str | None = None
 
 
 @dataclass(frozen=True)
 class RecordingSummary:
+    """The session directory written and each camera's :class:`CameraRecording`."""
+
     root: Path
     cameras: tuple[CameraRecording, ...]
 
@@ -311,6 +330,21 @@ def record(sources: Sequence, recorder: Recorder, *, max_frames: int | None = No
 
     A source that fails (``StreamLostError`` …) stops alone and is named in
     its ``CameraRecording.error``; a recorder failure stops all and is raised.
+
+    Parameters
+    ----------
+    sources : sequence of Source
+        Not yet opened; each is entered on its thread.
+    recorder : Recorder
+        Closed at the end.
+    max_frames : int, optional
+        Frames per camera.
+    stop : threading.Event, optional
+        Set to end the recording (also set by a recorder failure).
+
+    Returns
+    -------
+    RecordingSummary
     """
     stop = threading.Event() if stop is None else stop
     errors: dict[str, str] = {}

@@ -122,6 +122,8 @@ class TriggerProtocolError(TriggerError):
 
 @dataclass(frozen=True)
 class TriggerInfo:
+    """What a box says about itself: protocol version, firmware (major, minor), output count, serial."""
+
     protocol: int
     firmware: tuple[int, int]
     outputs: int
@@ -293,12 +295,15 @@ class TriggerBox:
         self.period_us = period
 
     def start(self) -> None:
+        """Start pulsing (free-running) and reset the pulse counter."""
         self._out(Request.START, b"", "START")
 
     def stop(self) -> None:
+        """Stop pulsing."""
         self._out(Request.STOP, b"", "STOP")
 
     def arm(self, n_pulses: int) -> None:
+        """Emit exactly ``n_pulses`` pulses at the set rate, then stop."""
         if not 1 <= int(n_pulses) < 2**32:
             raise ValueError(f"n_pulses must be in [1, 2**32), got {n_pulses}")
         self._out(Request.ARM, struct.pack(ARM_FMT, int(n_pulses)), "ARM")

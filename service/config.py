@@ -61,12 +61,31 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True)
 class CameraConfig:
+    """One ``[[camera]]`` of the studio (the capture keys as ``capture.backends.SourceSpec`` reads them).
+
+    Attributes
+    ----------
+    name, host : str
+        Camera name; the host it is plugged into.
+    backend : {"replay", "opencv"}
+    source : str
+        opencv: device index, device path or video file; replay: unused.
+    encoding : {"raw", "jpeg", "png"}
+        Frame encoding on the wire.
+    width, height : int or None
+        opencv: requested capture size (pixels).
+    fps : float or None
+        opencv: requested rate (frames per second; default ``[trigger] fps``).
+    exposure : float or None
+        opencv: requested exposure (driver units).
+    """
+
     name: str
     host: str
     backend: str = "replay"
     source: str = ""
     encoding: str = "raw"
-    width: int | None = None       # opencv: requested capture size and exposure (capture.sources keys)
+    width: int | None = None
     height: int | None = None
     fps: float | None = None
     exposure: float | None = None
@@ -74,6 +93,9 @@ class CameraConfig:
 
 @dataclass(frozen=True)
 class TriggerConfig:
+    """``[trigger]``: ``backend`` ("none" or "usb"), ``fps`` (frames per second, see
+    ``capture.studio.StudioCapture.fps``) and the other keys as ``options``."""
+
     backend: str = "none"
     fps: float = DEFAULT_FPS
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -81,6 +103,34 @@ class TriggerConfig:
 
 @dataclass(frozen=True)
 class StudioConfig:
+    """A validated ``studio.toml`` (the keys are in the module docstring).
+
+    Attributes
+    ----------
+    path : Path or None
+        The file (None when parsed from a mapping without a base folder).
+    studio : str
+        Studio name, the zenoh key prefix.
+    delivery : {"live", "lossless"}
+    session, calibration : Path or None
+        Replay session; calibration file (None: the session's).
+    model : str
+        Body model name or file.
+    jpeg_quality : int
+        1..100, for ``encoding = "jpeg"`` cameras.
+    zenoh : ZenohSettings
+    trigger : TriggerConfig
+    tracker_host : str
+    set_timeout_ms : float
+        Live: how long a frame set waits for missing cameras (milliseconds).
+    window : int
+        Lossless: frames in flight before the cameras wait.
+    router_host : str or None
+    router : ZenohSettings or None
+        ``[router]``, when this studio runs its own.
+    cameras : tuple of CameraConfig
+    """
+
     path: Path | None
     studio: str
     delivery: str
@@ -99,13 +149,16 @@ class StudioConfig:
 
     @property
     def hosts(self) -> tuple[str, ...]:
+        """Every host named in the config (cameras, tracker, router), first mention first."""
         hs = [c.host for c in self.cameras] + [self.tracker_host] + ([self.router_host] if self.router_host else [])
         return tuple(dict.fromkeys(hs))
 
     def cameras_on(self, host: str) -> tuple[CameraConfig, ...]:
+        """The cameras plugged into ``host``."""
         return tuple(c for c in self.cameras if c.host == host)
 
     def camera(self, name: str) -> CameraConfig:
+        """The camera called ``name``; ``ConfigError`` if there is none."""
         for c in self.cameras:
             if c.name == name:
                 return c
@@ -187,7 +240,22 @@ def _zenoh(r: _Reader, z: Mapping) -> ZenohSettings:
 
 
 def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path | None = None) -> StudioConfig:
-    """Validate a parsed studio TOML; relative paths are resolved against ``base``."""
+    """Validate a parsed studio TOML.
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed file.
+    where : str
+        File name for the error messages.
+    base : Path, optional
+        Folder relative paths are resolved against (the file's); None leaves them relative.
+
+    Returns
+    -------
+    StudioConfig
+        ``ConfigError`` naming the file and key if a key is missing, unknown or invalid.
+    """
     r = _Reader(where, base)
     r.unknown(data, {"studio", "zenoh", "trigger", "tracker", "router", "camera"}, "")
     s = r.get(data, "studio", "", (dict,))

@@ -19,8 +19,8 @@ from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
-from tracker.body.model import BodyModel, load_model
 from service.backgrounds import background_models
+from tracker.body.model import BodyModel, load_model
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
 __all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
@@ -47,11 +47,31 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
                   clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
-    """Pose records (dicts) for every frame set of ``session`` in frame-id order.
+    """Pose records for every frame set of ``session``, in frame-id order.
 
-    ``frames``: range of frame ids (None: all); ``cameras``: names to use (None: all);
-    ``initial_params``: start pose (n_params,), else automatic initialisation
-    (``tracker.search.initialise``) on the first frame.  ``backgrounds`` skips learning them.
+    Parameters
+    ----------
+    session : Session
+    model : str or BodyModel
+        Body model (a name is sized by the session's subject).
+    sliding, solver, options
+        Tracker settings (``tracker.fitting.tracking.Tracker``).
+    frames : range or None
+        Frame ids (None: all).
+    cameras : sequence of str or None
+        Camera names (None: all).
+    initial_params : ndarray, shape (n_params,), optional
+        Start pose; else automatic initialisation on the first frame.
+    segmentation : SegmentationParams, optional
+    backgrounds : dict, optional
+        Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
+    clock : callable () -> float
+        Seconds, for the tracker's timings.
+
+    Yields
+    ------
+    dict
+        A DESIGN.md pose record per frame id.
     """
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
@@ -80,10 +100,12 @@ class TrackSummary:
     fps: float
 
     def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict (NaN as None)."""
         return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.__dict__.items()}
 
 
 def summarise(records: Sequence[dict], elapsed_s: float) -> TrackSummary:
+    """Counts and medians of pose records (``ok``, ``iterations``, ``rms_px`` keys) tracked in ``elapsed_s`` seconds."""
     ok = [r for r in records if r.get("ok")]
     its = [r["iterations"] for r in ok]
     rms = [r["rms_px"] for r in ok if r.get("rms_px") is not None]

@@ -278,12 +278,14 @@ class FrameMessage:
         return img
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         meta = {"camera": self.camera, "frame_id": self.frame_id, "timestamp_ns": self.timestamp_ns,
                 "encoding": self.encoding, "shape": list(self.shape), "dtype": self.dtype}
         return pack_message(TYPE_FRAME, meta, self.data)
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = MAX_BYTES) -> "FrameMessage":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         meta, payload = unpack_message(data, TYPE_FRAME, max_bytes)
         camera = check_name(meta.get("camera"))
         encoding = meta.get("encoding")
@@ -332,12 +334,14 @@ class ChamferMessage:
         object.__setattr__(self, "attrs", MappingProxyType(dict(self.attrs)))
 
     def array(self, name: str) -> np.ndarray:
+        """The read-only array called ``name`` (e.g. ``"silhouette"``, shape (h, w) of the ROI); KeyError if absent."""
         for n, a in self.arrays:
             if n == name:
                 return a
         raise KeyError(f"camera {self.camera}: no array {name!r} (have {[n for n, _ in self.arrays]})")
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         specs, chunks = [], []
         for name, arr in self.arrays:
             if arr.dtype.name not in DTYPES or arr.ndim != 2:
@@ -352,6 +356,7 @@ class ChamferMessage:
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = MAX_BYTES) -> "ChamferMessage":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         meta, payload = unpack_message(data, TYPE_CHAMFER, max_bytes)
         camera = check_name(meta.get("camera"))
         w, h = _shape(meta.get("image_size"), "image_size", (2,))

@@ -87,6 +87,7 @@ class PoseRecord:
         return {k: np.asarray(v, float) for k, v in self.fields.get("joints", {}).items()}
 
     def get(self, key: str, default: Any = None) -> Any:
+        """Field ``key`` of the record, or ``default``."""
         return self.fields.get(key, default)
 
     def replace(self, **updates: Any) -> "PoseRecord":
@@ -94,13 +95,16 @@ class PoseRecord:
         return PoseRecord.from_dict({**self.fields, **updates})
 
     def to_dict(self) -> dict[str, Any]:
+        """The record as a plain dict (a copy)."""
         return dict(self.fields)
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json(dict(self.fields))
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = POSE_MAX_BYTES) -> "PoseRecord":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         return cls.from_dict(loads_json(data, max_bytes=max_bytes, what="pose"))
 
 
@@ -118,11 +122,13 @@ class StatusMessage:
         object.__setattr__(self, "stats", MappingProxyType(dict(self.stats)))
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "component": self.component, "state": self.state,
                            "timestamp_ns": self.timestamp_ns, "stats": dict(self.stats)})
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = STATUS_MAX_BYTES) -> "StatusMessage":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         obj = loads_json(data, max_bytes=max_bytes, what="status")
         _check_version(obj, "status")
         stats = obj.get("stats", {})
@@ -143,6 +149,7 @@ class _ConsumerFrame:
     WHAT = "record"
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "consumer": self.consumer, "frame_id": self.frame_id})
 
     @classmethod
@@ -187,6 +194,7 @@ class HaveMessage:
         return max(self.frame_ids) if self.frame_ids else None
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "camera": self.camera, "frames": list(self.frame_ids)})
 
     @classmethod
