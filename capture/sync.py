@@ -104,9 +104,12 @@ class FrameSetAssembler(Generic[T]):
     mode : {"live", "lossless"}
         Newest wins, or every set in frame-id order.
     timeout_s : float
-        How long a set waits for present cameras after its first item (the caller's clock units).
+        How long a set waits for present cameras after its first item.
     absent_after_s : float or None
         Silence after which a camera is absent (None: never).
+
+    Times are seconds for the service's monotonic clock, but no unit is assumed: any clock works
+    if every time given (``now_s`` too) uses it (:class:`FrameSynchronizer` uses nanoseconds).
     restart_gap : int
         ``live``: an id this far below a camera's newest is a restarted numbering.
     max_pending : int
@@ -333,6 +336,7 @@ class FrameSynchronizer:
             raise ValueError(f"timeout_ns must be positive, got {timeout_ns}")
         self.timeout_ns = int(timeout_ns)
         self.stop_after_ns = int(4 * timeout_ns if stop_after_ns is None else stop_after_ns)
+        # the assembler's clock is unit-free: nanoseconds here (integers: exact timeouts)
         self._asm: FrameSetAssembler[Frame] = FrameSetAssembler(
             cameras, mode="lossless", timeout_s=self.timeout_ns, absent_after_s=self.stop_after_ns,
             max_pending=max_pending)
