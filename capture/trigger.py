@@ -366,12 +366,15 @@ class SoftwareTrigger:
         self.info = TriggerInfo(PROTOCOL_VERSION, (0, 0), 0, "software")
 
     def set_rate(self, fps: float, *, pulse_width_us: int | None = None) -> None:
+        """Pulse rate (frames per second); the width is ignored."""
         self.period_us = _period_us(fps)
 
     def start(self) -> None:
+        """Count pulses from now on the injected clock."""
         self._t0, self._limit, self._stopped_count = self._clock(), None, None
 
     def arm(self, n_pulses: int) -> None:
+        """Start, and stop counting after ``n_pulses`` pulses."""
         if not 1 <= int(n_pulses) < 2**32:
             raise ValueError(f"n_pulses must be in [1, 2**32), got {n_pulses}")
         self.start()
@@ -408,6 +411,7 @@ class SoftwareTrigger:
         return c.last_frame_id, self._t0 + c.last_frame_id * self.period_us * 1000
 
     def frame_id_at(self, timestamp_ns: int, *, latency_ns: int = 0) -> int:
+        """Id of the latest pulse at or before ``timestamp_ns - latency_ns`` (clock ns)."""
         if self._t0 is None:
             raise TriggerError("software trigger: frame_id_at before start()")
         return max(int((timestamp_ns - latency_ns - self._t0) // (self.period_us * 1000)), 0)

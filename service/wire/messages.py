@@ -248,7 +248,23 @@ class FrameMessage:
     @classmethod
     def from_image(cls, camera: str, frame_id: int, timestamp_ns: int, image: np.ndarray, *,
                    encoding: str = "raw", jpeg_quality: int = 90) -> "FrameMessage":
-        """Encode ``image`` (h, w) or (h, w, 3) uint8/uint16 as raw, JPEG or PNG."""
+        """A frame message of one camera image.
+
+        Parameters
+        ----------
+        camera : str
+            Camera name (a short safe name).
+        frame_id : int
+            Trigger pulse number.
+        timestamp_ns : int
+            Capture time (ns).
+        image : ndarray, shape (h, w) or (h, w, 3), uint8 or uint16
+            BGR for colour.
+        encoding : {"raw", "jpeg", "png"}
+            ``raw`` sends the pixels as they are (little-endian).
+        jpeg_quality : int
+            1..100 for ``jpeg``.
+        """
         image = np.ascontiguousarray(image)
         if encoding == "raw":
             data = image.astype(image.dtype.newbyteorder("<"), copy=False).tobytes()
