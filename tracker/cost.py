@@ -47,8 +47,8 @@ import numpy as np
 
 from capture.camera import Camera, stack_cameras
 from tracker.contours import Contours, extremal_contours
-from tracker.jacobian import apply_screws, contour_image_motion
-from tracker.kernels import nearest_rows, sample_chamfer
+from tracker.jacobian import contour_image_motion
+from tracker.kernels import assemble, nearest_rows, sample_chamfer
 from tracker.kinematics import Pose, forward
 from tracker.model import BodyModel
 from tracker.visibility import covered_rays, hidden_points
@@ -56,6 +56,9 @@ from tracker.visibility import covered_rays, hidden_points
 __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+# placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
+_NO_MOTION, _NO_SCREWS = np.zeros((0, 2, 6)), np.zeros((6, 0))
+_NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
 
 
 def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
@@ -390,43 +393,20 @@ class ChamferCost:
             self._cache = (params.copy(), pose, contours, used, d, grad, rev, fresh)
             self.n_evaluations += 1
         urows = np.flatnonzero(used)
-        if compact:
-            # a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
-            # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations
-            keep = (d[urows] != 0.0) | (grad[urows] != 0.0).any(axis=2)  # (n_used, 2)
-            r = d[urows][keep]
-        else:
-            r = d.ravel()
-        if rev is not None:
-            rkeep = rev[0] != 0.0 if compact else slice(None)  # a matched sample has r > 0
-            r = np.concatenate([r, rev[0][rkeep]])
-        J = None
+        # compact: a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
+        # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations.
+        # Residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and reverse
+        # directions are applied there, then the parts' screws (tracker.kernels.assemble)
         if jacobian:
-            # residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and
-            # reverse directions are applied there, then one product with the parts' screws
-            n_p = self.model.n_params
             Mx = contour_image_motion(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            Mu = grad[urows] @ Mx  # (n_used, 2, 2) @ (n_used, 2, 6)
-            part = contours.part[urows]
-            Mr = rp = None
-            if rev is not None:
-                _, match, unit, _ = rev
-                m = match >= 0
-                pos = np.searchsorted(urows, match[m])  # matched rows are used rows
-                Mr = np.zeros((self.n_reverse, 6))
-                Mr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Mx[pos])[:, 0]
-                rp = np.zeros(self.n_reverse, dtype=part.dtype)
-                rp[m] = part[pos]
-            if compact:
-                rows6 = [Mu[keep]] + ([] if Mr is None else [Mr[rkeep]])
-                parts = [np.broadcast_to(part[:, None], keep.shape)[keep]] + ([] if rp is None else [rp[rkeep]])
-                J = apply_screws(self.model, pose, np.concatenate(rows6), np.concatenate(parts))
-            else:
-                J = np.zeros((contours.n_points, 2, n_p))
-                J[urows] = apply_screws(self.model, pose, Mu.reshape(-1, 6), np.repeat(part, 2)).reshape(-1, 2, n_p)
-                J = J.reshape(-1, n_p)
-                if Mr is not None:
-                    J = np.concatenate([J, apply_screws(self.model, pose, Mr, rp)])
+            screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
+        else:
+            Mx, screws = _NO_MOTION, _NO_SCREWS
+        rev_r, match, unit = (rev[0], rev[1], rev[2]) if rev is not None else (_NO_REV, _NO_MATCH, _NO_UNIT)
+        r, J = assemble(d, grad, urows, rev_r, bool(compact), bool(jacobian), Mx, contours.part, match, unit,
+                        self.reverse_weight, screws, self.model.affects)
+        if not jacobian:
+            J = None
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):

@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_chamfer", "forward_kinematics",
-           "screw_rows", "image_motion"]
+           "screw_rows", "image_motion",
+           "contour_points", "ruling_angles", "projection_jacobians", "assemble"]
 
 _Q_TOL = 1e-9  # tracker.visibility: a point exactly on another part's surface is not hidden
 _AHEAD = 1e-9  # smallest camera depth of a point (or a ray's direction) counted as in front
@@ -599,3 +600,78 @@ def projection_jacobians(cam_R, cam_t, intr, dist, points, cam):
             JI[i, 0, j] = a0 * cam_R[c, 0, j] + a1 * cam_R[c, 1, j] + a2 * cam_R[c, 2, j]
             JI[i, 1, j] = b0 * cam_R[c, 0, j] + b1 * cam_R[c, 1, j] + b2 * cam_R[c, 2, j]
     return JI
+
+
+@njit(cache=True, inline="always")
+def _screw_row(motion, p, screws, affects, J, out):
+    """``J[out, k] = motion · screws[:, k]`` for the parameters k that move part p."""
+    for k in range(screws.shape[1]):
+        if affects[p, k]:
+            J[out, k] = (motion[0] * screws[0, k] + motion[1] * screws[1, k] + motion[2] * screws[2, k]
+                         + motion[3] * screws[3, k] + motion[4] * screws[4, k] + motion[5] * screws[5, k])
+
+
+@njit(cache=True)
+def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, weight, screws, affects):
+    """Residual vector and Jacobian of ``tracker.cost.ChamferCost.evaluate`` (its module docstring
+    gives the layout).
+
+    d (N, 2), grad (N, 2, 2) sampled distances and gradients of the contour rows; urows (n,)
+    the used rows (sorted); rev_r (K,) reverse residuals; ``compact``: keep only used rows' and
+    reverse samples' residuals that are non-zero or have a non-zero gradient (else the fixed
+    layout, 2 N + K).  With ``jacobian``: Mx (n, 2, 6) image motion of the used rows, part (N,),
+    match (K,) matched contour row (-1: none), unit (K, 2) directions, ``weight`` the reverse
+    weight, screws (6, n_params), affects (n_parts, n_params) bool; each row is its per-screw
+    motion (gradient · Mx, or -weight · unit · Mx) times its part's parameter screws."""
+    N, n, K = d.shape[0], urows.size, rev_r.size
+    n_params = screws.shape[1]
+    keep = np.ones((n, 2), dtype=np.bool_)
+    n_fwd = 0
+    for j in range(n):
+        i = urows[j]
+        for s in range(2):
+            if compact:
+                keep[j, s] = d[i, s] != 0.0 or grad[i, s, 0] != 0.0 or grad[i, s, 1] != 0.0
+            n_fwd += keep[j, s]
+    n_rev = 0
+    for k in range(K):
+        if not compact or rev_r[k] != 0.0:  # a matched sample has r > 0
+            n_rev += 1
+    m_rows = (n_fwd if compact else 2 * N) + n_rev
+    r = np.zeros(m_rows)
+    J = np.zeros((m_rows if jacobian else 0, n_params))
+    motion = np.empty(6)
+    row = 0
+    for j in range(n):
+        i = urows[j]
+        for s in range(2):
+            if not keep[j, s]:
+                continue
+            out = row if compact else 2 * i + s
+            r[out] = d[i, s]
+            if jacobian:
+                for q in range(6):
+                    motion[q] = grad[i, s, 0] * Mx[j, 0, q] + grad[i, s, 1] * Mx[j, 1, q]
+                _screw_row(motion, part[i], screws, affects, J, out)
+            row += 1
+    if not compact:
+        for i in range(N):  # unused rows: their residuals (0), no gradient
+            r[2 * i], r[2 * i + 1] = d[i, 0], d[i, 1]
+    base = n_fwd if compact else 2 * N
+    row = 0
+    pos = np.full(N, -1, dtype=np.intp)
+    if jacobian:
+        for j in range(n):
+            pos[urows[j]] = j
+    for k in range(K):
+        if compact and rev_r[k] == 0.0:
+            continue
+        out = base + row
+        r[out] = rev_r[k]
+        if jacobian and match[k] >= 0:
+            jm = pos[match[k]]  # matched rows are used rows
+            for q in range(6):
+                motion[q] = -weight * (unit[k, 0] * Mx[jm, 0, q] + unit[k, 1] * Mx[jm, 1, q])
+            _screw_row(motion, part[match[k]], screws, affects, J, out)
+        row += 1
+    return r, J
