@@ -117,19 +117,23 @@ class _StackedChamfer:
         return d[:, 0], grad[:, 0], d[:, 1], grad[:, 1]
 
     def sample_rows(self, uv: np.ndarray, cam: np.ndarray, rows: np.ndarray, *, truncate_px: float | None = None,
-                    edge_weight: float = 1.0):
+                    edge_weight: float = 1.0, out=None):
         """Distances (n, 2) (silhouette, edge) and gradients (n, 2, 2) at rows ``rows`` (n,) of
         ``uv`` (N, 2), ``cam`` (N,); distances above ``truncate_px`` clipped with zero gradient,
-        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``)."""
+        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``).  With
+        ``out = (d (N, 2), grad (N, 2, 2))`` they are written to rows ``rows`` of those instead."""
         rows = np.asarray(rows, dtype=np.intp)
         cr = np.asarray(cam)[rows]
-        order = None
+        if out is None:
+            d, grad = np.empty((rows.size, 2)), np.empty((rows.size, 2, 2))
+            dest = np.arange(rows.size)
+        else:
+            d, grad = out
+            dest = rows
         if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
             order = np.argsort(cr, kind="stable")
-            rows, cr = rows[order], cr[order]
+            rows, cr, dest = rows[order], cr[order], dest[order]
         bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
-        d = np.empty((rows.size, 2))
-        grad = np.empty((rows.size, 2, 2))
         uv = np.ascontiguousarray(uv, dtype=float)
         trunc = np.inf if truncate_px is None else float(truncate_px)
         for c, ch in enumerate(self.chamfer):
@@ -138,11 +142,7 @@ class _StackedChamfer:
                 sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
                 sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
                                float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
-                               float(edge_weight), d[b0:b1], grad[b0:b1])
-        if order is not None:
-            inv = np.empty_like(order)
-            inv[order] = np.arange(order.size)
-            d, grad = d[inv], grad[inv]
+                               float(edge_weight), d, grad, dest[b0:b1])
         return d, grad
 
 
@@ -288,7 +288,11 @@ class ChamferCost:
         d = np.zeros((N, 2))
         grad = np.zeros((N, 2, 2))
         rows = np.flatnonzero(used)
-        d[rows], grad[rows] = self._sample_rows(contours, rows)
+        if self._stacked is not None:
+            self._stacked.sample_rows(contours.uv, contours.cam, rows, truncate_px=self.truncate_px,
+                                      edge_weight=self.edge_weight, out=(d, grad))
+        else:
+            d[rows], grad[rows] = self._sample_rows(contours, rows)
         return d, grad
 
     def _sample_rows(self, contours: Contours, rows: np.ndarray):

@@ -269,11 +269,11 @@ def nearest_rows(samples, sample_cam, uv, used, per_cam):
 
 
 @njit(cache=True)
-def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, truncate, edge_weight, d, grad):
+def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, truncate, edge_weight, d, grad, dest):
     """Bilinear distances and gradients of one camera's quantised chamfer images
     (``segmentation.distance.ChamferImages.sample``: pixel centres at integer (u, v), the arrays
     extended with the truncation code ``fill``) at rows ``rows`` (n,) of ``uv`` (N, 2), written to
-    ``d`` (n, 2) (silhouette, edge) and ``grad`` (n, 2, 2), pixels.
+    rows ``dest`` (n,) of ``d`` (., 2) (silhouette, edge) and ``grad`` (., 2, 2), pixels.
 
     sil, edge (h, w) codes stored at ``offset_x, offset_y`` of the image; ``resolution`` pixels
     per code.  Distances above ``truncate`` are clipped to it with zero gradient; the edge
@@ -304,9 +304,10 @@ def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, tr
             if value > truncate:
                 value, gx, gy = truncate, 0.0, 0.0
             wgt = 1.0 if img == 0 else edge_weight
-            d[j, img] = value * wgt
-            grad[j, img, 0] = gx * wgt
-            grad[j, img, 1] = gy * wgt
+            o = dest[j]
+            d[o, img] = value * wgt
+            grad[o, img, 0] = gx * wgt
+            grad[o, img, 1] = gy * wgt
 
 
 @njit(cache=True, inline="always")
