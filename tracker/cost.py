@@ -48,10 +48,10 @@ import numpy as np
 from capture.camera import Camera, stack_cameras
 from tracker.contours import Contours, extremal_contours
 from tracker.jacobian import contour_image_motion
-from tracker.kernels import assemble, nearest_rows, sample_chamfer
+from tracker.kernels import assemble, reverse_terms, sample_chamfer
 from tracker.kinematics import Pose, forward
 from tracker.model import BodyModel
-from tracker.visibility import covered_rays, hidden_points
+from tracker.visibility import hidden_points
 
 __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
@@ -59,6 +59,7 @@ _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 # placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
 _NO_MOTION, _NO_SCREWS = np.zeros((0, 2, 6)), np.zeros((6, 0))
 _NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+_RAY_RANGE_M = 50.0  # boundary-sample rays are followed this far (tracker.visibility.covered_rays)
 
 
 def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
@@ -273,6 +274,8 @@ class ChamferCost:
         self._boundary_cam = np.repeat(np.arange(len(self.boundary)), [len(b) for b in self.boundary])
         self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
         self._rays = _pixel_rays(cameras, self.boundary) if self.reverse_cover_px is not None else None
+        self._ray_dirs = self._rays[0] if self._rays is not None else np.zeros((self.n_reverse, 3))
+        self._focal = np.array([c.matrix[0, 0] for c in cameras], dtype=float)
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
@@ -320,41 +323,19 @@ class ChamferCost:
 
     def _reverse(self, pose: Pose, contours: Contours, used: np.ndarray):
         """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)
-        (0 for a sample on the predicted silhouette)."""
-        per_cam = contours.n_points // max(len(self.cameras), 1)
-        # matched contour row of each boundary sample (-1: its camera has no used row)
-        nearest = nearest_rows(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam)
-        has = nearest >= 0
-        diff = self._boundary_all - contours.uv[nearest]
-        dist = np.linalg.norm(diff, axis=1)
-        dist_all = np.where(has, dist, np.inf)
-        far = has & (dist > self.reverse_min_px)
-        if self._rays is not None and far.any():
-            # a sample on the predicted silhouette (e.g. on an end cap, or between two contour
-            # samples) is explained by the model: no residual, whatever its nearest contour point.
-            # (Tested at every evaluation: reusing a linearisation point's answer at the trial
-            # points let steps that uncover samples look free; hop: MPJPE 7.7 -> 10.3 mm.)
-            idx = np.flatnonzero(far)
-            dirs, cam = self._rays
-            margin = self.reverse_cover_px * self._px_depth(pose)  # (n_cams, n_parts) metres
-            on = covered_rays(self.model, pose, self.cameras, cam[idx], dirs[idx], margin_m=margin)
-            far[idx[on]] = False
-            dist_all[idx[on]] = 0.0
-        r = np.where(far, dist - self.reverse_min_px, 0.0)
-        match = np.where(far, nearest, -1)
-        unit = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
-        if self.truncate_px is not None:
-            over = r > self.truncate_px
-            r[over] = self.truncate_px
-            match[over] = -1
-        return self.reverse_weight * r, match, unit, dist_all
+        (0 for a sample on the predicted silhouette) (``tracker.kernels.reverse_terms``).
 
-    def _px_depth(self, pose: Pose) -> np.ndarray:
-        """Metres per pixel at each part's origin in each camera, (n_cams, n_parts)."""
+        A sample on the predicted silhouette (e.g. on an end cap, or between two contour samples)
+        is explained by the model: no residual, whatever its nearest contour point.  (Tested at
+        every evaluation: reusing a linearisation point's answer at the trial points let steps
+        that uncover samples look free; hop: MPJPE 7.7 -> 10.3 mm.)"""
+        per_cam = contours.n_points // max(len(self.cameras), 1)
         st = stack_cameras(self.cameras)
-        depth = np.einsum("cj,pj->cp", st.rotation[:, 2, :], pose.translation) + st.translation[:, 2:3]
-        focal = np.array([c.matrix[0, 0] for c in self.cameras])
-        return np.maximum(depth, 0.0) / focal[:, None]
+        return reverse_terms(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam, self.reverse_min_px,
+                             np.inf if self.truncate_px is None else self.truncate_px, self.reverse_weight,
+                             -1.0 if self.reverse_cover_px is None else self.reverse_cover_px, self._ray_dirs,
+                             self._focal, self.model.cones, pose.rotation, pose.translation, st.rotation,
+                             st.translation, _RAY_RANGE_M)
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
         """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""

@@ -676,3 +676,64 @@ def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, we
             _screw_row(motion, part[match[k]], screws, affects, J, out)
         row += 1
     return r, J
+
+
+@njit(cache=True)
+def reverse_terms(samples, sample_cam, uv, used, per_cam, min_px, truncate, weight, cover_px, directions, focal,
+                  cones, R, t, cam_R, cam_t, range_m):
+    """The reverse (silhouette → model) term of ``tracker.cost.ChamferCost`` (its module docstring).
+
+    samples (K, 2) boundary pixels of cameras ``sample_cam`` (K,); contour pixels ``uv`` (N, 2), used
+    rows ``used`` (N,) with ``per_cam`` rows per camera.  Each sample is matched to its nearest used
+    contour row (``nearest_rows``); one farther than ``min_px`` has the residual ``weight (dist -
+    min_px)`` (clipped at ``truncate``, unmatched beyond), unless ``cover_px`` >= 0 and its pixel's
+    ray (unit ``directions`` (K, 3)) meets the body grown by ``cover_px`` pixels at each part's depth
+    (``covered_mask``; focal (n_cams,) pixels): then it lies on the predicted silhouette.
+
+    Returns residuals (K,), matched rows (K,) (-1: none), unit directions from the match to the
+    sample (K, 2) and distances (K,) (inf: no match; 0: on the predicted silhouette)."""
+    K = samples.shape[0]
+    nearest = nearest_rows(samples, sample_cam, uv, used, per_cam)
+    r = np.zeros(K)
+    match = np.full(K, -1, dtype=np.intp)
+    unit = np.zeros((K, 2))
+    dist = np.full(K, np.inf)
+    far = np.zeros(K, dtype=np.bool_)
+    n_far = 0
+    for k in range(K):
+        j = nearest[k]
+        if j < 0:
+            continue
+        dx, dy = samples[k, 0] - uv[j, 0], samples[k, 1] - uv[j, 1]
+        dist[k] = math.sqrt(dx * dx + dy * dy)
+        if dist[k] > min_px:
+            far[k] = True
+            n_far += 1
+    if cover_px >= 0.0 and n_far > 0:
+        n_cams, n_parts = cam_R.shape[0], cones.shape[0]
+        grow = np.empty((n_cams, n_parts))  # cover_px pixels in metres at each part's origin depth
+        for c in range(n_cams):
+            for p in range(n_parts):
+                depth = cam_R[c, 2, 0] * t[p, 0] + cam_R[c, 2, 1] * t[p, 1] + cam_R[c, 2, 2] * t[p, 2] + cam_t[c, 2]
+                grow[c, p] = cover_px * max(depth, 0.0) / focal[c]
+        idx = np.flatnonzero(far)
+        on = covered_mask(cones, R, t, cam_R, cam_t, sample_cam[idx], directions[idx], grow, range_m)
+        for i in range(idx.size):
+            if on[i]:
+                far[idx[i]] = False
+                dist[idx[i]] = 0.0
+    for k in range(K):
+        if not far[k]:
+            continue
+        j = nearest[k]
+        d = dist[k]
+        rk = d - min_px
+        if rk > truncate:
+            r[k] = weight * truncate
+        else:
+            r[k] = weight * rk
+            match[k] = j
+        inv = 1.0 / max(d, 1e-12)
+        unit[k, 0] = (samples[k, 0] - uv[j, 0]) * inv
+        unit[k, 1] = (samples[k, 1] - uv[j, 1]) * inv
+    return r, match, unit, dist
