@@ -22,7 +22,7 @@ from numba import njit
 
 __all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_chamfer", "forward_kinematics",
            "screw_rows", "image_motion",
-           "contour_points", "ruling_angles", "projection_jacobians", "assemble"]
+           "contour_points", "ruling_angles", "projection_jacobians", "assemble", "reverse_terms", "warm_up"]
 
 _Q_TOL = 1e-9  # tracker.visibility: a point exactly on another part's surface is not hidden
 _AHEAD = 1e-9  # smallest camera depth of a point (or a ray's direction) counted as in front
@@ -737,3 +737,27 @@ def reverse_terms(samples, sample_cam, uv, used, per_cam, min_px, truncate, weig
         unit[k, 0] = (samples[k, 0] - uv[j, 0]) * inv
         unit[k, 1] = (samples[k, 1] - uv[j, 1]) * inv
     return r, match, unit, dist
+
+
+def warm_up() -> float:
+    """Compile every kernel (or load it from numba's on-disk cache) by fitting one small rendered
+    frame through the tracker's own code path (``tracker.tracking.fit_frame`` with the reverse
+    term and its ray test); returns the seconds it took.  A live worker calls it before its first
+    frame so that frame is not delayed by the compilation."""
+    import time
+
+    from segmentation.distance import chamfer_images
+    from tracker.kinematics import forward as forward_pose
+    from tracker.model import load_model
+    from tracker.render import internal_edges, render_label_images
+    from tracker.scene import ring_cameras
+    from tracker.tracking import TrackerOptions, fit_frame
+
+    t0 = time.perf_counter()
+    model = load_model("knossow40")
+    cams = ring_cameras(2, size=(160, 120))
+    p = model.zero()
+    labels = render_label_images(model, forward_pose(model, p), cams)
+    chamfer = [chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab)) for lab in labels]
+    fit_frame(model, cams, chamfer, p, options=TrackerOptions(max_iterations=2))
+    return time.perf_counter() - t0
