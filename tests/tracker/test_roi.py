@@ -74,3 +74,9 @@ def test_rejects_bad_arguments(model):
         pose_rois(model, model.zero(), cams, margin_m=-1.0)
     with pytest.raises(ValueError, match="margin_px"):
         pose_rois(model, model.zero(), cams, margin_px=2.5)
+
+
+def test_warm_up_fits_a_frame_through_the_tracker():
+    from tracker.fitting.warmup import warm_up
+
+    assert warm_up() > 0.0

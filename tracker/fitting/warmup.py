@@ -26,6 +26,7 @@ def warm_up() -> float:
     cams = ring_cameras(2, size=(160, 120))
     p = model.zero()
     labels = render_label_images(model, forward_pose(model, p), cams)
-    chamfer = [chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab)) for lab in labels]
+    chamfer = {cam.name: chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab))
+               for cam, lab in zip(cams, labels)}
     fit_frame(model, cams, chamfer, p, options=TrackerOptions(max_iterations=2))
     return time.perf_counter() - t0
