@@ -409,7 +409,7 @@ class Studio:
     seed : int
         Room texture (``tracker.scene.make_room_texture``) and light direction.
     dark_floor : bool
-        Floor texture darkened to about a third (dark shoes on a dark floor).
+        Floor texture darkened to 40 % (dark shoes on a dark floor).
     shadow_strength : float
         Fraction of the floor's brightness removed in full shadow.
     shadow_blur_px : float
@@ -433,7 +433,7 @@ class Studio:
         reach = max(np.linalg.norm(c.center[:2]) for c in self.cameras)
         tex = make_room_texture(int(seed), wall_radius_m=max(7.0, reach + 2.0), extent_m=max(8.0, reach + 3.0))
         if dark_floor:
-            tex = RoomTexture((tex.floor.astype(np.float32) * 0.32).astype(np.uint8), tex.wall, tex.extent_m,
+            tex = RoomTexture((tex.floor.astype(np.float32) * 0.4).astype(np.uint8), tex.wall, tex.extent_m,
                               tex.wall_radius_m, tex.wall_height_m)
         az = rng.uniform(-np.pi, np.pi)
         self.light = np.array([0.45 * np.cos(az), 0.45 * np.sin(az), 1.0])
@@ -577,7 +577,7 @@ class Studio:
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         lam = np.clip(normal @ self.light, 0.0, None)
         facing = np.clip(-np.sum(normal * d, axis=1), 0.0, 1.0)  # darker towards the outline
-        gain = (0.42 + 0.58 * lam) * (0.8 + 0.2 * facing)
+        gain = (0.55 + 0.45 * lam) * (0.82 + 0.18 * facing)
         return prim.colours[mat].astype(np.float32) * gain[:, None]
 
     def camera_output(self, image: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, bytes]:
