@@ -56,12 +56,13 @@ from segmentation.background import BackgroundModel  # noqa: E402
 from tracker.bvh import load_bvh  # noqa: E402
 from tracker.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
 from tracker.offline import track_session  # noqa: E402
+from tracker.retarget import retarget_bvh  # noqa: E402
 from tracker.scene import fit_ring_cameras  # noqa: E402
 from tracker.synth import bundled_motion  # noqa: E402
 from tracker.synthetic.evaluation import score_clip, summarise_clips  # noqa: E402
 from tracker.synthetic.motions import MOTIONS, make_motion, resample_bvh  # noqa: E402
 from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make_subject,  # noqa: E402
-                                      subject_height, subject_motion)
+                                      subject_height, subject_motion, subject_skeleton)
 
 CLIPS = tuple(MOTIONS) + ("cmu_walk",)
 QUICK = {"subjects": 2, "clips": "tpose_start,crouch,walk_turn", "cameras": "6", "frames": 60}
@@ -77,10 +78,15 @@ def clip_motion(name: str, skeleton, *, subject: int, frames: int, fps: float):
     return make_motion(name, skeleton, frames=frames, fps=fps, rng=rng)
 
 
+def bench_subject(index: int):
+    """Subject ``index`` of the benchmark: shoes dark for even indices."""
+    return make_subject(index, dark_shoes=index % 2 == 0)
+
+
 def render_session(root: Path, motion, subject_index: int, n_cameras: int, size, *, ground: str = "frame") -> tuple:
     """Render one clip into a session at ``root``; returns (truth (n, 16, 3), background models,
     height_m, render ms per frame)."""
-    subject = make_subject(subject_index, dark_shoes=subject_index % 2 == 0)
+    subject = bench_subject(subject_index)
     sm = subject_motion(motion, subject, ground=ground)
     prim = body_primitives(sm, subject)
     pts = np.concatenate([prim.spheres(f)[0].reshape(-1, 3) for f in range(prim.n_frames)])
@@ -104,8 +110,20 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     return sm.joints, backgrounds, height, render_ms
 
 
-def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size) -> dict:
+def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
+    """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
+    the true joints (``tracker.retarget``) on every ``every``-th frame: what a perfect tracker with
+    that model could reach on this subject."""
+    skel = subject_skeleton(motion, bench_subject(subject_index))
+    n = (skel.n_frames - 1) // every + 1
+    rt = retarget_bvh(skel, model="knossow40", fps=fps / every, frames=n, height_m=height_m)
+    return float(1e3 * rt.residual_m.mean())
+
+
+def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
+             ik_floor: bool = True) -> dict:
     """Render, track and score one clip; returns its per-clip record."""
+    t_clip = time.perf_counter()
     motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
     with tempfile.TemporaryDirectory(prefix="robustness_") as tmp:
         root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
@@ -128,6 +146,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         if rec.get("joints"):
             pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
     score = score_clip(pred, ok, truth, fps=fps)
+    floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
     reasons = {}
     for r in records:
@@ -135,8 +154,9 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             key = r.get("reason", "?").split(":")[0]
             reasons[key] = reasons.get(key, 0) + 1
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
-            **score, "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
+            **score, "ik_floor_mm": floor_mm, "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
+            "wall_s": time.perf_counter() - t_clip,
             "latencies_ms": lat, "pipeline_ms": pipe_ms}
 
 
@@ -153,6 +173,11 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=75)
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--size", default="320x240")
+    ap.add_argument("--all-cameras", action="store_true",
+                    help="every clip with every camera count (default: balanced, clip j of subject s uses "
+                         "cameras[(s + j) % len(cameras)])")
+    ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
+    ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     args = ap.parse_args(argv)
     if args.quick:
         for k, v in QUICK.items():
@@ -181,16 +206,19 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     per_clip = []
     for s in subjects:
-        for name in clips:
-            for n in cams:
-                rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h))
+        for j, name in enumerate(clips):
+            for n in (cams if args.all_cameras else [cams[(s + j) % len(cams)]]):
+                rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
+                               ik_floor=not args.no_ik_floor)
                 per_clip.append(rec)
-                if not args.json:
-                    print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
-                          f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
-                          f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
-                          f"{rec['false_alarm']:3d}  {rec['ms_per_frame_median']:.0f} ms/frame", flush=True)
+                print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
+                      f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
+                      f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
+                      f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
+                      f"{rec['ms_per_frame_median']:.0f} ms/frame", flush=True, file=sys.stderr if args.json else sys.stdout)
     summary = summarise_clips(per_clip)
+    floors = [r["ik_floor_mm"] for r in per_clip if r["ik_floor_mm"] is not None]
+    summary["ik_floor_mm_mean"] = float(np.mean(floors)) if floors else None
     lat = [v for r in per_clip for v in r.pop("latencies_ms")]
     pipe = [v for r in per_clip for v in r.pop("pipeline_ms")]
     result = {
@@ -200,6 +228,8 @@ def main(argv=None) -> int:
         "cameras": cams, "motions": clips, "wall_s": time.perf_counter() - t_start,
         "date": datetime.date.today().isoformat(), "per_clip": per_clip,
     }  # fmt: skip
+    if args.out is not None:
+        args.out.write_text(json.dumps(result, indent=1) + "\n")
     if args.json:
         print(json.dumps(result))
     else:
