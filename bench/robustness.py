@@ -165,10 +165,37 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             key = r.get("reason", "?").split(":")[0]
             reasons[key] = reasons.get(key, 0) + 1
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
-            **score, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm, "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
+            **score, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
+            "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
             "wall_s": time.perf_counter() - t_clip,
             "latencies_ms": lat, "pipeline_ms": pipe_ms}
+
+
+def summarise(per_clip: list[dict]) -> dict:
+    """The headline figures over per-clip records (``run_clip``)."""
+    summary = summarise_clips(per_clip)
+    floors = [r["ik_floor_mm"] for r in per_clip if r["ik_floor_mm"] is not None]
+    lat = [v for r in per_clip for v in r["latencies_ms"]]
+    pipe = [v for r in per_clip for v in r["pipeline_ms"]]
+    return {"subjects": len({r["subject"] for r in per_clip}), "clips": len(per_clip), **summary,
+            "ik_floor_mm_mean": float(np.mean(floors)) if floors else None,
+            "unprocessed_percent": 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"],
+            "ms_per_frame_median": float(np.median(lat)) if lat else None,
+            "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None}
+
+
+def merge(paths) -> dict:
+    """One result from several ``--out`` files (e.g. subjects run in separate processes)."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    per_clip = [c for r in runs for c in r["per_clip"]]
+    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras")
+    head = {k: v for k, v in runs[0].items() if k not in drop}
+    return {**head, "subject_ids": sorted({c["subject"] for c in per_clip}), **summarise(per_clip),
+            "motions": [m for m in CLIPS if any(c["clip"] == m for c in per_clip)],
+            "cameras": sorted({c["cameras"] for c in per_clip}),
+            "machine_ref_ms": float(np.median([r["machine_ref_ms"] for r in runs])),
+            "wall_s": max(r["wall_s"] for r in runs), "merged": [str(p) for p in paths], "per_clip": per_clip}
 
 
 def main(argv=None) -> int:
@@ -192,7 +219,11 @@ def main(argv=None) -> int:
                          "without a pose (0: no limit)")
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
+    ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
+                    help="combine the --out files of several runs (nothing is run)")
     args = ap.parse_args(argv)
+    if args.merge:
+        return _emit(merge(args.merge), args)
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
@@ -231,26 +262,20 @@ def main(argv=None) -> int:
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
-    summary = summarise_clips(per_clip)
-    floors = [r["ik_floor_mm"] for r in per_clip if r["ik_floor_mm"] is not None]
-    summary["ik_floor_mm_mean"] = float(np.mean(floors)) if floors else None
-    summary["unprocessed_percent"] = 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"]
-    lat = [v for r in per_clip for v in r.pop("latencies_ms")]
-    pipe = [v for r in per_clip for v in r.pop("pipeline_ms")]
-    result = {
-        "subjects": len(subjects), "subject_ids": subjects, "clips": len(per_clip), **summary,
-        "ms_per_frame_median": float(np.median(lat)), "pipeline_ms_per_frame_median": float(np.median(pipe)),
-        "machine_ref_ms": ref, "size": [w, h], "fps": args.fps, "frames_per_clip": args.frames,
-        "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s, "wall_s": time.perf_counter() - t_start,
-        "date": datetime.date.today().isoformat(), "per_clip": per_clip,
-    }  # fmt: skip
+    result = {"subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref, "size": [w, h], "fps": args.fps,
+              "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
+              "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
+    return _emit(result, args)
+
+
+def _emit(result: dict, args) -> int:
     if args.out is not None:
         args.out.write_text(json.dumps(result, indent=1) + "\n")
     if args.json:
         print(json.dumps(result))
     else:
         for key, val in result.items():
-            if key != "per_clip":
+            if key not in ("per_clip", "merged"):
                 print(f"{key:48s} {val:.2f}" if isinstance(val, float) else f"{key:48s} {val}")
     return 0
 

@@ -43,7 +43,8 @@ def test_render_is_deterministic_for_a_seed(skeleton):
     for _ in range(2):
         subject, sm, prim, studio = _scene(skeleton, 3)
         images, masks = studio.render(prim, 2)
-        outs.append([studio.camera_output(im, np.random.default_rng(5))[1] for im in images] + [m.tobytes() for m in masks])
+        jpegs = [studio.camera_output(im, np.random.default_rng(5))[1] for im in images]
+        outs.append(jpegs + [m.tobytes() for m in masks])
     assert outs[0] == outs[1]
     _, _, prim4, studio4 = _scene(skeleton, 4)
     assert studio4.render(prim4, 2)[1][0].tobytes() != outs[0][4]

@@ -263,8 +263,8 @@ class Primitives:
         centres (n_prim, 2, 3) and radii (n_prim, 2)."""
         ell = np.repeat(self.ell_c[frame][:, None], 2, axis=1)
         pts = np.concatenate([np.stack([self.cap_a[frame], self.cap_b[frame]], axis=1), ell])
-        rad = np.concatenate([np.repeat(self.cap_r[:, None], 2, axis=1), np.repeat(self.ell_r.max(axis=1)[:, None], 2, axis=1)])
-        return pts, rad
+        rad = np.concatenate([self.cap_r, self.ell_r.max(axis=1)])
+        return pts, np.repeat(rad[:, None], 2, axis=1)
 
 
 def _frame_axes(up: np.ndarray, side: np.ndarray) -> np.ndarray:
@@ -568,7 +568,8 @@ class Studio:
         if np.any(ell):
             ei = idx[ell] - nc
             ax, rad = prim.ell_axes[frame, ei], prim.ell_r[ei]
-            qq = np.einsum("nij,nj->ni", ax, p[ell] - prim.ell_c[frame, ei]) / rad  # (forward, left, up) on the unit sphere
+            # unit-sphere coordinates (forward, left, up) of the hit
+            qq = np.einsum("nij,nj->ni", ax, p[ell] - prim.ell_c[frame, ei]) / rad
             normal[ell] = np.einsum("nij,ni->nj", ax, qq / rad)
             m = prim.ell_mat[ei].copy()
             hair = (ei == prim.head) & ((qq[:, 2] > 0.35) | ((qq[:, 0] < -0.1) & (qq[:, 2] > -0.55)))
