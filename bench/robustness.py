@@ -18,7 +18,10 @@ the subject's standing height measured on the rendered body), background models 
 ``tracker.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
 ``knossow40`` model sized from the height) exactly as ``contourcap track`` does.  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
-mirrored, false ok, false alarm and PCK).
+mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
+silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
+the IK floor (the height-sized model posed onto the true joints by ``tracker.retarget``: the
+error a perfect tracker with that model would still have).
 
 A tracker that has lost the body searches again on every bad frame (1–10 s each here), so a clip
 it cannot track would dominate the run: tracking a clip stops once it has used ``--clip-budget-s``
@@ -59,6 +62,7 @@ from capture.calibration import save_calibration  # noqa: E402
 from capture.session import load_session, write_session_toml  # noqa: E402
 from machine_ref import machine_ref_ms  # noqa: E402
 from segmentation.background import BackgroundModel  # noqa: E402
+from segmentation.pipeline import segment_frame  # noqa: E402
 from tracker.bvh import load_bvh  # noqa: E402
 from tracker.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
 from tracker.offline import track_session  # noqa: E402
@@ -73,6 +77,7 @@ from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make
 CLIPS = tuple(MOTIONS) + ("cmu_walk",)
 QUICK = {"subjects": 2, "clips": "tpose_start,crouch,walk_turn", "cameras": "6", "frames": 60}
 N_BACKGROUND = 10
+IOU_EVERY = 15
 assert tuple(MODEL_JOINTS) == JOINT_NAMES
 
 
@@ -91,7 +96,8 @@ def bench_subject(index: int):
 
 def render_session(root: Path, motion, subject_index: int, n_cameras: int, size, *, ground: str = "frame") -> tuple:
     """Render one clip into a session at ``root``; returns (truth (n, 16, 3), background models,
-    height_m, render ms per frame)."""
+    height_m, render ms per frame, median IoU of the segmented silhouettes with the true ones on
+    every ``IOU_EVERY``-th frame)."""
     subject = bench_subject(subject_index)
     sm = subject_motion(motion, subject, ground=ground)
     prim = body_primitives(sm, subject)
@@ -104,16 +110,21 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     for c in cams:
         (root / c.name).mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    ious = []
     for f in range(prim.n_frames):
-        images, _ = studio.render(prim, f)
-        for c, img in zip(cams, images):
-            (root / c.name / f"{f:06d}.jpg").write_bytes(studio.camera_output(img, rng)[1])
+        images, masks = studio.render(prim, f)
+        for c, img, mask in zip(cams, images, masks):
+            decoded, jpeg = studio.camera_output(img, rng)
+            (root / c.name / f"{f:06d}.jpg").write_bytes(jpeg)
+            if f % IOU_EVERY == 0:
+                sil = segment_frame(backgrounds[c.name], decoded).silhouette > 0
+                ious.append(np.sum(sil & mask) / max(np.sum(sil | mask), 1))
     render_ms = 1e3 * (time.perf_counter() - t0) / prim.n_frames
     save_calibration(root / "calibration.toml", cams)
     height = subject_height(motion, subject)
     write_session_toml(root, name=root.name, fps=float(sm.fps),
                        cameras=[{"name": c.name, "images": f"{c.name}/%06d.jpg"} for c in cams], height_m=height)
-    return sm.joints, backgrounds, height, render_ms
+    return sm.joints, backgrounds, height, render_ms, float(np.median(ious))
 
 
 def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
@@ -136,7 +147,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
     with tempfile.TemporaryDirectory(prefix="robustness_") as tmp:
         root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
-        truth, backgrounds, height, render_ms = render_session(root, motion, subject_index, n_cameras, size)
+        truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
         records, pipe_ms, cpu_s = [], [], 0.0
         it = track_session(session, backgrounds=backgrounds)
@@ -165,7 +176,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             key = r.get("reason", "?").split(":")[0]
             reasons[key] = reasons.get(key, 0) + 1
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
-            **score, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
+            **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
             "wall_s": time.perf_counter() - t_clip,

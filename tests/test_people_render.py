@@ -54,7 +54,7 @@ def test_render_is_deterministic_for_a_seed(skeleton):
 def test_silhouettes_contain_the_projected_joints(skeleton, motion):
     for seed in range(2):
         _, sm, prim, studio = _scene(skeleton, seed, motion=motion, frames=30)
-        for f in (0, 17, 29):
+        for f in (0, 21):
             _, masks = studio.render(prim, f)
             for cam, mask in zip(studio.cameras, masks):
                 uv = np.rint(cam.project(sm.joints[f])).astype(int)
