@@ -267,6 +267,9 @@ def main(argv=None) -> int:
                 rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
                                ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s)
                 per_clip.append(rec)
+                if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
+                    args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
+                                                    "machine_ref_ms": ref, "per_clip": per_clip}, indent=1) + "\n")
                 print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
                       f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
                       f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
