@@ -34,7 +34,7 @@ them as ratios to ``machine_ref_ms``.
 
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
-                               [--fps 30] [--clip-budget-s 40] [--out result.json]
+                               [--fps 30] [--clip-budget-s 20] [--out result.json]
 """
 
 from __future__ import annotations
@@ -225,7 +225,7 @@ def main(argv=None) -> int:
     ap.add_argument("--all-cameras", action="store_true",
                     help="every clip with every camera count (default: balanced, clip j of subject s uses "
                          "cameras[(s + j) % len(cameras)])")
-    ap.add_argument("--clip-budget-s", type=float, default=40.0,
+    ap.add_argument("--clip-budget-s", type=float, default=20.0,
                     help="CPU seconds of tracking per clip after which its remaining frames count as not ok "
                          "without a pose (0: no limit)")
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
