@@ -8,19 +8,19 @@ Every clip is one subject × one motion × one camera ring:
 - motions: the procedural clips of ``tracker.synthetic.motions`` (``walk_turn``, ``crouch``,
   ``arms``, ``tpose_start``, ``nont_start``; place and heading drawn per subject and clip) and
   ``cmu_walk`` (CMU 131_01, the bundled start–walk clip, from 1 s), resampled to ``--fps``;
-- cameras: a ring of 4 and one of 6 (``tracker.scene.fit_ring_cameras``: the subject stays in
+- cameras: a ring of 4 and one of 6 (``tracker.synthetic.scene.fit_ring_cameras``: the subject stays in
   view), ``--size`` pixels.
 
 Per clip the frames are rendered (``tracker.synthetic.people.Studio``, sensor noise, JPEG
 quality 85) into a temporary session (JPEG image sequences, calibration, ``[subject] height_m`` =
 the subject's standing height measured on the rendered body), background models are learned from
 10 rendered empty-room frames per camera, and the session is tracked by
-``tracker.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
+``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
 ``knossow40`` model sized from the height) exactly as ``contourcap track`` does.  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
 silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
-the IK floor (the height-sized model posed onto the true joints by ``tracker.retarget``: the
+the IK floor (the height-sized model posed onto the true joints by ``tracker.synthetic.retarget``: the
 error a perfect tracker with that model would still have).
 
 A tracker that has lost the body searches again on every bad frame (1–10 s each here), so a clip
@@ -63,12 +63,12 @@ from capture.session import load_session, write_session_toml  # noqa: E402
 from machine_ref import machine_ref_ms  # noqa: E402
 from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
-from tracker.bvh import load_bvh  # noqa: E402
-from tracker.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
-from tracker.offline import track_session  # noqa: E402
-from tracker.retarget import retarget_bvh  # noqa: E402
-from tracker.scene import fit_ring_cameras  # noqa: E402
-from tracker.synth import bundled_motion  # noqa: E402
+from tracker.synthetic.bvh import load_bvh  # noqa: E402
+from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
+from service.offline import track_session  # noqa: E402
+from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
+from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
+from tracker.synthetic.synth import bundled_motion  # noqa: E402
 from tracker.synthetic.evaluation import score_clip, summarise_clips  # noqa: E402
 from tracker.synthetic.motions import MOTIONS, make_motion, resample_bvh  # noqa: E402
 from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make_subject,  # noqa: E402
@@ -129,7 +129,7 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
 
 def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
     """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
-    the true joints (``tracker.retarget``) on every ``every``-th frame: what a perfect tracker with
+    the true joints (``tracker.synthetic.retarget``) on every ``every``-th frame: what a perfect tracker with
     that model could reach on this subject."""
     skel = subject_skeleton(motion, bench_subject(subject_index))
     n = (skel.n_frames - 1) // every + 1
@@ -224,7 +224,7 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="320x240")
     ap.add_argument("--all-cameras", action="store_true",
                     help="every clip with every camera count (default: balanced, clip j of subject s uses "
-                         "cameras[(s + j) % len(cameras)])")
+                         "cameras[(s + j) %% len(cameras)])")
     ap.add_argument("--clip-budget-s", type=float, default=20.0,
                     help="CPU seconds of tracking per clip after which its remaining frames count as not ok "
                          "without a pose (0: no limit)")

@@ -7,7 +7,7 @@ the body's heading frame (x forward, y to the subject's left, z up).  ``motion_t
 that into channel values on the hierarchy of a CMU BVH (``tracker/data/scaled_131_01.bvh``):
 every joint that drives a bone gets the smallest rotation that points the bone along its
 direction (its twist is inherited from its parent), every other joint keeps its parent's
-orientation.  The result is an ordinary ``tracker.bvh.Bvh``, so the renderer and the ground
+orientation.  The result is an ordinary ``tracker.synthetic.bvh.Bvh``, so the renderer and the ground
 truth read it exactly as they read a recorded clip.
 
 Clips (``MOTIONS``, each ``make(name, skeleton, frames=, fps=, rng=)``):
@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from tracker.bvh import Bvh, bvh_forward
+from tracker.synthetic.bvh import Bvh, bvh_forward
 
 __all__ = ["BVH_TO_WORLD", "BONES", "PoseTrack", "motion_to_bvh", "MOTIONS", "make_motion", "standing_track",
            "resample_bvh"]

@@ -1,9 +1,9 @@
 """Synthetic people that are not the tracker's body model: an independent test renderer.
 
-The tracker fits truncated elliptical cones (``tracker.model``) and its own synthetic sessions are
-rendered from those cones (``tracker.render``); a tracker judged only on them is judged on the
+The tracker fits truncated elliptical cones (``tracker.body.model``) and its own synthetic sessions are
+rendered from those cones (``tracker.imaging.render``); a tracker judged only on them is judged on the
 body it assumes.  This module draws a different body, driven directly by a BVH skeleton's joint
-positions (``tracker.bvh``), and uses neither the cone model nor its renderer:
+positions (``tracker.synthetic.bvh``), and uses neither the cone model nor its renderer:
 
 - **Subject** (``make_subject``): per-segment proportions ``scale`` (BVH offsets of thigh, shank,
   foot, upper arm, forearm, hand, spine, neck, head, hip width and shoulder width each × U(0.85,
@@ -18,9 +18,9 @@ positions (``tracker.bvh``), and uses neither the cone model nor its renderer:
 - **Ground truth** (``SubjectMotion.joints``): the contourcap joint centres (``JOINT_NAMES``) from
   the scaled skeleton's joints: pelvis = midpoint of the hip joints, spine = ``Chest``, neck =
   ``Neck``, head = midpoint of ``Head`` and its end site, shoulder, elbow, wrist, hip, knee, ankle
-  = the CMU joints of those names (the same correspondence ``tracker.retarget`` uses).
+  = the CMU joints of those names (the same correspondence ``tracker.synthetic.retarget`` uses).
 - **Studio** (``Studio``): N calibrated cameras (``capture.camera.Camera``), the textured room of
-  ``tracker.scene`` (floor light or dark), one directional light.  Per camera and frame every
+  ``tracker.synthetic.scene`` (floor light or dark), one directional light.  Per camera and frame every
   pixel of the body's image box is ray-cast against all primitives (vectorised: pixels ×
   primitives), shaded by a Lambert term; floor pixels near the body cast a ray to the light, and
   the hard shadow is blurred (soft shadow) and darkens the floor.  ``camera_output`` adds Gaussian
@@ -35,8 +35,8 @@ import cv2
 import numpy as np
 
 from capture.camera import Camera
-from tracker.bvh import Bvh, bvh_forward
-from tracker.scene import RoomTexture, make_room_texture, render_background
+from tracker.synthetic.bvh import Bvh, bvh_forward
+from tracker.synthetic.scene import RoomTexture, make_room_texture, render_background
 from tracker.synthetic.motions import BVH_TO_WORLD, motion_to_bvh, standing_track
 
 __all__ = ["JOINT_NAMES", "SEGMENTS", "Subject", "make_subject", "subject_skeleton", "SubjectMotion",
@@ -407,9 +407,9 @@ class Studio:
     ----------
     cameras : sequence of Camera
     seed : int
-        Room texture (``tracker.scene.make_room_texture``) and light direction.
+        Room texture (``tracker.synthetic.scene.make_room_texture``) and light direction.
     dark_floor : bool
-        Floor texture darkened to 40 % (dark shoes on a dark floor).
+        Floor texture darkened to 0.4 of its brightness (dark shoes on a dark floor).
     shadow_strength : float
         Fraction of the floor's brightness removed in full shadow.
     shadow_blur_px : float

@@ -8,9 +8,9 @@ import warnings
 import numpy as np
 import pytest
 
-from tracker.bvh import load_bvh
-from tracker.scene import ring_cameras
-from tracker.synth import bundled_motion
+from tracker.synthetic.bvh import load_bvh
+from tracker.synthetic.scene import ring_cameras
+from tracker.synthetic.synth import bundled_motion
 from tracker.synthetic.evaluation import (FALSE_ALARM_M, FALSE_OK_M, mirrored_frames, frame_errors, reflect_front_back,
                                           score_clip, summarise_clips, swap_left_right)
 from tracker.synthetic.motions import MOTIONS, make_motion
