@@ -78,7 +78,7 @@ def _quadratic_coefficients(mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov: np.ndarray,
                 colour_mean: np.ndarray, colour_cov: np.ndarray, *, colour_weight: float = 1.0,
-                gate: float = 25.0, use: np.ndarray | None = None) -> Assignment:
+                gate: float = 25.0, use: np.ndarray | None = None, log_det: bool = False) -> Assignment:
     """Eqs. 2–3: nearest blob of every voxel.
 
     Parameters
@@ -89,6 +89,8 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
     colour_weight : factor on the colour term (0: position only, as when colours are not learned yet)
     gate : largest position term (squared Mahalanobis) of an assigned voxel
     use : (b,) bool, blobs taking part (default all)
+    log_det : add ``log det K_j + log det K'_j`` (the Gaussians' normalisation: the full negative
+        log-likelihood; the paper's eq. 2 has none, which lets wide blobs take a narrow one's voxels)
     """
     n, b = len(centres), len(mean)
     if n == 0 or b == 0:
@@ -107,6 +109,8 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
         dcol = (F @ _quadratic_coefficients(colour_mean - k0, colour_cov)).reshape(n, v, b)
         best_view = dcol.argmin(1)  # (n, b)
         total = dpos + colour_weight * np.maximum(np.take_along_axis(dcol, best_view[:, None, :], 1)[:, 0], 0.0)
+    if log_det:
+        total = total + np.linalg.slogdet(cov)[1] + (np.linalg.slogdet(colour_cov)[1] if colour_weight > 0 else 0.0)
     labels = total.argmin(1)
     rows = np.arange(n)
     dist = total[rows, labels]
