@@ -71,18 +71,27 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
-                  clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
+                  clock: Callable[[], float] = time.perf_counter, method: str = "contours",
+                  blob_options=None) -> Iterator[dict]:
     """Pose records (dicts) for every frame set of ``session`` in frame-id order.
 
     ``frames``: range of frame ids (None: all); ``cameras``: names to use (None: all);
     ``initial_params``: start pose (n_params,), else automatic initialisation
     (``tracker.initialise``) on the first frame.  ``backgrounds`` skips learning them.
+    ``method``: ``"contours"`` (``tracker.tracking.Tracker``) or ``"blobs"``
+    (``tracker.blobs.BlobTracker`` with ``blob_options``; ``sliding``, ``solver``, ``options`` and
+    ``segmentation`` are the contour tracker's).
     """
+    if method not in ("contours", "blobs"):
+        raise ValueError(f"method: expected 'contours' or 'blobs', got {method!r}")
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
     cams = [session.camera_model(n) for n in names]
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
+    if method == "blobs":
+        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock)
+        return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock)
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
@@ -90,6 +99,17 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
                            silhouettes={n: s.silhouette for n, s in segs.items()})
+
+
+def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock) -> Iterator[dict]:
+    from tracker.blobs import BlobOptions, BlobTracker, initialise_from_images
+
+    tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
+                          initialiser=lambda cs, images: initialise_from_images(body, cs, images, backgrounds),
+                          options=blob_options or BlobOptions(), clock=clock)
+    for fid, group in iter_frame_sets(session, cameras=[c.name for c in cams], frames=frames):
+        ts = next(iter(group.values())).timestamp_ns
+        yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 
 
 @dataclass(frozen=True)

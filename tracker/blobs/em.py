@@ -152,7 +152,9 @@ def maximisation(assignment: Assignment, centres: np.ndarray, sizes: np.ndarray,
     colour, colour_cov = moments(C, None)
     cov += min_sigma_m**2 * np.eye(3)
     colour_cov += min_colour_sigma**2 * np.eye(3)
-    det = np.linalg.det(colour_cov)
-    small = np.isfinite(det) & (det < min_colour_det)
+    det = np.full(n_blobs, np.nan)
+    finite = np.isfinite(colour_cov).all((1, 2))
+    det[finite] = np.linalg.det(colour_cov[finite])
+    small = finite & (det < min_colour_det)
     colour_cov[small] *= ((min_colour_det / np.maximum(det[small], 1e-12)) ** (1.0 / 3.0))[:, None, None]
     return BlobStats(mean, cov, colour, colour_cov, W, count)
