@@ -93,8 +93,8 @@ class HullOptions:
     levels): ``k`` gives ``k²`` samples per cube and view.
     """
 
-    min_voxel_m: float = 0.02
-    levels: int = 3
+    min_voxel_m: float = 0.03
+    levels: int = 2
     low: float = 16.0
     high: float = 64.0
     samples: tuple = (4, 3, 3, 2)
@@ -112,11 +112,14 @@ class HullOptions:
 
 def zone_of_interest(model: BodyModel, params: np.ndarray, *, margin_m: float = 0.25,
                      floor_z: float = 0.0) -> np.ndarray:
-    """Box ``(2, 3)`` ``[lower, upper]`` around the body surface at ``params`` grown by ``margin_m``
-    (not below ``floor_z``), world metres."""
+    """Box ``(2, 3)`` ``[lower, upper]`` around the body surface at ``params`` grown by ``margin_m``,
+    world metres; vertically it always spans ``floor_z`` to the subject's height above the body's
+    lowest point (plus the margin), so a pose predicted too low or too high cannot cut the head or
+    the feet off the hull that should correct it."""
     pts = body_points(model, forward(model, params), n_theta=8, n_z=2).reshape(-1, 3)
     lo, hi = pts.min(0) - margin_m, pts.max(0) + margin_m
-    lo[2] = max(lo[2], floor_z)
+    lo[2] = floor_z
+    hi[2] = max(hi[2], max(pts[:, 2].min(), floor_z) + model.height_m + margin_m)
     return np.stack([lo, hi])
 
 

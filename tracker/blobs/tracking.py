@@ -10,7 +10,7 @@ Per frame set (camera name → BGR image):
    de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
    blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
    a constraint, the limbs by cyclic coordinate descent (or damped least squares) within the
-   joint limits, then the floor contact (``tracker.blobs.ik``);
+   joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
 3. emit a DESIGN.md pose record (``"method": "blobs"``).
 
 The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
@@ -62,7 +62,8 @@ class BlobOptions:
     ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
     ``damped_least_squares``; orientation_weight, max_turn_deg : the root's orientation constraint
     (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
-    constant_velocity : predict ``2 p_t − p_{t−1}``; min_voxels, min_active_fraction,
+    velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
+    1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise); min_voxels, min_active_fraction,
     max_goal_rms_m : below/above these a frame is ``ok: false``.
     """
 
@@ -88,7 +89,7 @@ class BlobOptions:
     orientation_weight: float = 0.02
     max_turn_deg: float = 60.0
     floor_snap_m: float | None = 0.02
-    constant_velocity: bool = True
+    velocity_gain: float = 0.0
     min_voxels: int = 50
     min_active_fraction: float = 0.6
     max_goal_rms_m: float = 0.08
@@ -171,8 +172,8 @@ class BlobTracker:
         """Start pose for the next frame (n_params,) or None before initialisation."""
         if self.params is None:
             return None
-        if self.options.constant_velocity and self.previous is not None:
-            return self.model.clamp(2.0 * self.params - self.previous)
+        if self.options.velocity_gain > 0 and self.previous is not None:
+            return self.model.clamp(self.params + self.options.velocity_gain * (self.params - self.previous))
         return self.params
 
     def _hull(self, cams, images, params) -> ColourHull:
@@ -191,8 +192,6 @@ class BlobTracker:
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
                                           iterations=o.dls_iterations, damping=o.dls_damping)
-        if o.floor_snap_m is not None:
-            params = floor_contact(m, params, snap_m=o.floor_snap_m)
         return params
 
     def _axis_goals(self, pose, means: np.ndarray, covs: np.ndarray) -> np.ndarray:
@@ -232,6 +231,8 @@ class BlobTracker:
             if o.axis_goals:
                 goals = self._axis_goals(pose, goals, np.nan_to_num(stats.cov))
             params = self._ik(params, goals, weights)
+        if o.floor_snap_m is not None:
+            params = floor_contact(m, params, snap_m=o.floor_snap_m)
         at = blobs.attachment(m, forward(m, params))
         act = weights > 0
         rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
