@@ -93,7 +93,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--frames", type=int, default=120)
-    ap.add_argument("--ik", choices=("ccd", "dls"), default="ccd")
+    ap.add_argument("--ik", choices=("ccd", "dls"), default="dls")
     ap.add_argument("--only", choices=sorted(SESSIONS), default=None, help="one of the two sessions")
     ap.add_argument("--cache", type=Path, default=None, help="keep (or reuse) the rendered sessions here")
     args = ap.parse_args(argv)

@@ -80,7 +80,7 @@ class BlobOptions:
     min_fill: float = 0.3
     colour_prior_weight: float = 0.2
     skin_prior_weight: float = 0.5
-    ik: str = "ccd"
+    ik: str = "dls"
     ccd_sweeps: int = 3
     ccd_attenuation: float = 1.0
     ccd_damping: float = 1e-4
