@@ -86,7 +86,7 @@ class BlobSet:
 
     layout : BlobLayout; shape : (b, 3, 3) position covariance in the part frame, m²;
     colour, colour_cov : (b, 3), (b, 3, 3) colour Gaussian, BGR; point : (b, 3) attachment point in
-    the part frame, m (learned: where the blob's voxels sat at initialisation); colour_prior, colour_prior_cov :
+    the part frame, m (the layout's); colour_prior, colour_prior_cov :
     what the colour is pulled back to (learned at initialisation, skin-blended on skin blobs);
     active : (b,) bool; fill : (b,) last filling (received volume / prior volume);
     mean, cov : (b, 3), (b, 3, 3) world position Gaussian of the last regeneration.
@@ -139,15 +139,14 @@ class BlobSet:
 
 def learn_blobs(model: BodyModel, params: np.ndarray, centres: np.ndarray, sizes: np.ndarray,
                 colours: np.ndarray, *, layout: BlobLayout | None = None, skin_weight: float = 0.3,
-                shape_weight: float = 0.5, rounds: int = 2, learn_points: bool = True) -> BlobSet:
+                shape_weight: float = 0.5, rounds: int = 2) -> BlobSet:
     """Blobs learned from a coloured hull at a known pose.
 
     ``centres`` (n, 3), ``sizes`` (n,), ``colours`` (n, v, 3): the hull's voxels.  Voxels are first
     assigned by position alone (prior shapes, colour taken as the median over views), then
     ``rounds`` expectation–maximisation rounds with colour refine the colours; skin blobs' colour is
     blended with :data:`SKIN_BGR` by ``skin_weight``, and the learned shape (in the part frame) with
-    the prior by ``shape_weight``.  With ``learn_points`` each blob's attachment point becomes the
-    mean of its voxels in its part's frame (blobs with fewer than 10 voxels keep the layout's point).
+    the prior by ``shape_weight``.
     """
     layout = layout or blob_layout(model)
     b = layout.n_blobs
@@ -175,10 +174,6 @@ def learn_blobs(model: BodyModel, params: np.ndarray, centres: np.ndarray, sizes
     got = np.isfinite(stats.cov).all((1, 2)) & (stats.count >= 10)
     learned = R.transpose(0, 2, 1) @ np.where(got[:, None, None], stats.cov, blobs.cov) @ R
     blobs.shape = shape_weight * layout.shape + (1 - shape_weight) * learned
-    if learn_points:  # where each blob's voxels really sit on its part (body shape, hull fatness)
-        t = pose.translation[layout.part]
-        own = np.einsum("bji,bj->bi", R, np.nan_to_num(stats.mean) - t)
-        blobs.point = np.where(got[:, None], own, layout.point)
     blobs.colour_prior, blobs.colour_prior_cov = blobs.colour.copy(), blobs.colour_cov.copy()
     blobs.fill = stats.volume / layout.volume
     blobs.active = np.ones(b, bool)

@@ -53,18 +53,15 @@ class BlobOptions:
     to eq. 2 (``tracker.blobs.em.expectation``); gate : largest position term of an assigned
     voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position covariance in
     the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
-    reaches its voxels); learn_points : attachment points learned at initialisation
-    (``tracker.blobs.blobset.learn_blobs``); axis_goals, axis_elongation : goals of blobs on oblong parts along their
-    main axis (``BlobTracker._axis_goals``; the axis is the bone's unless the blob's main variance is
-    ``axis_elongation`` times the mean of the other two); min_fill : filling below which a blob is inactive;
+    reaches its voxels); min_fill : filling below which a blob is inactive;
     colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior
     each frame (skin blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps,
     ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
     ``damped_least_squares``; orientation_weight, max_turn_deg : the root's orientation constraint
     (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
     velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
-    1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise); min_voxels, min_active_fraction,
-    max_goal_rms_m : below/above these a frame is ``ok: false``.
+    1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
+    min_voxels, min_active_fraction, max_goal_rms_m : below/above these a frame is ``ok: false``.
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -74,9 +71,6 @@ class BlobOptions:
     log_det: bool = False
     gate: float = 25.0
     motion_sigma_m: float = 0.06
-    learn_points: bool = False
-    axis_goals: bool = False
-    axis_elongation: float = 2.0
     min_fill: float = 0.3
     colour_prior_weight: float = 0.2
     skin_prior_weight: float = 0.5
@@ -161,7 +155,6 @@ class BlobTracker:
             self.params = model.clamp(p)
         names = self.layout.names
         self._motion = options.motion_sigma_m**2 * np.eye(3)
-        self._round = np.array([any(t in n for t in ("pelvis", "abdomen", "torso", "head", "hand", "foot")) for n in names])
         self._root_blobs = np.array([any(n == r for r in _ROOT_BLOBS) for n in names])
         kind = model.param_kind
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
@@ -194,26 +187,6 @@ class BlobTracker:
                                           iterations=o.dls_iterations, damping=o.dls_damping)
         return params
 
-    def _axis_goals(self, pose, means: np.ndarray, covs: np.ndarray) -> np.ndarray:
-        """Goals (b, 3) of the attachment points: a round blob's mean; for a blob on an oblong part, the
-        point of the line through its mean along its main axis nearest to the attachment point (the
-        along-bone position of a blob's voxels says little: it shifts with how its neighbours share
-        the limb).  The main axis is found by power iteration from the bone's direction (BMVC'04
-        §4.2: a local maximisation of the main eigenvalue around the predicted eigenvector)."""
-        lay = self.layout
-        bone = pose.rotation[lay.part][:, :, 2]  # part z axes, (b, 3)
-        e = bone
-        for _ in range(2):
-            e = np.einsum("bij,bj->bi", covs, e)
-            e /= np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-12)
-        main = np.einsum("bi,bij,bj->b", e, covs, e)
-        rest = 0.5 * (np.trace(covs, axis1=1, axis2=2) - main)
-        e = np.where((main > self.options.axis_elongation * rest)[:, None], e, bone)
-        X = pose.to_world(lay.part, self.blobs.point)
-        along = np.einsum("bi,bi->b", X - means, e)
-        line = means + along[:, None] * e
-        return np.where(self._round[:, None], means, line)
-
     def fit(self, hull: ColourHull, start: np.ndarray) -> tuple[np.ndarray, dict]:
         """EM and IK rounds on one hull from ``start``; returns params and quality figures."""
         o, m, blobs = self.options, self.model, self.blobs
@@ -228,8 +201,6 @@ class BlobTracker:
             blobs.absorb(stats, colour_prior_weight=self._prior_weight, min_fill=o.min_fill)
             weights = np.where(blobs.active, np.minimum(blobs.fill, 1.0), 0.0)
             goals = np.where(blobs.active[:, None], np.nan_to_num(stats.mean), blobs.mean)
-            if o.axis_goals:
-                goals = self._axis_goals(pose, goals, np.nan_to_num(stats.cov))
             params = self._ik(params, goals, weights)
         if o.floor_snap_m is not None:
             params = floor_contact(m, params, snap_m=o.floor_snap_m)
@@ -275,8 +246,7 @@ class BlobTracker:
             self.previous = None
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
-            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
-                                     learn_points=o.learn_points)
+            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout)
         params, quality = self.fit(hull, start)
         joints = joint_centre_array(self.model, forward(self.model, params))
         why = []
