@@ -97,7 +97,7 @@ class HullOptions:
     levels: int = 2
     low: float = 16.0
     high: float = 64.0
-    samples: tuple = (4, 3, 3, 2)
+    samples: tuple = (4, 3, 3)
 
     def __post_init__(self):
         if not (np.isfinite(self.min_voxel_m) and self.min_voxel_m > 0):

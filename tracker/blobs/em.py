@@ -35,12 +35,15 @@ class Assignment:
     """Result of :func:`expectation`.
 
     labels : (n,) int, blob index of each voxel, -1 unassigned; colour : (n, 3) the view colour
-    used for its blob; distance : (n,) its eq. 2 distance (inf when unassigned).
+    used for its blob; distance : (n,) its eq. 2 distance (inf when unassigned); shares : for a
+    soft assignment, ``(voxel (m,), blob (m,), colour (m, 3), weight (m,))``: each voxel's share of
+    its nearest blobs (weights summing to 1 per assigned voxel), else None.
     """
 
     labels: np.ndarray
     colour: np.ndarray
     distance: np.ndarray
+    shares: tuple | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,7 +81,8 @@ def _quadratic_coefficients(mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov: np.ndarray,
                 colour_mean: np.ndarray, colour_cov: np.ndarray, *, colour_weight: float = 1.0,
-                gate: float = 25.0, use: np.ndarray | None = None, log_det: bool = False) -> Assignment:
+                gate: float = 25.0, use: np.ndarray | None = None, log_det: bool = False,
+                soft: int = 0) -> Assignment:
     """Eqs. 2–3: nearest blob of every voxel.
 
     Parameters
@@ -91,6 +95,8 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
     use : (b,) bool, blobs taking part (default all)
     log_det : add ``log det K_j + log det K'_j`` (the Gaussians' normalisation: the full negative
         log-likelihood; the paper's eq. 2 has none, which lets wide blobs take a narrow one's voxels)
+    soft : 0 for the paper's hard assignment; ``k > 1`` shares each voxel among its ``k`` nearest
+        blobs in proportion to ``exp(−dst / 2)`` (blobs beyond the gate get no share)
     """
     n, b = len(centres), len(mean)
     if n == 0 or b == 0:
@@ -121,19 +127,42 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
         colour = np.median(colours, axis=1).astype(np.float32)
     else:
         colour = colours[rows, best_view[rows, labels]].astype(np.float32)
-    return Assignment(labels, colour, dist)
+    shares = None
+    if soft > 1:
+        k = min(int(soft), b)
+        near = np.argpartition(total, k - 1, axis=1)[:, :k]  # (n, k)
+        t = np.take_along_axis(total, near, 1)
+        wgt = np.exp(-0.5 * (t - t.min(1, keepdims=True)))
+        wgt[np.take_along_axis(dpos, near, 1) > gate] = 0.0
+        wgt /= np.maximum(wgt.sum(1, keepdims=True), 1e-300)
+        vox = np.repeat(rows, k)
+        blob = near.ravel()
+        keep = wgt.ravel() > 1e-3
+        if best_view is None:
+            col = np.repeat(colour, k, axis=0)
+        else:
+            col = colours[vox, best_view[vox, blob]].astype(np.float32)
+        shares = (vox[keep], blob[keep], col[keep], wgt.ravel()[keep])
+    return Assignment(labels, colour, dist, shares)
 
 
 def maximisation(assignment: Assignment, centres: np.ndarray, sizes: np.ndarray, n_blobs: int, *,
                  min_sigma_m: float = 0.01, min_colour_sigma: float = 4.0,
                  min_colour_det: float = 8.0**6) -> BlobStats:
-    """Eq. 4 with the covariance floors (module docstring); ``sizes`` (n,) voxel edges, m."""
-    lab = assignment.labels
-    sel = lab >= 0
-    lab, P, s, C = lab[sel], centres[sel], sizes[sel], assignment.colour[sel].astype(float)
-    w = s**3
+    """Eq. 4 with the covariance floors (module docstring); ``sizes`` (n,) voxel edges, m.  A soft
+    assignment's shares weight each voxel's volume (``count`` is then the summed shares)."""
+    if assignment.shares is not None:
+        vox, lab, C, share = assignment.shares
+        P, s, C = centres[vox], sizes[vox], C.astype(float)
+        w = s**3 * share
+        count = np.bincount(lab, weights=share, minlength=n_blobs)
+    else:
+        lab = assignment.labels
+        sel = lab >= 0
+        lab, P, s, C = lab[sel], centres[sel], sizes[sel], assignment.colour[sel].astype(float)
+        w = s**3
+        count = np.bincount(lab, minlength=n_blobs)
     W = np.bincount(lab, weights=w, minlength=n_blobs)
-    count = np.bincount(lab, minlength=n_blobs)
     with np.errstate(invalid="ignore", divide="ignore"):
         inv = np.where(W > 0, 1.0 / W, np.nan)
 

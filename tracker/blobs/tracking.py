@@ -50,7 +50,8 @@ class BlobOptions:
     hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the
     predicted body surface; em_iterations : expectation–maximisation–IK rounds per frame;
     colour_weight : factor on the colour term of eq. 2; log_det : add the Gaussians' log-determinants
-    to eq. 2 (``tracker.blobs.em.expectation``); gate : largest position term of an assigned
+    to eq. 2 (``tracker.blobs.em.expectation``); soft : share each voxel among its ``soft`` nearest
+    blobs instead of the paper's hard assignment (0); gate : largest position term of an assigned
     voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position covariance in
     the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
     reaches its voxels); min_fill : filling below which a blob is inactive;
@@ -69,8 +70,9 @@ class BlobOptions:
     em_iterations: int = 2
     colour_weight: float = 1.0
     log_det: bool = False
+    soft: int = 3
     gate: float = 25.0
-    motion_sigma_m: float = 0.06
+    motion_sigma_m: float = 0.04
     min_fill: float = 0.3
     colour_prior_weight: float = 0.2
     skin_prior_weight: float = 0.5
@@ -196,7 +198,7 @@ class BlobTracker:
             pose = forward(m, params)
             blobs.regenerate(m, pose)
             asg = expectation(hull.centres, hull.colours, blobs.mean, blobs.cov + self._motion, blobs.colour, blobs.colour_cov,
-                              colour_weight=o.colour_weight, gate=o.gate, log_det=o.log_det)
+                              colour_weight=o.colour_weight, gate=o.gate, log_det=o.log_det, soft=o.soft)
             stats = maximisation(asg, hull.centres, hull.sizes, self.layout.n_blobs)
             blobs.absorb(stats, colour_prior_weight=self._prior_weight, min_fill=o.min_fill)
             weights = np.where(blobs.active, np.minimum(blobs.fill, 1.0), 0.0)
