@@ -110,7 +110,8 @@ def test_coloured_hull_rejects_bad_input(rng):
 
 
 # ----------------------------------------------------------------------------- EM
-def test_em_recovers_two_touching_blobs_of_different_colours():
+@pytest.mark.parametrize("soft", [0, 3])
+def test_em_recovers_two_touching_blobs_of_different_colours(soft):
     rng = np.random.default_rng(7)
     means = np.array([[0.0, 0.0, 1.0], [0.09, 0.0, 1.0]])  # 9 cm apart, 4 cm spread: the clouds overlap
     colours = np.array([[200.0, 60.0, 40.0], [40.0, 60.0, 200.0]])
@@ -125,7 +126,7 @@ def test_em_recovers_two_touching_blobs_of_different_colours():
     cov = np.repeat((0.04**2 * np.eye(3))[None], 2, 0)
     ccov = np.repeat((10.0**2 * np.eye(3))[None], 2, 0)
     for _ in range(3):
-        asg = expectation(centres, views, mu, cov, colours, ccov, gate=50.0)
+        asg = expectation(centres, views, mu, cov, colours, ccov, gate=50.0, soft=soft)
         st = maximisation(asg, centres, sizes, 2)
         mu, cov = st.mean, st.cov
     assert np.all(np.linalg.norm(st.mean - means, axis=1) < 0.005), 1e3 * (st.mean - means)

@@ -23,8 +23,8 @@ unknown somewhere (and nowhere background or edge) takes the majority class of i
 at the same level (background, edge or foreground; neighbours that were never tested do not vote;
 without voters it counts as an edge).  Above the finest level a background majority only splits
 the cube (weakly foreground limbs — clothing close to the background's colour — are thinner than a
-coarse cube and are dropped by their background neighbours otherwise).  At the finest level an edge cube is kept when, in
-every view, the mean of its samples' distances clipped at ``high`` reaches ``low`` (the paper's
+coarse cube and are dropped by their background neighbours otherwise).  At the finest level an edge
+cube is kept when, in every view, the mean of its samples' distances clipped at ``high`` reaches ``low`` (the paper's
 mean test; the clipping keeps one saturated sample from deciding: about a quarter of the samples
 certain, or most of them weakly foreground, as on clothing close to the background's colour).
 

@@ -5,8 +5,10 @@ Per frame set (camera name → BGR image):
 1. predict the pose (constant velocity, as the contour tracker) and reconstruct the coloured hull
    (``tracker.blobs.colour_hull``) in the zone of interest around it;
 2. ``em_iterations`` times: re-create the blobs on the model at the current pose
-   (``BlobSet.regenerate``), assign voxels to blobs (``tracker.blobs.em.expectation``, eq. 2),
-   re-estimate them (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
+   (``BlobSet.regenerate``), assign voxels to blobs (``tracker.blobs.em.expectation``, eq. 2;
+   by default each voxel is shared among its nearest blobs rather than given to one, which keeps a
+   blob that slipped onto a neighbour's voxels from locking there), re-estimate them
+   (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
    de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
    blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
    a constraint, the limbs by cyclic coordinate descent (or damped least squares) within the
