@@ -2,7 +2,7 @@
 
 Per frame set (camera name → BGR image):
 
-1. predict the pose (constant velocity, as the contour tracker) and reconstruct the coloured hull
+1. predict the pose (the last one, or extrapolated with ``velocity_gain``) and reconstruct the coloured hull
    (``tracker.blobs.colour_hull``) in the zone of interest around it;
 2. ``em_iterations`` times: re-create the blobs on the model at the current pose
    (``BlobSet.regenerate``), assign voxels to blobs (``tracker.blobs.em.expectation``, eq. 2;
@@ -11,8 +11,8 @@ Per frame set (camera name → BGR image):
    (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
    de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
    blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
-   a constraint, the limbs by cyclic coordinate descent (or damped least squares) within the
-   joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
+   a constraint, the limbs by damped least squares (or the paper's cyclic coordinate descent)
+   within the joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
 3. emit a DESIGN.md pose record (``"method": "blobs"``).
 
 The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
