@@ -246,3 +246,22 @@ def test_track_method_blobs_on_a_short_hop(hop, tmp_path, capsys):
     summary = json.loads(capsys.readouterr().err.split("summary: ")[1].splitlines()[0])
     assert summary["frames"] == N_FRAMES
 
+
+
+def test_blob_tracker_reports_unsolvable_frames_without_raising(rng, model):
+    from tracker.blobs import BlobTracker
+
+    cams = _ring(3)
+    models, _ = _cube_scene(rng, cams, (0, 0, 0))
+    backgrounds = {c.name: m for c, m in zip(cams, models)}
+    empty = {c.name: _background_image(m) for c, m in zip(cams, models)}
+    tracker = BlobTracker(model, cams, backgrounds)
+    rec = tracker.step(0, 0, empty)
+    assert rec["ok"] is False and "no initial pose" in rec["reason"] and rec["method"] == "blobs"
+    tracker = BlobTracker(model, cams, backgrounds, initial_params=model.zero())
+    rec = tracker.step(1, 10, {**empty, "cam9": empty["cam0"]})
+    assert rec["ok"] is False and "unknown camera" in rec["reason"]
+    rec = tracker.step(2, 20, empty)  # nobody in the studio
+    assert rec["ok"] is False and "voxels" in rec["reason"] and rec["cameras"] == 3
+    with pytest.raises(ValueError, match="backgrounds"):
+        BlobTracker(model, cams, {})
