@@ -27,6 +27,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
     parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
+    parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
+                        help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
+                             "EM blobs and inverse kinematics (Caillette & Howard)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -66,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         with open(args.out, "w", encoding="utf-8") as out:
             for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
+                                     method=args.method):
                 out.write(json.dumps(rec) + "\n")
                 records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
                 _progress(len(records), total, time.perf_counter() - t0, rec)
