@@ -23,6 +23,7 @@ _EXPORTS = {
     "tracker.cost": ("ChamferCost", "CostTerms"),
     "tracker.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
     "tracker.tracking": ("Tracker", "TrackerOptions"),
+    "tracker.roi": ("pose_rois",),
     "tracker.hull": ("VoxelHull", "visual_hull"),
     "tracker.initialise": ("InitResult", "initialise"),
     "tracker.recovery": ("LossMonitor", "recover"),
