@@ -93,9 +93,11 @@ class FrameSegmentation:
 
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
-                  params: SegmentationParams | None = None) -> FrameSegmentation:
+                  params: SegmentationParams | None = None, cut=None) -> FrameSegmentation:
     """Segment one BGR uint8 frame ``(h, w, 3)`` against ``model``; only ``roi = (x0, y0, x1, y1)``
-    is processed when given.  Does not adapt the model (call ``model.update`` for that)."""
+    is processed when given.  Does not adapt the model (call ``model.update`` for that).
+    ``cut(silhouette_roi, box) -> silhouette_roi``, when given, edits the silhouette of the box
+    before the edges and chamfer images are made (``segmentation.clutter``)."""
     params = params or SegmentationParams()
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w, h = model.size
@@ -109,6 +111,8 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     sil_roi = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
                                max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
                                close_px=params.close_px, max_components=params.max_components)
+    if cut is not None:
+        sil_roi = cut(sil_roi, box)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,
                                  blur_sigma=params.blur_sigma)

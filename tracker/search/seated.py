@@ -1,0 +1,134 @@
+"""Initialisation of a subject who is not standing in a T- or A-pose: seated hypotheses.
+
+``tracker.search.initialise.initialise`` searches a person standing in a T- or A-pose.  A
+subject seated from the first frame (a studio take on a chair) fits none of those
+hypotheses: the refinement then drapes the standing model over the chair.  ``seated_candidates``
+places a seated posture (thighs forward, shanks down, arms hanging with the forearms on the
+thighs) at every heading on the visual hull: its lowest point on the floor, its volume centred on
+the hull's horizontally, then refined (root only) and lifted by ``polish_iou``.
+``initialise_any`` runs both searches and keeps the pose with the best silhouette IoU
+(``ScoreViews``: a limb missing from the model costs as much as one the images lack, so the
+standing model folded over a chair scores below the seated one).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from tracker.body.kinematics import forward
+from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
+from tracker.fitting.cost import ChamferCost
+from tracker.imaging.render import body_points
+from tracker.search.hull import VoxelHull, visual_hull
+from tracker.search.initialise import InitResult, ScoreViews, initialise, prepare_inputs, refine
+
+__all__ = ["SEATED_DEG", "POLISH_STEPS", "seated_params", "seated_candidates", "polish_iou", "initialise_any"]
+
+#: The seated posture, degrees per DOF name suffix (both sides): thighs forward, knees bent,
+#: arms hanging with the forearms bent forward onto the thighs.
+SEATED_DEG = {"thigh.flexion": 90.0, "shank.flexion": 90.0, "upper_arm.abduction": -80.0,
+              "upper_arm.flexion": 15.0, "forearm.flexion": 60.0}
+
+
+#: ``polish_iou``'s parameters and first steps (metres, radians): the root and the seated
+#: posture's main joints, where a prop under the subject misleads the chamfer refinement.
+POLISH_STEPS = {"pelvis.tx": 0.04, "pelvis.ty": 0.04, "pelvis.tz": 0.04, "pelvis.ry": 0.15, "pelvis.rz": 0.15,
+                "abdomen.flexion": 0.15, "left_thigh.flexion": 0.15, "right_thigh.flexion": 0.15,
+                "left_shank.flexion": 0.15, "right_shank.flexion": 0.15, "left_thigh.abduction": 0.1,
+                "right_thigh.abduction": 0.1}
+
+
+def polish_iou(model: BodyModel, views: ScoreViews, params: np.ndarray, *,
+               steps: Mapping[str, float] = POLISH_STEPS, rounds: int = 6) -> tuple[np.ndarray, float]:
+    """Coordinate ascent of the silhouette IoU (``views.score``) over the parameters of ``steps``:
+    each is moved by ± its step and the move kept when the IoU rises; a round without a gain
+    halves the steps.  ``rounds`` rounds (2 × len(steps) scores each).  Returns ``(params, IoU)``.
+
+    The chamfer refinement lets a body sink into a prop that is part of the silhouette (its
+    contour lies inside the silhouette either way); the IoU counts the silhouette the body
+    leaves uncovered and the body outside it, so it lifts the body back onto the person."""
+    names = [n for n in steps if n in model.param_names]
+    idx = np.array([model.param_names.index(n) for n in names], dtype=int)
+    step = np.array([steps[n] for n in names], dtype=float)
+    p = model.clamp(np.asarray(params, dtype=float))
+    best = views.score(p)
+    for _ in range(int(rounds)):
+        gained = False
+        for k, i in enumerate(idx):  # a few dozen parameters, not pixels
+            for sign in (1.0, -1.0):
+                q = p.copy()
+                q[i] += sign * step[k]
+                q = model.clamp(q)
+                s = views.score(q)
+                if s > best + 1e-4:
+                    p, best, gained = q, s, True
+        if not gained:
+            step *= 0.5
+    return p, float(best)
+
+
+def seated_params(model: BodyModel, posture: Mapping[str, float] = SEATED_DEG) -> np.ndarray:
+    """The posture (``{"thigh.flexion": deg, ...}``, both sides) at the origin, heading 0 (n_params,)."""
+    p = model.zero()
+    for suffix, deg in posture.items():
+        for side in ("left", "right"):
+            name = f"{side}_{suffix}"
+            if name in model.param_names:
+                p[model.param_names.index(name)] = np.radians(deg)
+    return model.clamp(p)
+
+
+def seated_candidates(model: BodyModel, hull: VoxelHull, *, n_headings: int = 12,
+                      posture: Mapping[str, float] = SEATED_DEG) -> list:
+    """``[(label, heading_rad, params)]``: the posture at ``n_headings`` evenly spaced headings,
+    lowest point on the hull's floor, body centroid over the hull's centroid."""
+    centroid = hull.centroid()
+    floor = hull.extent()[0, 2]
+    root_t = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    root_r = np.flatnonzero(model.param_kind == ROOT_ROTATION)
+    shape = seated_params(model, posture)
+    out = []
+    for psi in 2 * np.pi * np.arange(n_headings) / max(n_headings, 1):
+        p = shape.copy()
+        p[root_r] = [0.0, 0.0, (psi + np.pi) % (2 * np.pi) - np.pi]
+        pts = body_points(model, forward(model, p), n_theta=8, n_z=2).reshape(-1, 3)
+        p[root_t] += [centroid[0] - pts[:, 0].mean(), centroid[1] - pts[:, 1].mean(), floor - pts[:, 2].min()]
+        out.append(("seated", float(p[root_r][2]), p))
+    return out
+
+
+def initialise_any(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+                   chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
+                   keep: int = 3, min_voxel_m: float = 0.03, score_scale: float = 0.5,
+                   max_iterations: int = 10) -> InitResult:
+    """The better (silhouette IoU) of ``initialise`` (standing T/A-pose, or recovery from ``hint``)
+    and the seated search; same arguments and result as ``initialise``."""
+    standing = initialise(model, cameras, silhouettes, chamfer, hint=hint, n_headings=n_headings, keep=keep,
+                          min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations)
+    cams, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
+    hull = standing.hull if standing.hull is not None else visual_hull(cams, sils, min_voxel_m=min_voxel_m)
+    hull = hull.largest_component()
+    if hull.empty:
+        return standing
+    views = ScoreViews(model, cams, sils, scale=score_scale)
+    cands = seated_candidates(model, hull, n_headings=n_headings)
+    scores = np.array([views.score(p) for _, _, p in cands])
+    root = [np.flatnonzero(model.param_kind != JOINT_ROTATION)]
+    best = None
+    for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
+        label, psi, p0 = cands[i]
+        p, _ = refine(model, cams, chs, p0, stages=root, max_iterations=max_iterations)
+        p, s = polish_iou(model, views, p)
+        if best is None or s > best[0]:
+            best = (s, p, psi)
+    standing_score = views.score(np.asarray(standing.params))
+    if best[0] <= standing_score:
+        return standing
+    s, p, psi = best
+    terms = ChamferCost(model, cams, chs, n_samples=8).evaluate(p)
+    return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
+                      heading_rad=psi, label="seated", height_m=standing.height_m,
+                      candidates=views.n_scored + standing.candidates, hull=hull)
