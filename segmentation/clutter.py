@@ -35,7 +35,7 @@ from segmentation.checks import check_image_bgr
 from segmentation.pipeline import FrameSegmentation, SegmentationParams, segment_frame
 
 __all__ = ["StaticClutter", "parse_ignore_region", "ignore_mask", "ignore_masks", "without_clutter",
-           "segment_without_clutter"]
+           "segment_without_clutter", "session_ignore_regions"]
 
 _REGION = re.compile(r"^\s*([^:\s]+)\s*:\s*(-?\d+)\s*,\s*(-?\d+)\s*,\s*(\d+)\s*,\s*(\d+)\s*$")
 
@@ -175,3 +175,28 @@ def ignore_masks(sizes: Mapping[str, tuple[int, int]], regions: Mapping[str, Seq
     if unknown:
         raise ValueError(f"ignore regions for unknown camera(s) {unknown} (have {sorted(sizes)})")
     return {n: ignore_mask(sizes[n], regs) for n, regs in regions.items() if regs}
+
+
+def session_ignore_regions(session_toml) -> dict[str, list[tuple[int, int, int, int]]]:
+    """The ``ignore = [[x, y, w, h], ...]`` lists of the ``[[camera]]`` tables of a session.toml
+    (camera name -> rectangles; cameras without one are left out).  ValueError on a bad entry."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(session_toml)
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    out: dict[str, list] = {}
+    for table in data.get("camera", []):
+        regs = table.get("ignore") if isinstance(table, dict) else None
+        if regs is None:
+            continue
+        name = table.get("name")
+        if not isinstance(regs, list) or not all(isinstance(r, list) and len(r) == 4 and
+                                                 all(isinstance(v, int) and not isinstance(v, bool) for v in r)
+                                                 for r in regs):
+            raise ValueError(f"{path} camera {name!r} key 'ignore': expected a list of [x, y, w, h] whole pixels")
+        if any(r[2] <= 0 or r[3] <= 0 for r in regs):
+            raise ValueError(f"{path} camera {name!r} key 'ignore': width and height must be > 0")
+        out[str(name)] = [tuple(r) for r in regs]
+    return out

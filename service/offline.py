@@ -20,6 +20,7 @@ from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
 from tracker.body.model import BodyModel, load_model
+from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
 __all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
@@ -71,12 +72,16 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
-                  clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
+                  clock: Callable[[], float] = time.perf_counter, scene: SceneOptions | None = None,
+                  ignore: dict[str, np.ndarray] | None = None) -> Iterator[dict]:
     """Pose records (dicts) for every frame set of ``session`` in frame-id order.
 
     ``frames``: range of frame ids (None: all); ``cameras``: names to use (None: all);
     ``initial_params``: start pose (n_params,), else automatic initialisation
     (``tracker.search.initialise``) on the first frame.  ``backgrounds`` skips learning them.
+    ``scene``: decide which foreground is body (``tracker.fitting.scene``: clutter learned and cut,
+    seated initialisation; None: every foreground pixel is body); ``ignore``: camera name ->
+    (h, w) bool mask of pixels that are never body (with ``scene`` only).
     """
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
@@ -85,6 +90,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         backgrounds, _ = background_models(session, names, frames=frames)
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock)
+    if scene is not None:
+        st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
+                          segmentation=segmentation)
+        for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+            ts = next(iter(group.values())).timestamp_ns
+            yield st.step(fid, ts, {n: f.image for n, f in group.items()})
+        return
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns

@@ -12,7 +12,9 @@ import numpy as np
 
 from capture.session import SessionError, load_session
 from tracker.body.model import ModelError, available_models
+from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from service.offline import background_models, session_model, summarise, track_session
+from tracker.fitting.scene import SceneOptions
 
 HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
 
@@ -26,6 +28,11 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
     parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
+    parser.add_argument("--ignore-region", action="append", default=[], metavar="CAM:x,y,w,h",
+                        help="pixels of camera CAM that are never body (repeatable; adds to session.toml's "
+                             "[[camera]] ignore lists)")
+    parser.add_argument("--no-scene", action="store_true",
+                        help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -72,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         model = session_model(session, args.model)
         init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
         names = list(session.camera_names if cameras is None else cameras)
+        ignore = _ignore_masks(session, args.ignore_region)
         t_bg = time.perf_counter()
         backgrounds, how = background_models(session, names, frames=frames)
         print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
@@ -82,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         with open(args.out, "w", encoding="utf-8") as out:
             for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
+                                     scene=None if args.no_scene else SceneOptions(), ignore=ignore):
                 out.write(json.dumps(rec) + "\n")
                 records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
                 _progress(len(records), total, time.perf_counter() - t0, rec)
@@ -93,6 +102,16 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)
     return 0 if summary["frames"] else 1
+
+
+def _ignore_masks(session, texts) -> dict:
+    """Camera name -> ignore mask from session.toml's ``ignore`` lists and ``--ignore-region``s."""
+    regions = session_ignore_regions(session.root / "session.toml")
+    for text in texts:
+        name, box = parse_ignore_region(text)
+        regions.setdefault(name, []).append(box)
+    sizes = {n: session.camera_model(n).size for n in session.camera_names}
+    return ignore_masks(sizes, regions)
 
 
 def _frame_count(session, frames: range | None) -> int | None:

@@ -50,6 +50,8 @@ class SceneOptions:
     recovery_gap : frames between two recovery searches at least (the CPU budget of recovery:
         a search costs tens of frames' fits)
     seated : the first pose is searched standing (T/A) and seated (``tracker.search.seated``)
+    heights : subject heights (metres) the seated search also tries, the tracker's model re-sized
+        to the best (None: only the model's own; a seated subject's height is not on the hull)
     """
 
     learn: bool = True
@@ -60,6 +62,7 @@ class SceneOptions:
     warmup_frames: int = 25
     recovery_gap: int = 25
     seated: bool = True
+    heights: tuple | None = None
 
 
 class SceneTracker:
@@ -96,9 +99,7 @@ class SceneTracker:
         self.learners = ({n: StaticClutter((c.width, c.height), learn_frames=options.learn_frames,
                                            colour_tol=options.colour_tol) for n, c in tracker.cameras.items()}
                          if options.learn else {})
-        cams = list(tracker.cameras.values())
-        self._views = ScoreViews(tracker.model, cams, [np.zeros((c.height, c.width), np.uint8) for c in cams],
-                                 scale=0.5)
+        self._views = self._render_views()
         self._base_options = tracker.options
         self._since_init = 0
         self._since_recovery = options.recovery_gap
@@ -106,6 +107,10 @@ class SceneTracker:
         self._inits = tracker.n_initialisations
         self._explained: dict[str, np.ndarray] = {}
         self.last_segmentation: dict = {}
+
+    def _render_views(self) -> ScoreViews:
+        cams = list(self.tracker.cameras.values())
+        return ScoreViews(self.tracker.model, cams, [np.zeros((c.height, c.width), np.uint8) for c in cams], scale=0.5)
 
     def clutter(self, name: str) -> np.ndarray | None:
         """Camera ``name``'s clutter mask (h, w) bool: ignore regions and learned clutter, or None."""
@@ -171,11 +176,16 @@ class SceneTracker:
         names = [n for n in tr.cameras if n in segs and np.any(segs[n].silhouette)]
         if not names:
             return
+        heights = [] if self.options.heights is None else list(self.options.heights)
         try:
-            res = initialise_any(tr.model, [tr.cameras[n] for n in names],
-                                 {n: segs[n].silhouette for n in names}, {n: segs[n].chamfer for n in names})
+            res, model = initialise_any(tr.model, [tr.cameras[n] for n in names],
+                                        {n: segs[n].silhouette for n in names}, {n: segs[n].chamfer for n in names},
+                                        heights=heights)
         except ValueError:
             return
+        if model is not tr.model:
+            tr.model = model
+            self._views = self._render_views()
         tr.params = tr.model.clamp(np.asarray(res.params, dtype=float))
         tr.n_initialisations += 1
 

@@ -100,35 +100,49 @@ def seated_candidates(model: BodyModel, hull: VoxelHull, *, n_headings: int = 12
     return out
 
 
-def initialise_any(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
-                   chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
-                   keep: int = 3, min_voxel_m: float = 0.03, score_scale: float = 0.5,
-                   max_iterations: int = 10) -> InitResult:
-    """The better (silhouette IoU) of ``initialise`` (standing T/A-pose, or recovery from ``hint``)
-    and the seated search; same arguments and result as ``initialise``."""
-    standing = initialise(model, cameras, silhouettes, chamfer, hint=hint, n_headings=n_headings, keep=keep,
-                          min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations)
-    cams, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
-    hull = standing.hull if standing.hull is not None else visual_hull(cams, sils, min_voxel_m=min_voxel_m)
-    hull = hull.largest_component()
-    if hull.empty:
-        return standing
+def _seated_search(model: BodyModel, cams, sils, chs, hull: VoxelHull, *, n_headings: int, keep: int,
+                   score_scale: float, max_iterations: int) -> tuple[float, np.ndarray, float, ScoreViews]:
+    """Best seated pose on ``hull``: ``(IoU, params, heading, views)``."""
     views = ScoreViews(model, cams, sils, scale=score_scale)
     cands = seated_candidates(model, hull, n_headings=n_headings)
     scores = np.array([views.score(p) for _, _, p in cands])
     root = [np.flatnonzero(model.param_kind != JOINT_ROTATION)]
     best = None
     for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
-        label, psi, p0 = cands[i]
+        _, psi, p0 = cands[i]
         p, _ = refine(model, cams, chs, p0, stages=root, max_iterations=max_iterations)
         p, s = polish_iou(model, views, p)
         if best is None or s > best[0]:
-            best = (s, p, psi)
-    standing_score = views.score(np.asarray(standing.params))
-    if best[0] <= standing_score:
-        return standing
-    s, p, psi = best
-    terms = ChamferCost(model, cams, chs, n_samples=8).evaluate(p)
+            best = (s, p, psi, views)
+    return best
+
+
+def initialise_any(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+                   chamfer: Mapping[str, object] | None = None, *, hint=None, n_headings: int = 12,
+                   keep: int = 3, min_voxel_m: float = 0.03, score_scale: float = 0.5,
+                   max_iterations: int = 10, heights: Sequence[float] = ()) -> tuple[InitResult, BodyModel]:
+    """The better (silhouette IoU) of ``initialise`` (standing T/A-pose, or recovery from ``hint``)
+    and the seated search; arguments as ``initialise``.  ``heights`` (metres): the seated search
+    is also run with ``model`` re-sized to each (a seated subject's height cannot be read off the
+    hull).  Returns ``(result, the model it is a pose of)``."""
+    standing = initialise(model, cameras, silhouettes, chamfer, hint=hint, n_headings=n_headings, keep=keep,
+                          min_voxel_m=min_voxel_m, score_scale=score_scale, max_iterations=max_iterations)
+    cams, sils, chs = prepare_inputs(model, cameras, silhouettes, chamfer)
+    hull = standing.hull if standing.hull is not None else visual_hull(cams, sils, min_voxel_m=min_voxel_m)
+    hull = hull.largest_component()
+    if hull.empty:
+        return standing, model
+    best, best_model, n_scored = None, model, 0
+    for m in [model] + [model.with_height(h) for h in heights if abs(h - model.height_m) > 1e-6]:
+        found = _seated_search(m, cams, sils, chs, hull, n_headings=n_headings, keep=keep,
+                               score_scale=score_scale, max_iterations=max_iterations)
+        n_scored += found[3].n_scored
+        if best is None or found[0] > best[0]:
+            best, best_model = found, m
+    s, p, psi, views = best
+    if s <= ScoreViews(model, cams, sils, scale=score_scale).score(np.asarray(standing.params)):
+        return standing, model
+    terms = ChamferCost(best_model, cams, chs, n_samples=8).evaluate(p)
     return InitResult(params=p, score=s, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
-                      heading_rad=psi, label="seated", height_m=standing.height_m,
-                      candidates=views.n_scored + standing.candidates, hull=hull)
+                      heading_rad=psi, label="seated", height_m=best_model.height_m,
+                      candidates=n_scored + standing.candidates, hull=hull), best_model
