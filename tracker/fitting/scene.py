@@ -19,6 +19,7 @@ and the clutter of ``segmentation.clutter``:
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, replace
 from typing import Mapping
 
@@ -47,8 +48,9 @@ class SceneOptions:
     max_unexplained : a fit leaving more than this share of the foreground unexplained does not
         feed the learner
     warmup_frames : frames after an initialisation with the reverse term off and no recovery
-    recovery_gap : frames between two recovery searches at least (the CPU budget of recovery:
-        a search costs tens of frames' fits)
+    recovery_gap, recovery_share : the CPU budget of recovery (a search costs tens of frames'
+        fits): at least ``recovery_gap`` frames between two searches, and a search only while the
+        time spent in searches is at most ``recovery_share`` of the time spent tracking
     seated : the first pose is searched standing (T/A) and seated (``tracker.search.seated``)
     heights : subject heights (metres) the seated search also tries, the tracker's model re-sized
         to the best (None: only the model's own; a seated subject's height is not on the hull)
@@ -61,6 +63,7 @@ class SceneOptions:
     max_unexplained: float = 0.45
     warmup_frames: int = 25
     recovery_gap: int = 25
+    recovery_share: float = 0.2
     seated: bool = True
     heights: tuple | None = None
 
@@ -103,6 +106,8 @@ class SceneTracker:
         self._base_options = tracker.options
         self._since_init = 0
         self._since_recovery = options.recovery_gap
+        self._tracking_s = 0.0
+        self._recovery_s = 0.0
         self._recover = tracker.recover
         self._inits = tracker.n_initialisations
         self._explained: dict[str, np.ndarray] = {}
@@ -146,13 +151,18 @@ class SceneTracker:
             self._initialise(segs)
         warm = self._since_init < self.options.warmup_frames and self.options.learn
         tr.options = replace(self._base_options, reverse_weight=0.0) if warm else self._base_options
-        tr.recover = self._recover and not warm and self._since_recovery >= self.options.recovery_gap
+        tr.recover = (self._recover and not warm and self._since_recovery >= self.options.recovery_gap
+                      and self._recovery_s <= self.options.recovery_share * self._tracking_s)
+        t0 = time.perf_counter()
         rec = tr.step(frame_id, timestamp_ns, {n: s.chamfer for n, s in segs.items()},
                       silhouettes={n: s.silhouette for n, s in segs.items()})
         tr.options, tr.recover = self._base_options, self._recover
+        dt = time.perf_counter() - t0
+        self._tracking_s += dt
         self._since_recovery += 1
         if tr.n_initialisations != self._inits:
             self._inits, self._since_init, self._since_recovery = tr.n_initialisations, 0, 0
+            self._recovery_s += dt
         else:
             self._since_init += 1
         if "params" not in rec:

@@ -45,7 +45,7 @@ def polish_iou(model: BodyModel, views: ScoreViews, params: np.ndarray, *,
                steps: Mapping[str, float] = POLISH_STEPS, rounds: int = 6) -> tuple[np.ndarray, float]:
     """Coordinate ascent of the silhouette IoU (``views.score``) over the parameters of ``steps``:
     each is moved by ± its step and the move kept when the IoU rises; a round without a gain
-    halves the steps.  ``rounds`` rounds (2 × len(steps) scores each).  Returns ``(params, IoU)``.
+    halves the steps.  ``rounds`` rounds (two scores per parameter each).  Returns ``(params, IoU)``.
 
     The chamfer refinement lets a body sink into a prop that is part of the silhouette (its
     contour lies inside the silhouette either way); the IoU counts the silhouette the body
