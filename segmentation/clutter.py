@@ -91,6 +91,7 @@ class StaticClutter:
         self.colour_tol = float(colour_tol)
         self._count = np.zeros((h, w), np.uint16)
         self._last: np.ndarray | None = None
+        self._box: tuple[int, int, int, int] | None = None
         self.mask = np.zeros((h, w), bool)
         self.frames = 0
 
@@ -107,17 +108,28 @@ class StaticClutter:
         if fg.shape != self._count.shape or expl.shape != fg.shape:
             raise ValueError(f"foreground, explained: expected shape {self._count.shape}, got {fg.shape}, {expl.shape}")
         img = check_image_bgr(image_bgr, "image_bgr", size=self.size)
-        if self._last is None:
-            steady = np.ones_like(fg)
-        else:
-            diff = cv2.absdiff(img, self._last)
-            steady = cv2.transform(diff, np.ones((1, 3), np.float32)).reshape(fg.shape) <= self.colour_tol
+        # outside the foreground everything restarts: work in the box of this frame's foreground
+        # and the last one's (the state is zero outside the last box)
+        x, y, w, h = cv2.boundingRect(fg.view(np.uint8))
+        box = (x, y, x + w, y + h) if w and h else None
+        last, self._box = self._box, box
+        if last is not None and box is not None:
+            box = (min(box[0], last[0]), min(box[1], last[1]), max(box[2], last[2]), max(box[3], last[3]))
+        elif box is None:
+            box = last
+        if box is not None:
+            sl = np.s_[box[1]:box[3], box[0]:box[2]]
+            f, e = fg[sl], expl[sl]
+            if self._last is None:
+                steady = np.ones_like(f)
+            else:
+                diff = cv2.absdiff(img[sl], self._last[sl])
+                steady = cv2.transform(diff, np.ones((1, 3), np.float32)).reshape(f.shape) <= self.colour_tol
+            count = self._count[sl]
+            count[:] = np.where(f & ~e & steady, np.minimum(count, np.uint16(60000)) + np.uint16(1),
+                                np.where(f & e, count, np.uint16(0)))
+            self.mask[sl] = (count >= self.learn_frames) | (self.mask[sl] & f)
         self._last = img.copy()
-        grow = fg & ~expl & steady
-        hold = fg & expl
-        self._count = np.where(grow, np.minimum(self._count, np.uint16(60000)) + np.uint16(1),
-                               np.where(hold, self._count, np.uint16(0))).astype(np.uint16)
-        self.mask = (self._count >= self.learn_frames) | (self.mask & fg)
         self.frames += 1
         return self.mask
 
@@ -126,6 +138,7 @@ class StaticClutter:
         self._count[:] = 0
         self.mask[:] = False
         self._last = None
+        self._box = None
         self.frames = 0
 
 
