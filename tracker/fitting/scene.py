@@ -14,7 +14,13 @@ and the clutter of ``segmentation.clutter``:
    bound on the unexplained share keeps such a fit from teaching the learner;
 4. while no clutter is learned yet (the first ``warmup_frames`` frames after an
    initialisation), the reverse (silhouette → model) term is off: it would pull the nearest limb
-   onto the outline of a prop; the model → image terms alone keep a good start where it is.
+   onto the outline of a prop; the model → image terms alone keep a good start where it is;
+   recovery searches wait too, and later keep to a CPU budget (``recovery_gap``,
+   ``recovery_share``);
+5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``).
+
+The bound on the unexplained share is the only guard against a wrong fit teaching the learner
+the real body as clutter; a fit that starts on the prop and stays there can learn the person.
 """
 
 from __future__ import annotations
