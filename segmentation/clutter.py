@@ -162,17 +162,20 @@ def without_clutter(silhouette: np.ndarray, clutter: np.ndarray | None, *, keep:
 
 
 def segment_without_clutter(model: BackgroundModel, image_bgr: np.ndarray, clutter: np.ndarray | None, *,
-                            keep: np.ndarray | None = None, params: SegmentationParams | None = None,
-                            ) -> tuple[FrameSegmentation, np.ndarray]:
+                            keep: np.ndarray | None = None, ignore: np.ndarray | None = None,
+                            params: SegmentationParams | None = None) -> tuple[FrameSegmentation, np.ndarray]:
     """``segmentation.pipeline.segment_frame`` with the clutter cut (``without_clutter``) between
-    the silhouette and the edges / chamfer images.  Returns ``(segmentation of the body,
-    raw silhouette (h, w) uint8 with the clutter)``; the raw one feeds ``StaticClutter.update``."""
+    the silhouette and the edges / chamfer images; ``ignore`` (h, w) bool is cut whatever ``keep``
+    says (the operator's never-body pixels).  Returns ``(segmentation of the body, raw silhouette
+    (h, w) uint8 with the clutter, ignore regions cut)``; the raw one feeds ``StaticClutter.update``."""
     params = params or SegmentationParams()
     w, h = model.size
     raw = np.zeros((h, w), np.uint8)
 
     def cut(sil_roi: np.ndarray, box) -> np.ndarray:
         x0, y0, x1, y1 = box
+        if ignore is not None:
+            sil_roi = np.where(ignore[y0:y1, x0:x1], 0, sil_roi).astype(np.uint8)
         raw[y0:y1, x0:x1] = sil_roi
         if clutter is None:
             return sil_roi

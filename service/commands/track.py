@@ -84,6 +84,11 @@ def run(args: argparse.Namespace) -> int:
         backgrounds, how = background_models(session, names, frames=frames)
         print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
               f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+        no_video = [n for n, h in how.items() if h != "video"]
+        if no_video:
+            print(f"warning: camera(s) {', '.join(no_video)} have no background video: their background is the "
+                  "temporal median of the take, which swallows a subject who stays in one place; record ~2 s "
+                  "of the empty room per camera ([[camera]] background in session.toml)", file=sys.stderr)
         total = _frame_count(session, frames)
         records = []
         t0 = time.perf_counter()

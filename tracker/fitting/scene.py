@@ -124,11 +124,10 @@ class SceneTracker:
         return ScoreViews(self.tracker.model, cams, [np.zeros((c.height, c.width), np.uint8) for c in cams], scale=0.5)
 
     def clutter(self, name: str) -> np.ndarray | None:
-        """Camera ``name``'s clutter mask (h, w) bool: ignore regions and learned clutter, or None."""
-        masks = [m for m in (self.ignore.get(name), getattr(self.learners.get(name), "mask", None)) if m is not None]
-        if not masks:
-            return None
-        return masks[0] if len(masks) == 1 else (masks[0] | masks[1])
+        """Camera ``name``'s learned clutter (h, w) bool, or None (the ignore regions are apart:
+        ``ignore``)."""
+        learner = self.learners.get(name)
+        return None if learner is None else learner.mask
 
     def explained(self, params: np.ndarray) -> dict[str, np.ndarray]:
         """The body's projection at ``params`` per camera, (h, w) bool, grown by ``margin_m``."""
@@ -150,7 +149,7 @@ class SceneTracker:
         for name, img in images.items():
             segs[name], raws[name] = segment_without_clutter(
                 self.backgrounds[name], img, self.clutter(name), keep=self._explained.get(name),
-                params=self.segmentation)
+                ignore=self.ignore.get(name), params=self.segmentation)
         self.last_segmentation = segs
         tr = self.tracker
         if tr.params is None and self.options.seated:
