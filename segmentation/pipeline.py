@@ -131,7 +131,7 @@ class FrameSegmentation:
 
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
-                  params: SegmentationParams | None = None) -> FrameSegmentation:
+                  params: SegmentationParams | None = None, cut=None) -> FrameSegmentation:
     """Segment one frame against a background model: silhouette, edges and chamfer images.
 
     Does not adapt the model (call ``model.update`` for that).
@@ -143,6 +143,9 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     roi : (int, int, int, int), optional
         ``(x0, y0, x1, y1)``: only that box is processed (default: the automatic ROI of ``params``).
     params : SegmentationParams, optional
+    cut : callable (silhouette_roi, box) -> silhouette_roi, optional
+        Edits the silhouette of the box before the edges and chamfer images are made
+        (``segmentation.clutter``).
 
     Returns
     -------
@@ -161,6 +164,8 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     sil_roi = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
                                max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
                                close_px=params.close_px, max_components=params.max_components)
+    if cut is not None:
+        sil_roi = cut(sil_roi, box)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,
                                  blur_sigma=params.blur_sigma)
