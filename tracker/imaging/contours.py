@@ -148,7 +148,7 @@ def contour_generator_angles(cones: np.ndarray, m: np.ndarray) -> tuple[np.ndarr
     """
     # F = -b m1, G = -a m2, H = a b (1 + k m3), D = F² + G² - H²; t± = (-G ± √D) / (H - F) =
     # (H + F) / (-G ∓ √D), each root taken in the form whose numerator does not cancel
-    # (tracker.kernels._ruling_angles)
+    # (tracker.kernels.projection._ruling_angles)
     cones, m = np.broadcast_arrays(np.asarray(cones, dtype=float)[..., :3], np.asarray(m, dtype=float))
     shape = m.shape[:-1]
     theta, real = ruling_angles(np.ascontiguousarray(cones.reshape(-1, 3)), np.ascontiguousarray(m.reshape(-1, 3)))
