@@ -102,3 +102,31 @@ def test_lossless_blob_worker_equals_offline_and_publishes_hulls(hop, studio):
     assert [r.message.frame_id for r in got] == list(range(N_FRAMES))
     assert all(abs(r.message.count - o["voxels"]) == 0 for r, o in zip(got, offline))
     assert studio.results["track"]["hulls"] == N_FRAMES
+
+
+@pytest.mark.slow
+def test_live_blob_worker_fits_the_newest_frames(hop, studio):
+    """Live: a camera worker replays in real time, the blob track worker (no segment worker, no demand)
+    fits complete sets of the newest frames and publishes a pose and a hull for each."""
+    session = load_session(hop)
+    names = tuple(session.camera_names)
+    fit = BlobFitter.from_session(session, replayed=names, initial_params=np.asarray(_truth(hop)[0]["params"]))
+    poses, track_s = [], studio.session(listen=True)
+    client = studio.session()
+    hulls = Inbox(client, studio.keys.hull, HullMessage.from_bytes, mode="lossless", depth=100)
+    studio.start("track", run_blob_track_worker, track_s, studio.keys, names, fit, mode="live", set_timeout_s=0.3,
+                 stop=studio.stop, on_pose=poses.append)
+    sources = {c: ReplaySource(session, c, pacing="realtime") for c in names}
+    for s in sources.values():
+        s.open()
+    cam = run_camera_worker(studio.session(), studio.keys, sources, mode="live", stop=studio.stop)
+    assert cam["processed"] == len(names) * N_FRAMES
+    assert wait_for(lambda: len(poses) >= 1, 20.0)
+    studio.stop.set()
+    studio.threads[0].join(20.0)
+    assert all(p.get("method") == "blobs" for p in poses)
+    assert any(p.get("cameras") == len(names) for p in poses), [p.get("cameras") for p in poses]  # late cameras: fewer
+    assert len({p.frame for p in poses}) == len(poses)  # each set once
+    got = []
+    assert wait_for(lambda: got.extend(hulls.drain()) or len(got) >= len(poses), 5.0)
+    assert {r.message.frame_id for r in got} == {p.frame for p in poses}
