@@ -99,7 +99,7 @@ class BlobOptions:
     velocity_gain: float = 0.0
     min_voxels: int = 50
     min_active_fraction: float = 0.6
-    max_goal_rms_m: float = 0.08
+    max_goal_rms_m: float = 0.045
     min_part_support: float = 0.4
     max_unexplained: float = 0.4
 
