@@ -176,7 +176,8 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         if not r.get("ok"):
             key = r.get("reason", "?").split(":")[0]
             reasons[key] = reasons.get(key, 0) + 1
-    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method, "height_m": round(height, 3),
+    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
+            "height_m": round(height, 3),
             **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
@@ -279,7 +280,8 @@ def main(argv=None) -> int:
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
-    result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref, "size": [w, h], "fps": args.fps,
+    result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref,
+              "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
               "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
     return _emit(result, args)

@@ -79,7 +79,8 @@ class BlobFitter:
         self._hull = None  # (frame_id, timestamp_ns, ColourHull) of the last set that made one
 
     @classmethod
-    def from_session(cls, session, *, model: str = "knossow40", replayed: Sequence[str] = (), **options) -> "BlobFitter":
+    def from_session(cls, session, *, model: str = "knossow40", replayed: Sequence[str] = (),
+                     **options) -> "BlobFitter":
         """A fitter on ``session``'s calibration and subject; ``replayed`` cameras take their background
         model from the session (``service.backgrounds``), the others learn it from their first frames."""
         from service.backgrounds import background_models

@@ -20,8 +20,8 @@ pose an ``initialiser`` finds in the first frame, e.g. :func:`initialise_from_im
 contour tracker's silhouette search).  A frame is ``ok: false`` when the hull in the zone is nearly
 empty, too few blobs are active, the active blobs' means are far from where the fitted model
 puts them, a part of the fitted model lies outside the hull (``BlobOptions.min_part_support``), or
-much of the hull lies outside the fitted model (``max_unexplained``); the fit is still the next frame's start, without velocity.  Never
-raises on data.
+much of the hull lies outside the fitted model (``max_unexplained``); the fit is still the next
+frame's start, without velocity.  Never raises on data.
 """
 
 from __future__ import annotations
@@ -153,8 +153,9 @@ def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m: float
     local = np.einsum("pji,pmj->pmi", pose.rotation, P[None] - pose.translation[:, None, :])  # R^T (x - t)
     z = local[..., 2]
     r = np.maximum(1.0 + k * z, 0.0)
-    ra, rb = a * r + margin_m, b * r + margin_m
-    inside = ((local[..., 0] / ra) ** 2 + (local[..., 1] / rb) ** 2 <= 1.0) & (z >= z1 - margin_m) & (z <= z2 + margin_m)
+    ra, rb = np.maximum(a * r + margin_m, 1e-9), np.maximum(b * r + margin_m, 1e-9)
+    inside = (((local[..., 0] / ra) ** 2 + (local[..., 1] / rb) ** 2 <= 1.0)
+              & (z >= z1 - margin_m) & (z <= z2 + margin_m))
     return inside.any(0)
 
 
