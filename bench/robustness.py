@@ -16,7 +16,8 @@ quality 85) into a temporary session (JPEG image sequences, calibration, ``[subj
 the subject's standing height measured on the rendered body), background models are learned from
 10 rendered empty-room frames per camera, and the session is tracked by
 ``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
-``knossow40`` model sized from the height) exactly as ``contourcap track`` does.  The poses are
+``knossow40`` model sized from the height) exactly as ``contourcap track`` does (``--method blobs``:
+the blob tracker ``tracker.blobs`` on the colour frames, initialised by the same silhouette search).  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
 silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
@@ -34,7 +35,7 @@ them as ratios to ``machine_ref_ms``.
 
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
-                               [--fps 30] [--clip-budget-s 20] [--out result.json]
+                               [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--out result.json]
 """
 
 from __future__ import annotations
@@ -138,7 +139,7 @@ def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, ever
 
 
 def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
-             ik_floor: bool = True, budget_s: float = 0.0) -> dict:
+             ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours") -> dict:
     """Render, track and score one clip; returns its per-clip record.
 
     ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
@@ -150,7 +151,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
         records, pipe_ms, cpu_s = [], [], 0.0
-        it = track_session(session, backgrounds=backgrounds)
+        it = track_session(session, backgrounds=backgrounds, method=method)
         while not (budget_s and cpu_s > budget_s):
             t0, c0 = time.perf_counter(), time.process_time()
             rec = next(it, None)
@@ -175,7 +176,8 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         if not r.get("ok"):
             key = r.get("reason", "?").split(":")[0]
             reasons[key] = reasons.get(key, 0) + 1
-    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
+    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
+            "height_m": round(height, 3),
             **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
@@ -228,6 +230,8 @@ def main(argv=None) -> int:
     ap.add_argument("--clip-budget-s", type=float, default=20.0,
                     help="CPU seconds of tracking per clip after which its remaining frames count as not ok "
                          "without a pose (0: no limit)")
+    ap.add_argument("--method", choices=("contours", "blobs"), default="contours",
+                    help="contours: the Knossow contour tracker; blobs: the BMVC'04 blob tracker (tracker.blobs)")
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
@@ -265,7 +269,7 @@ def main(argv=None) -> int:
         for j, name in enumerate(clips):
             for n in (cams if args.all_cameras else [cams[(s + j) % len(cams)]]):
                 rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
-                               ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s)
+                               ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s, method=args.method)
                 per_clip.append(rec)
                 if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
                     args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
@@ -276,7 +280,8 @@ def main(argv=None) -> int:
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
-    result = {"subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref, "size": [w, h], "fps": args.fps,
+    result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref,
+              "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
               "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
     return _emit(result, args)

@@ -26,6 +26,7 @@
     host = "host-a"
     set_timeout_ms = 80               # live: wait this long for missing cameras
     window = 8                        # lossless: frames in flight before the cameras wait
+    method = "contours"               # contours (Knossow) | blobs (BMVC'04: the track worker reads the frames)
 
     [router]                          # optional: `contourcap run` on this host also runs the router
     host = "host-a"
@@ -53,6 +54,10 @@ from capture.studio import DEFAULT_FPS, parse_studio_capture, read_studio_toml
 from service.wire.bus import MODES, ZenohSettings
 from service.wire.messages import ENCODINGS, check_name, MessageError
 
+
+
+METHODS = ("contours", "blobs")
+"""``[tracker] method`` values."""
 
 
 class ConfigError(ValueError):
@@ -129,6 +134,9 @@ class StudioConfig:
     router : ZenohSettings or None
         ``[router]``, when this studio runs its own.
     cameras : tuple of CameraConfig
+    method : {"contours", "blobs"}
+        ``[tracker] method``: the contour tracker on the segment workers' chamfer images, or the blob
+        tracker (``tracker.blobs``) on the camera frames themselves (no segment worker runs).
     """
 
     path: Path | None
@@ -146,6 +154,7 @@ class StudioConfig:
     router_host: str | None
     router: ZenohSettings | None
     cameras: tuple[CameraConfig, ...]
+    method: str = "contours"
 
     @property
     def hosts(self) -> tuple[str, ...]:
@@ -273,7 +282,7 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
                                  width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure))
     trigger = TriggerConfig(cap.trigger, cap.fps, dict(cap.trigger_options))
     tr = r.get(data, "tracker", "", (dict,), {})
-    r.unknown(tr, {"host", "set_timeout_ms", "window"}, "tracker")
+    r.unknown(tr, {"host", "set_timeout_ms", "window", "method"}, "tracker")
     ro = r.get(data, "router", "", (dict,), None)
     zen = _zenoh(r, r.get(data, "zenoh", "", (dict,), {}))
     router = None
@@ -298,7 +307,8 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
         tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
         router_host=r.name(ro, "host", "router") if ro is not None else None,
         router=router,
-        cameras=tuple(cams))
+        cameras=tuple(cams),
+        method=r.get(tr, "method", "tracker", (str,), "contours", choices=METHODS))
 
 
 def load_config(path) -> StudioConfig:

@@ -6,6 +6,7 @@ Entity layout (world = the tracker's frame, metres, Z up)::
     world/cameras/<cam>/image      camera frame (JPEG/PNG passed through undecoded; raw as Image)
     world/cameras/<cam>/silhouette SegmentationImage from the chamfer images (1 = person)
     world/skeleton                 Points3D with keypoint ids (AnnotationContext: names + bones [static])
+    world/hull                     Points3D: the blob tracker's coloured voxels (centre, colour, half edge)
     metrics/{rms_px,latency_ms,cameras,ok}   Scalars
 
 Timelines: ``frame`` (frame id) and ``capture_time`` (timestamp_ns).  The bridge is a separate zenoh
@@ -19,6 +20,7 @@ from typing import Sequence
 import numpy as np
 import rerun as rr
 
+from service.wire.hull import HullMessage
 from service.wire.messages import ChamferMessage, FrameMessage, MessageError
 from service.wire.records import PoseRecord
 
@@ -43,7 +45,7 @@ class RerunBridge:
                  joint_names: Sequence[str] = DEFAULT_JOINTS) -> None:
         self.rec, self.image_every = recording, max(1, int(image_every))
         self.joint_names = list(joint_names)
-        self.logged = {"poses": 0, "images": 0, "silhouettes": 0}
+        self.logged = {"poses": 0, "images": 0, "silhouettes": 0, "hulls": 0}
         self._log_static(cameras)
 
     def _log_static(self, cameras: Sequence) -> None:
@@ -90,6 +92,12 @@ class RerunBridge:
                 rec.log(f"metrics/{key}", rr.Scalars(float(pose.get(key))))
         rec.log("metrics/ok", rr.Scalars(1.0 if pose.ok else 0.0))
         self.logged["poses"] += 1
+
+    def on_hull(self, hull: HullMessage) -> None:
+        """The coloured hull of one frame (``service.wire.hull.HullMessage``) as points of its voxels' colours."""
+        self._time(hull.frame_id, hull.timestamp_ns)
+        self.rec.log("world/hull", rr.Points3D(hull.centres, colors=hull.rgb(), radii=0.5 * hull.sizes))
+        self.logged["hulls"] += 1
 
     def wants(self, frame_id: int) -> bool:
         """Whether frame ``frame_id``'s images are logged (every ``image_every``-th)."""

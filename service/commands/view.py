@@ -7,7 +7,7 @@ import sys
 import threading
 import time
 
-HELP = "show a live studio in rerun: camera frusta, images, silhouettes, 3-D skeleton, metrics"
+HELP = "show a live studio in rerun: camera frusta, images, silhouettes, 3-D skeleton, coloured hull, metrics"
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -45,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from service.wire.bus import BusError, Inbox, Keys, open_session
     from service.config import ConfigError
     from service.wire.messages import ChamferMessage, FrameMessage, MessageError
+    from service.wire.hull import HullMessage
     from service.wire.records import PoseRecord
     from service.workers.runtime import client_settings, stop_on_signals
     from service.viewer import RerunBridge, cameras_for_view
@@ -78,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     start = last = time.monotonic()
     try:
         inboxes.append((Inbox(session, keys.pose, PoseRecord.from_bytes, mode="live", depth=64), bridge.on_pose))
+        inboxes.append((Inbox(session, keys.hull, HullMessage.from_bytes, mode="live", depth=2), bridge.on_hull))
         if not args.no_images:
             n = max(1, len(cameras))
             inboxes += [(Inbox(session, keys.frame("*"), FrameMessage.from_bytes, mode="live", depth=2 * n),

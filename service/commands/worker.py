@@ -119,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             from service.workers.track import run_track_worker
 
+            if cfg.method == "blobs" and not args.plugin:  # frames in, no segment workers (blob_track docstring)
+                from service.workers.blob_track import run_blob_track_worker as run_track_worker
             fitter = build_fitter(cfg, plugin=args.plugin)
             idle = None if args.idle_exit_s is None else args.idle_exit_s
             stats = run_track_worker(session, keys, cams, fitter, mode=cfg.delivery,

@@ -8,7 +8,8 @@ SIGTERM to every child, waits ``grace_s``, then SIGKILLs what is left.
 Processes of a host (:func:`plan_host`): the router (if ``[router] host`` is this host), one camera
 worker per camera (a crashed camera does not take the others down) — or one for all the host's
 cameras when they take frame ids from the USB trigger box, which a single process must own — one
-segment worker for all the host's cameras, and the tracker (if ``[tracker] host`` is this host).
+segment worker for all the host's cameras (none with ``[tracker] method = "blobs"``: that tracker reads the
+frames itself), and the tracker (if ``[tracker] host`` is this host).
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         for cam in cams:
             specs.append(ProcessSpec(f"camera-{cam}", worker + ("camera", "--cameras", cam) + common + extra))
     idle = ("--idle-exit-s", str(idle_exit_s)) if idle_exit_s is not None else ()
-    if cams:
+    if cams and (cfg.method != "blobs" or fit_plugin):  # the blob tracker reads the frames itself
         plug = ("--plugin", segment_plugin) if segment_plugin else ()
         specs.append(ProcessSpec("segment", worker + ("segment", "--cameras", ",".join(cams)) + common
                                  + plug + idle))

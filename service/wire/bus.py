@@ -67,6 +67,11 @@ class Keys:
         """``pose``: the tracker's PoseRecords."""
         return f"{self.root}/pose"
 
+    @property
+    def hull(self) -> str:
+        """``hull``: the blob tracker's coloured hull per frame (``service.wire.hull.HullMessage``)."""
+        return f"{self.root}/hull"
+
     def status(self, component: str = "*") -> str:
         """``status/<component>``: StatusMessages and liveliness tokens."""
         return f"{self.root}/status/{component}"

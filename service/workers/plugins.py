@@ -60,6 +60,8 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
     (``[studio] calibration`` replaces the session's)."""
     if plugin:
         return load_plugin(plugin)(cfg)
+    if cfg.method == "blobs":  # [tracker] method = "blobs": the blob tracker reads the frames itself
+        return _blob_fitter(cfg)
     from service.workers.components import TrackerFitter
 
     session = studio_session(cfg)
@@ -68,3 +70,17 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
 
         session = replace(session, calibration=tuple(load_calibration(cfg.calibration)))
     return TrackerFitter.from_session(session, model=cfg.model)
+
+
+def _blob_fitter(cfg: StudioConfig) -> Callable:
+    """``service.workers.blob_track.BlobFitter`` on the session's subject and calibration; replay
+    cameras take the session's background models, live ones learn theirs from their first frames."""
+    from service.workers.blob_track import BlobFitter
+
+    session = studio_session(cfg)
+    if cfg.calibration is not None:
+        from capture.calibration import load_calibration
+
+        session = replace(session, calibration=tuple(load_calibration(cfg.calibration)))
+    replayed = [c.name for c in cfg.cameras if c.backend == "replay"]
+    return BlobFitter.from_session(session, model=cfg.model, replayed=replayed)

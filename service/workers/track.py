@@ -22,7 +22,7 @@ import zenoh
 from capture.sync import FrameSetAssembler
 from service.flow.demand import DemandPlanner
 from service.wire.bus import Inbox, Keys, StatusReporter, declare_publisher, wait_any
-from service.wire.messages import ChamferMessage, MessageError
+from service.wire.messages import ChamferMessage, FrameMessage, MessageError
 from service.wire.records import CreditMessage, DemandMessage, HaveMessage, PoseRecord
 from service.workers.base import TRACK_CONSUMER, Fitter
 
@@ -60,6 +60,9 @@ class TrackWorker:
         Live: silence after which a camera is left out of the sets.
     demand_timeout_s : float, optional
         Live: a demand that brought nothing is given up after this (default ``max(0.25, 2 * set_timeout_s)``).
+    inputs : {"chamfer", "frames"}
+        What the fitter takes: the segment workers' chamfer images, or the camera frames themselves
+        (``service.workers.blob_track``; live sets are then the newest frame per camera, no demand).
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
@@ -67,16 +70,18 @@ class TrackWorker:
                  clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
                  component: str = "track", max_frames: int | None = None, idle_exit_s: float | None = None,
                  on_pose: Callable[[PoseRecord], None] | None = None, absent_after_s: float = 0.5,
-                 demand_timeout_s: float | None = None) -> None:
+                 demand_timeout_s: float | None = None, inputs: str = "chamfer") -> None:
         self.keys, self.fit, self.stop, self.clock, self.wall_ns = keys, fit, stop, clock, wall_ns
         self.max_frames, self.idle_exit_s, self.on_pose = max_frames, idle_exit_s, on_pose
         lossless = mode == "lossless"
         cv = threading.Condition()
-        self.inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
+        frames = inputs == "frames"  # the fitter reads the camera frames itself: no segment worker, no demand
+        self.inbox = Inbox(session, keys.frame("*") if frames else keys.chamfer("*"),
+                           FrameMessage.from_bytes if frames else ChamferMessage.from_bytes, mode=mode,
                            depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
-        self.haves = None if lossless else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
-                                                 depth=64 * len(cameras), cv=cv)
-        self.planner = None if lossless else DemandPlanner(
+        self.haves = None if lossless or frames else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
+                                                           depth=64 * len(cameras), cv=cv)
+        self.planner = None if lossless or frames else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
         # lossless: every camera is waited for (absent_after_s None); "cameras" reports those heard within 1 s

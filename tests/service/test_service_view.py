@@ -1,5 +1,5 @@
-"""`contourcap view --save`: a real zenoh peer publishes poses, frames and chamfer images; the .rrd
-written by the bridge is read back and holds the frusta, skeleton, images, silhouettes and metrics."""
+"""`contourcap view --save`: a real zenoh peer publishes poses, frames, chamfer images and hulls; the .rrd
+written by the bridge is read back and holds the frusta, skeleton, images, silhouettes, hull and metrics."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import argparse
 import collections
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ import pytest
 from capture.calibration import save_calibration
 from capture.camera import Camera
 from service.wire.bus import Keys, ZenohSettings, declare_publisher, free_port, open_session
+from service.wire.hull import HullMessage
 from service.wire.messages import ChamferMessage, FrameMessage
 from service.wire.records import PoseRecord
 
@@ -24,7 +26,8 @@ def _publish(port, stop, rng):
     s = open_session(ZenohSettings.loopback(port, listen=True))
     keys = Keys("view1")
     pubs = {k: declare_publisher(s, k) for k in (keys.pose, keys.frame("cam0"), keys.frame("cam1"),
-                                                  keys.chamfer("cam0"))}
+                                                  keys.chamfer("cam0"), keys.hull)}
+    hull = HullMessage(0, 0, rng.uniform(-0.3, 0.3, (20, 3)), np.full(20, 0.03), rng.uniform(0, 255, (20, 3)), 0.03)
     img = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
     sil = np.full((20, 30), 40, np.uint8)
     sil[5:15, 10:20] = 0
@@ -38,6 +41,7 @@ def _publish(port, stop, rng):
                   "left_hand_tip": [0.5, 0, 1.4]}
         pubs[keys.pose].put(PoseRecord.from_dict({"frame": k, "timestamp_ns": k * 1000, "ok": True, "joints": joints,
                                                   "rms_px": 1.0, "latency_ms": 5.0, "cameras": 2}).to_bytes())
+        pubs[keys.hull].put(replace(hull, frame_id=k, timestamp_ns=k * 1000).to_bytes())
         k += 1
         time.sleep(0.02)
     s.close()
@@ -69,4 +73,5 @@ def test_view_saves_rrd(tmp_path, rng):
     assert rows["/world/cameras/cam0"] >= 2 and rows["/world/cameras/cam1"] >= 2  # transform + pinhole
     assert rows["/world/cameras/cam0/image"] >= 1 and rows["/world/cameras/cam1/image"] >= 1
     assert rows["/world/cameras/cam0/silhouette"] >= 1
+    assert rows["/world/hull"] >= 1
     assert rows["/metrics/rms_px"] >= 8 and rows["/metrics/latency_ms"] >= 8

@@ -243,10 +243,14 @@ def test_track_method_blobs_on_a_short_hop(hop, tmp_path, capsys):
     recs, truth = _records(out), _records(gt)
     assert [r["frame"] for r in recs] == list(range(N_FRAMES))
     assert all(r["method"] == "blobs" and r["model"] == "knossow40" and r["cameras"] == 4 for r in recs)
-    assert sum(r["ok"] for r in recs) >= N_FRAMES - 1, [r.get("reason") for r in recs if not r["ok"]]
     errs = [np.mean([np.linalg.norm(np.subtract(r["joints"][k], truth[r["frame"]]["joints"][k]))
                      for k in truth[0]["joints"]]) for r in recs]
     assert 1e3 * np.mean(errs) < MPJPE_LIMIT_MM, [round(1e3 * e) for e in errs]
+    # an honest ok: no frame called ok is off by more than bench/robustness.py's false-ok error
+    from tracker.synthetic.evaluation import FALSE_OK_M
+
+    assert all(e <= FALSE_OK_M for r, e in zip(recs, errs) if r["ok"]), [(round(1e3 * e), r["ok"]) for r, e in zip(recs, errs)]
+    assert sum(r["ok"] for r in recs) >= N_FRAMES // 2, [r.get("reason") for r in recs if not r["ok"]]
     summary = json.loads(capsys.readouterr().err.split("summary: ")[1].splitlines()[0])
     assert summary["frames"] == N_FRAMES
 

@@ -18,9 +18,10 @@ Per frame set (camera name → BGR image):
 The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
 pose an ``initialiser`` finds in the first frame, e.g. :func:`initialise_from_images`: the
 contour tracker's silhouette search).  A frame is ``ok: false`` when the hull in the zone is nearly
-empty, too few blobs are active, or the active blobs' means are far from where the fitted model
-puts them (``BlobOptions``); the fit is still the next frame's start, without velocity.  Never
-raises on data.
+empty, too few blobs are active, the active blobs' means are far from where the fitted model
+puts them, a part of the fitted model lies outside the hull (``BlobOptions.min_part_support``), or
+much of the hull lies outside the fitted model (``max_unexplained``); the fit is still the next
+frame's start, without velocity.  Never raises on data.
 """
 
 from __future__ import annotations
@@ -64,7 +65,15 @@ class BlobOptions:
     (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
     velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
     1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
-    min_voxels, min_active_fraction, max_goal_rms_m : below/above these a frame is ``ok: false``.
+    min_voxels, min_active_fraction, max_goal_rms_m : below/above these a frame is ``ok: false``;
+    min_part_support : a frame is ``ok: false`` when some part (clavicles aside) has less than this
+    fraction of its interior points (its cone shrunk to half its radii) in the hull, within half a
+    finest voxel (:func:`hull_support`): a limb the fit put where the cameras see background (or
+    where nothing was reconstructed) is not explained by the images, however well the blobs fit
+    (0: no such test); max_unexplained : a frame is ``ok: false`` when more than this fraction of the
+    hull's volume lies outside the fitted body (every part grown by a finest voxel,
+    :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
+    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -90,13 +99,64 @@ class BlobOptions:
     velocity_gain: float = 0.0
     min_voxels: int = 50
     min_active_fraction: float = 0.6
-    max_goal_rms_m: float = 0.08
+    max_goal_rms_m: float = 0.045
+    min_part_support: float = 0.4
+    max_unexplained: float = 0.4
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
             raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
         if int(self.em_iterations) < 1:
             raise ValueError(f"em_iterations: expected >= 1, got {self.em_iterations!r}")
+
+
+def _interior_samples(model: BodyModel, *, n_theta: int = 8, n_z: int = 5,
+                      radius_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points inside every part but the clavicles: ``n_theta × n_z`` points on each cone shrunk to
+    ``radius_fraction`` of its radii.  Returns (parts (p,), part of each point (p m,), points in
+    their part's frame (p m, 3))."""
+    from tracker.imaging.render import cone_points
+
+    parts = np.array([i for i, n in enumerate(model.part_names) if "clavicle" not in n])
+    local = cone_points(model, n_theta=n_theta, n_z=n_z)[parts].copy()
+    local[..., :2] *= radius_fraction
+    return parts, np.repeat(parts, local.shape[1]), local.reshape(-1, 3)
+
+
+def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0.0) -> np.ndarray:
+    """Whether each point (m, 3) lies in a cube of the coloured hull, or within ``tolerance_m`` of one
+    along an axis; (m,) bool.  The hull's cubes lie on the world lattice of their size
+    (``coloured_hull``), so each size is one sorted lookup."""
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    if tolerance_m > 0:
+        offsets = np.vstack([np.zeros(3), tolerance_m * np.eye(3), -tolerance_m * np.eye(3)])
+        P = (P[None] + offsets[:, None]).reshape(-1, 3)
+    inside = np.zeros(len(P), bool)
+    for size in np.unique(hull.sizes):
+        cells = np.floor(hull.centres[hull.sizes == size] / size).astype(np.int64)
+        q = np.floor(P / size).astype(np.int64)
+        lo = np.minimum(cells.min(0), q.min(0))
+        dims = np.maximum(cells.max(0), q.max(0)) - lo + 1
+        keys = np.sort(np.ravel_multi_index((cells - lo).T, dims))
+        qk = np.ravel_multi_index((q - lo).T, dims)
+        pos = np.clip(np.searchsorted(keys, qk), 0, len(keys) - 1)
+        inside |= keys[pos] == qk
+    n = len(np.asarray(points).reshape(-1, 3))
+    return inside.reshape(-1, n).any(0)
+
+
+def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
+    """Whether each point (m, 3) lies in some part's cone (radii and ends grown by ``margin_m``) at
+    ``pose``; (m,) bool."""
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    a, b, k, z1, z2 = (model.cones[:, i][:, None] for i in range(5))
+    local = np.einsum("pji,pmj->pmi", pose.rotation, P[None] - pose.translation[:, None, :])  # R^T (x - t)
+    z = local[..., 2]
+    r = np.maximum(1.0 + k * z, 0.0)
+    ra, rb = np.maximum(a * r + margin_m, 1e-9), np.maximum(b * r + margin_m, 1e-9)
+    inside = (((local[..., 0] / ra) ** 2 + (local[..., 1] / rb) ** 2 <= 1.0)
+              & (z >= z1 - margin_m) & (z <= z2 + margin_m))
+    return inside.any(0)
 
 
 def initialise_from_images(model: BodyModel, cameras: Sequence[Camera], images: Mapping[str, np.ndarray],
@@ -164,6 +224,7 @@ class BlobTracker:
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
                                                            for p in model.param_part])
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
+        self._support_parts, self._support_part, self._support_local = _interior_samples(model)
 
     def predict(self) -> np.ndarray | None:
         """Start pose for the next frame (n_params,) or None before initialisation."""
@@ -191,6 +252,33 @@ class BlobTracker:
                                           iterations=o.dls_iterations, damping=o.dls_damping)
         return params
 
+    def part_support(self, hull: ColourHull, pose) -> np.ndarray:
+        """Per part (``model.part_names`` but the clavicles, in order) the fraction of its interior
+        points in ``hull`` at ``pose`` (a ``Pose`` or params), within half a finest voxel; shape (p,)."""
+        if not hasattr(pose, "to_world"):
+            pose = forward(self.model, np.asarray(pose, dtype=float))
+        inside = hull_support(hull, pose.to_world(self._support_part, self._support_local),
+                              tolerance_m=0.5 * hull.min_voxel_m)
+        return inside.reshape(len(self._support_parts), -1).mean(1)
+
+    def explains(self, hull: ColourHull, pose) -> dict:
+        """How a pose (``Pose`` or params) and a hull explain each other: ``unexplained`` (fraction of
+        the hull's volume outside every part grown by a finest voxel), ``support_min`` (the smallest
+        :meth:`part_support`) and ``support_min_part`` (its part's name)."""
+        if not hasattr(pose, "to_world"):
+            pose = forward(self.model, np.asarray(pose, dtype=float))
+        vol = hull.volumes
+        outside = ~body_contains(self.model, pose, hull.centres, margin_m=hull.min_voxel_m)
+        support = self.part_support(hull, pose)
+        worst = int(np.argmin(support))
+        return {"unexplained": float(vol[outside].sum() / vol.sum()) if vol.sum() > 0 else 1.0,
+                "support_min": float(support[worst]), "support_min_part": self.support_parts[worst]}
+
+    @property
+    def support_parts(self) -> tuple:
+        """Names of the parts :meth:`part_support` reports, in its order."""
+        return tuple(self.model.part_names[p] for p in self._support_parts)
+
     def fit(self, hull: ColourHull, start: np.ndarray) -> tuple[np.ndarray, dict]:
         """EM and IK rounds on one hull from ``start``; returns params and quality figures."""
         o, m, blobs = self.options, self.model, self.blobs
@@ -208,10 +296,27 @@ class BlobTracker:
             params = self._ik(params, goals, weights)
         if o.floor_snap_m is not None:
             params = floor_contact(m, params, snap_m=o.floor_snap_m)
-        at = blobs.attachment(m, forward(m, params))
+        pose = forward(m, params)
+        at = blobs.attachment(m, pose)
         act = weights > 0
         rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
-        return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms}
+        return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms, **self.explains(hull, pose)}
+
+    def judge(self, quality: dict) -> list:
+        """Why a fit with these quality figures (``fit``'s) is not ok; empty when it is (``BlobOptions``)."""
+        o = self.options
+        why = []
+        if quality["active_fraction"] < o.min_active_fraction:
+            why.append(f"{100 * quality['active_fraction']:.0f}% of blobs active < {100 * o.min_active_fraction:.0f}%")
+        if quality["unexplained"] > o.max_unexplained:
+            why.append(f"{100 * quality['unexplained']:.0f}% of the hull outside the body > "
+                       f"{100 * o.max_unexplained:.0f}%")
+        if quality["support_min"] < o.min_part_support:
+            why.append(f"{quality['support_min_part']} outside the hull ({100 * quality['support_min']:.0f}% of its "
+                       f"interior in it < {100 * o.min_part_support:.0f}%)")
+        if not quality["goal_rms_m"] <= o.max_goal_rms_m:
+            why.append(f"blob goals {1e3 * quality['goal_rms_m']:.0f} mm off > {1e3 * o.max_goal_rms_m:.0f}")
+        return why
 
     def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
         """Fit one frame set (camera name → BGR uint8 image) and return its pose record."""
@@ -253,16 +358,13 @@ class BlobTracker:
             self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout)
         params, quality = self.fit(hull, start)
         joints = joint_centre_array(self.model, forward(self.model, params))
-        why = []
-        if quality["active_fraction"] < o.min_active_fraction:
-            why.append(f"{100 * quality['active_fraction']:.0f}% of blobs active < {100 * o.min_active_fraction:.0f}%")
-        if not quality["goal_rms_m"] <= o.max_goal_rms_m:
-            why.append(f"blob goals {1e3 * quality['goal_rms_m']:.0f} mm off > {1e3 * o.max_goal_rms_m:.0f}")
+        why = self.judge(quality)
         record.update(
             ok=not why, params=[float(v) for v in params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             iterations=int(o.em_iterations), voxels=int(hull.n_voxels),
-            active_fraction=quality["active_fraction"],
+            active_fraction=quality["active_fraction"], unexplained=quality["unexplained"],
+            support_min=quality["support_min"], support_min_part=quality["support_min_part"],
             goal_rms_mm=1e3 * quality["goal_rms_m"] if np.isfinite(quality["goal_rms_m"]) else None,
             hull_ms=1e3 * (t_hull - t0),
         )
