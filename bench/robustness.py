@@ -127,6 +127,16 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     return sm.joints, backgrounds, height, render_ms, float(np.median(ious))
 
 
+_REASONS = (("silhouette IoU", "iou"), ("rms", "rms"), ("contour on the silhouettes", "inside"),
+            ("initialisation failed", "initialisation"), ("no camera", "no_camera"))
+
+
+def _reason_keys(reason: str) -> list[str]:
+    """Short names of the checks a not-ok record failed (its ``reason`` text from the tracker)."""
+    keys = [key for text, key in _REASONS if text in reason]
+    return keys or ["other"]
+
+
 def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
     """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
     the true joints (``tracker.retarget``) on every ``every``-th frame: what a perfect tracker with
@@ -170,11 +180,11 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     score = score_clip(pred, ok, truth, fps=fps)
     floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
-    reasons = {}
+    reasons: dict[str, int] = {}
     for r in records:
         if not r.get("ok"):
-            key = r.get("reason", "?").split(":")[0]
-            reasons[key] = reasons.get(key, 0) + 1
+            for key in _reason_keys(r.get("reason", "")):
+                reasons[key] = reasons.get(key, 0) + 1
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
             **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
