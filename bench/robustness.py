@@ -214,13 +214,18 @@ def merge(paths) -> dict:
     """One result from several ``--out`` files (e.g. subjects run in separate processes)."""
     runs = [json.loads(Path(p).read_text()) for p in paths]
     per_clip = [c for r in runs for c in r["per_clip"]]
-    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras")
+    for c in per_clip:  # records written before ``posed_after`` existed
+        if "posed_after" not in c and c["posed"] + c["unprocessed"] == c["frames"]:
+            # the frames without a pose are the trailing unprocessed ones
+            c["posed_after"] = max(0, c["posed"] - (c["frames"] - c["frames_after"]))
+    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras", "partial")
     head = {k: v for k, v in runs[0].items() if k not in drop}
     return {**head, "subject_ids": sorted({c["subject"] for c in per_clip}), **summarise(per_clip),
             "motions": [m for m in CLIPS if any(c["clip"] == m for c in per_clip)],
             "cameras": sorted({c["cameras"] for c in per_clip}),
             "machine_ref_ms": float(np.median([r["machine_ref_ms"] for r in runs])),
-            "wall_s": max(r["wall_s"] for r in runs), "merged": [str(p) for p in paths], "per_clip": per_clip}
+            "wall_s": max(r.get("wall_s", float("nan")) for r in runs), "partial": any(r.get("partial") for r in runs),
+            "merged": [str(p) for p in paths], "per_clip": per_clip}
 
 
 def main(argv=None) -> int:
@@ -274,6 +279,8 @@ def main(argv=None) -> int:
     ref = machine_ref_ms()
     skeleton = load_bvh(bundled_motion("scaled_131_01"))
     t_start = time.perf_counter()
+    header = {"machine_ref_ms": ref, "size": [w, h], "fps": args.fps, "frames_per_clip": args.frames, "cameras": cams,
+              "motions": clips, "clip_budget_s": args.clip_budget_s, "date": datetime.date.today().isoformat()}
     per_clip = []
     for s in subjects:
         for j, name in enumerate(clips):
@@ -283,16 +290,16 @@ def main(argv=None) -> int:
                 per_clip.append(rec)
                 if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
                     args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
-                                                    "machine_ref_ms": ref, "per_clip": per_clip}, indent=1) + "\n")
+                                                    **header, "wall_s": time.perf_counter() - t_start,
+                                                    "per_clip": per_clip}, indent=1) + "\n")
                 print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
                       f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
                       f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
-    result = {"subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref, "size": [w, h], "fps": args.fps,
-              "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
-              "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
+    result = {"subject_ids": subjects, **summarise(per_clip), **header, "wall_s": time.perf_counter() - t_start,
+              "per_clip": per_clip}
     return _emit(result, args)
 
 
