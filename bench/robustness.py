@@ -70,7 +70,7 @@ from tracker.offline import track_session  # noqa: E402
 from tracker.retarget import retarget_bvh  # noqa: E402
 from tracker.scene import fit_ring_cameras  # noqa: E402
 from tracker.synth import bundled_motion  # noqa: E402
-from tracker.synthetic.evaluation import score_clip, summarise_clips  # noqa: E402
+from tracker.synthetic.evaluation import frame_errors, mirrored_frames, score_clip, summarise_clips  # noqa: E402
 from tracker.synthetic.motions import MOTIONS, make_motion, resample_bvh  # noqa: E402
 from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make_subject,  # noqa: E402
                                       subject_height, subject_motion, subject_skeleton)
@@ -180,6 +180,9 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         if rec.get("joints"):
             pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
     score = score_clip(pred, ok, truth, fps=fps)
+    err = frame_errors(pred, truth)
+    series = {"mpjpe_mm": [None if not np.isfinite(v) else round(1e3 * v, 1) for v in err["mpjpe"]],
+              "mirrored": [bool(v) for v in mirrored_frames(err)], "ok": [bool(v) for v in ok]}
     floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
     reasons: dict[str, int] = {}
@@ -192,7 +195,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
             "wall_s": time.perf_counter() - t_clip,
-            "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms}
+            "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
 
 
 def summarise(per_clip: list[dict]) -> dict:
