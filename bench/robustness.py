@@ -30,8 +30,9 @@ CPU seconds (reading, segmenting and tracking), and its remaining frames are sco
 without a pose (``unprocessed``; a live system would not have delivered them either).
 
 Timings: ``ms_per_frame_median`` is the tracker's own per-frame latency (fit, wall clock, one
-BLAS thread), ``pipeline_ms_per_frame_median`` adds reading and segmenting the frame set; quote
-them as ratios to ``machine_ref_ms``.
+BLAS thread), ``pipeline_ms_per_frame_median`` adds reading and segmenting the frame set, and
+``pipeline_cpu_ms_per_frame_median`` is the same on this process's CPU clock (steadier on a shared
+machine); quote them as ratios to ``machine_ref_ms``.
 
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
@@ -70,7 +71,7 @@ from service.offline import track_session  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
 from tracker.synthetic.synth import bundled_motion  # noqa: E402
-from tracker.synthetic.evaluation import score_clip, summarise_clips  # noqa: E402
+from tracker.synthetic.evaluation import frame_errors, mirrored_frames, score_clip, summarise_clips  # noqa: E402
 from tracker.synthetic.motions import MOTIONS, make_motion, resample_bvh  # noqa: E402
 from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make_subject,  # noqa: E402
                                       subject_height, subject_motion, subject_skeleton)
@@ -128,6 +129,16 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     return sm.joints, backgrounds, height, render_ms, float(np.median(ious))
 
 
+_REASONS = (("silhouette IoU", "iou"), ("rms", "rms"), ("contour on the silhouettes", "inside"),
+            ("initialisation failed", "initialisation"), ("no camera", "no_camera"))
+
+
+def _reason_keys(reason: str) -> list[str]:
+    """Short names of the checks a not-ok record failed (its ``reason`` text from the tracker)."""
+    keys = [key for text, key in _REASONS if text in reason]
+    return keys or ["other"]
+
+
 def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
     """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
     the true joints (``tracker.synthetic.retarget``) on every ``every``-th frame: what a perfect tracker with
@@ -150,14 +161,15 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
         truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
-        records, pipe_ms, cpu_s = [], [], 0.0
+        records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
         it = track_session(session, backgrounds=backgrounds, method=method)
         while not (budget_s and cpu_s > budget_s):
             t0, c0 = time.perf_counter(), time.process_time()
             rec = next(it, None)
             if rec is None:
                 break
-            cpu_s += time.process_time() - c0
+            pipe_cpu_ms.append(1e3 * (time.process_time() - c0))
+            cpu_s += pipe_cpu_ms[-1] / 1e3
             pipe_ms.append(1e3 * (time.perf_counter() - t0))
             records.append(rec)
         it.close()
@@ -169,20 +181,23 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         if rec.get("joints"):
             pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
     score = score_clip(pred, ok, truth, fps=fps)
+    err = frame_errors(pred, truth)
+    series = {"mpjpe_mm": [None if not np.isfinite(v) else round(1e3 * v, 1) for v in err["mpjpe"]],
+              "mirrored": [bool(v) for v in mirrored_frames(err)], "ok": [bool(v) for v in ok]}
     floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
-    reasons = {}
+    reasons: dict[str, int] = {}
     for r in records:
         if not r.get("ok"):
-            key = r.get("reason", "?").split(":")[0]
-            reasons[key] = reasons.get(key, 0) + 1
+            for key in _reason_keys(r.get("reason", "")):
+                reasons[key] = reasons.get(key, 0) + 1
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
             "height_m": round(height, 3),
             **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
             "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
             "wall_s": time.perf_counter() - t_clip,
-            "latencies_ms": lat, "pipeline_ms": pipe_ms}
+            "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
 
 
 def summarise(per_clip: list[dict]) -> dict:
@@ -191,24 +206,31 @@ def summarise(per_clip: list[dict]) -> dict:
     floors = [r["ik_floor_mm"] for r in per_clip if r["ik_floor_mm"] is not None]
     lat = [v for r in per_clip for v in r["latencies_ms"]]
     pipe = [v for r in per_clip for v in r["pipeline_ms"]]
+    pipe_cpu = [v for r in per_clip for v in r.get("pipeline_cpu_ms", [])]
     return {"subjects": len({r["subject"] for r in per_clip}), "clips": len(per_clip), **summary,
             "ik_floor_mm_mean": float(np.mean(floors)) if floors else None,
             "unprocessed_percent": 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"],
             "ms_per_frame_median": float(np.median(lat)) if lat else None,
-            "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None}
+            "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None,
+            "pipeline_cpu_ms_per_frame_median": float(np.median(pipe_cpu)) if pipe_cpu else None}
 
 
 def merge(paths) -> dict:
     """One result from several ``--out`` files (e.g. subjects run in separate processes)."""
     runs = [json.loads(Path(p).read_text()) for p in paths]
     per_clip = [c for r in runs for c in r["per_clip"]]
-    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras")
+    for c in per_clip:  # records written before ``posed_after`` existed
+        if "posed_after" not in c and c["posed"] + c["unprocessed"] == c["frames"]:
+            # the frames without a pose are the trailing unprocessed ones
+            c["posed_after"] = max(0, c["posed"] - (c["frames"] - c["frames_after"]))
+    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras", "partial")
     head = {k: v for k, v in runs[0].items() if k not in drop}
     return {**head, "subject_ids": sorted({c["subject"] for c in per_clip}), **summarise(per_clip),
             "motions": [m for m in CLIPS if any(c["clip"] == m for c in per_clip)],
             "cameras": sorted({c["cameras"] for c in per_clip}),
             "machine_ref_ms": float(np.median([r["machine_ref_ms"] for r in runs])),
-            "wall_s": max(r["wall_s"] for r in runs), "merged": [str(p) for p in paths], "per_clip": per_clip}
+            "wall_s": max(r.get("wall_s", float("nan")) for r in runs), "partial": any(r.get("partial") for r in runs),
+            "merged": [str(p) for p in paths], "per_clip": per_clip}
 
 
 def main(argv=None) -> int:
@@ -264,6 +286,8 @@ def main(argv=None) -> int:
     ref = machine_ref_ms()
     skeleton = load_bvh(bundled_motion("scaled_131_01"))
     t_start = time.perf_counter()
+    header = {"machine_ref_ms": ref, "size": [w, h], "fps": args.fps, "frames_per_clip": args.frames, "cameras": cams,
+              "motions": clips, "clip_budget_s": args.clip_budget_s, "date": datetime.date.today().isoformat()}
     per_clip = []
     for s in subjects:
         for j, name in enumerate(clips):
@@ -273,17 +297,16 @@ def main(argv=None) -> int:
                 per_clip.append(rec)
                 if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
                     args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
-                                                    "machine_ref_ms": ref, "per_clip": per_clip}, indent=1) + "\n")
+                                                    **header, "wall_s": time.perf_counter() - t_start,
+                                                    "per_clip": per_clip}, indent=1) + "\n")
                 print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
                       f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
                       f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
-    result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref,
-              "size": [w, h], "fps": args.fps,
-              "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
-              "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
+    result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), **header, "wall_s": time.perf_counter() - t_start,
+              "per_clip": per_clip}
     return _emit(result, args)
 
 

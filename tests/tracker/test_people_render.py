@@ -157,8 +157,10 @@ def test_score_counts_false_ok_false_alarm_and_mirrored_after_the_first_second()
     assert tot["frames"] == 2 * n
     assert tot["false_ok_percent"] == pytest.approx(100 * 5 / n)
     assert tot["false_alarm_percent"] == pytest.approx(100 * 2 / n)
-    assert tot["mirrored_frames_percent"] == pytest.approx(100 * 1 / (n - 4))
-    assert tot["mirrored_frames_percent_including_first_second"] == pytest.approx(100 * 4 / n)
+    # mirrored: of the frames with a pose (frame 9 has none)
+    assert s["posed_after"] == n - 4 - 1
+    assert tot["mirrored_frames_percent"] == pytest.approx(100 * 1 / (n - 5))
+    assert tot["mirrored_frames_percent_including_first_second"] == pytest.approx(100 * 4 / (n - 1))
     assert tot["no_pose_percent"] == pytest.approx(100 / n)
 
 

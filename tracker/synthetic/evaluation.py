@@ -106,7 +106,8 @@ def score_clip(pred: np.ndarray, ok, truth: np.ndarray, *, fps: float, skip_s: f
     -------
     dict
         ``frames``, ``posed`` (frames with a pose), ``ok``, ``false_ok``, ``false_alarm``,
-        ``mirrored`` (all frames), ``mirrored_after`` and ``frames_after`` (from ``skip_s``),
+        ``mirrored`` (all frames), ``mirrored_after``, ``frames_after`` and ``posed_after`` (from
+        ``skip_s``: mirrored frames, frames, frames with a pose),
         ``pck_hits`` (joints within ``PCK_M``), ``error_sum_m`` (sum of per-frame MPJPE over posed
         frames), ``mpjpe_mm`` (their mean, None without any), ``mpjpe_ok_mm`` (over ok frames).
     """
@@ -124,26 +125,28 @@ def score_clip(pred: np.ndarray, ok, truth: np.ndarray, *, fps: float, skip_s: f
         "frames": n, "posed": int(posed.sum()), "ok": int(ok.sum()),
         "false_ok": int(np.sum(ok & (e > FALSE_OK_M))), "false_alarm": int(np.sum(~ok & posed & (e < FALSE_ALARM_M))),
         "mirrored": int(mir.sum()), "mirrored_after": int(np.sum(mir & after)), "frames_after": int(after.sum()),
+        "posed_after": int(np.sum(posed & after)),
         "pck_hits": int(np.sum(np.where(posed[:, None], err["joint"], np.inf) < PCK_M)),
         "error_sum_m": float(err["mpjpe"][posed].sum()), "mpjpe_mm": mm(posed), "mpjpe_ok_mm": mm(posed & ok),
     }  # fmt: skip
 
 
 def summarise_clips(clips: list[dict]) -> dict:
-    """Totals over clips scored by ``score_clip``: percentages of all frames (PCK: of all joints),
-    MPJPE pooled over posed frames and the worst clip's."""
+    """Totals over clips scored by ``score_clip``: percentages of all frames (PCK: of all joints;
+    mirrored: of the frames with a pose), MPJPE pooled over posed frames and the worst clip's."""
     if not clips:
         raise ValueError("no clips to summarise")
     tot = {k: sum(c[k] for c in clips) for k in ("frames", "posed", "ok", "false_ok", "false_alarm", "mirrored",
-                                                   "mirrored_after", "frames_after", "pck_hits")}
+                                                   "mirrored_after", "frames_after", "posed_after", "pck_hits")}
     pct = lambda a, b: 100.0 * a / b if b else None  # noqa: E731
     per = [c["mpjpe_mm"] for c in clips if c["mpjpe_mm"] is not None]
     return {
         "mpjpe_mm_mean": 1e3 * sum(c["error_sum_m"] for c in clips) / tot["posed"] if tot["posed"] else None,
         "mpjpe_mm_worst_clip": max(per) if per else None,
         "pck50_percent": pct(tot["pck_hits"], tot["frames"] * len(JOINT_NAMES)),
-        "mirrored_frames_percent": pct(tot["mirrored_after"], tot["frames_after"]),
-        "mirrored_frames_percent_including_first_second": pct(tot["mirrored"], tot["frames"]),
+        "mirrored_frames_percent": pct(tot["mirrored_after"], tot["posed_after"]),
+        "mirrored_frames_percent_including_first_second": pct(tot["mirrored"], tot["posed"]),
+        "posed_frames_after_first_second": tot["posed_after"],
         "ok_percent": pct(tot["ok"], tot["frames"]),
         "false_ok_percent": pct(tot["false_ok"], tot["frames"]),
         "false_alarm_percent": pct(tot["false_alarm"], tot["frames"]),
