@@ -20,6 +20,7 @@ from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
 from tracker.body.model import BodyModel, load_model
+from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
 __all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
@@ -71,12 +72,15 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
-                  clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
+                  clock: Callable[[], float] = time.perf_counter, colour: bool = True,
+                  front_back: FrontBackOptions | None = FrontBackOptions()) -> Iterator[dict]:
     """Pose records (dicts) for every frame set of ``session`` in frame-id order.
 
     ``frames``: range of frame ids (None: all); ``cameras``: names to use (None: all);
     ``initial_params``: start pose (n_params,), else automatic initialisation
     (``tracker.search.initialise``) on the first frame.  ``backgrounds`` skips learning them.
+    ``colour``: give the tracker the frames' colour images (its front/back appearance cue);
+    ``front_back``: the tracker's front/back guard (``tracker.fitting.hypotheses``; None: off).
     """
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
@@ -84,12 +88,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
-                      options=options, clock=clock)
+                      options=options, clock=clock, front_back=front_back)
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
-                           silhouettes={n: s.silhouette for n, s in segs.items()})
+                           silhouettes={n: s.silhouette for n, s in segs.items()},
+                           images={n: f.image for n, f in group.items()} if colour else None)
 
 
 @dataclass(frozen=True)

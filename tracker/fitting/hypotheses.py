@@ -1,0 +1,237 @@
+"""Front or back: the tracker keeps a pose and its mirror until the evidence separates them.
+
+Silhouettes cannot tell a T-pose from the same body turned round with left and right exchanged
+(``tracker.search.mirror``).  ``FrontBackGuard`` is the tracker's bookkeeping of that question:
+
+* **ambiguous** (from the first frame, after every re-initialisation, and whenever the evidence
+  turns against the pose): the mirror hypothesis is tracked beside the pose, each fitted from its
+  own previous fit, and every frame adds to an evidence sum ``D`` (positive: the pose, negative:
+  the mirror) the clipped per-frame cues
+
+  - ``fit``: the mirror's ``tracker.search.mirror.hypothesis_cost`` (RMS chamfer residual, silhouette
+    IoU, joints at their limits — knees and elbows that would have to bend the wrong way) minus
+    the pose's;
+  - ``feet``: ``tracker.search.appearance.feet_occupancy`` of the pose minus the mirror's (the feet
+    point forward);
+  - ``head``: ``tracker.search.appearance.head_cue`` (face against back of the head, with the frame's
+    colour images);
+  - ``colour``: the learned ``tracker.search.appearance.AppearanceModel``'s preference for the pose's
+    labelling of the image colours over the mirrored one;
+  - ``walk``: the pelvis moving at walking speed along the heading rather than against it.
+
+  The frames are reported not ok ("front/back ambiguous") until ``|D|`` reaches ``margin``; the
+  winner is then kept (the tracker switches to the mirror's fit when it wins) and the colour model
+  is learned from it from then on.
+* **resolved**: the cheap cues (feet of the pose against the unfitted mirror, colour) keep running
+  in a leaky sum; when it falls to ``-reopen`` the question is opened again (the frame is reported
+  not ok while the mirror is tracked beside it).
+
+The guard never fits anything itself: the tracker passes a ``fit(start, prediction)`` callable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tracker.body.model import ROOT_TRANSLATION, BodyModel
+from tracker.search.appearance import AppearanceModel, feet_occupancy, head_cue, mirror_samples, surface_colours
+from tracker.search.mirror import _at_limits, _heading, front_back_cost, mirror_params
+
+__all__ = ["FrontBackOptions", "FrontBackGuard", "GuardOutcome", "AMBIGUOUS", "RESOLVED"]
+
+AMBIGUOUS, RESOLVED = "ambiguous", "resolved"
+
+
+@dataclass(frozen=True)
+class FrontBackOptions:
+    """Weights (per frame, in units of the evidence sum) and thresholds of ``FrontBackGuard``.
+
+    margin : |D| at which the ambiguity is resolved; min_frames : frames before it may be;
+    fit_weight, fit_clip : per unit of hypothesis-cost difference, clipped to ±fit_clip;
+    feet_weight : per unit of feet-occupancy difference (range ±1);
+    head_weight, head_scale : ``head_weight`` × clip(head cue / ``head_scale``, ±1);
+    colour_weight, colour_scale : likewise for the learned colour model's evidence;
+    walk_weight, walk_speed_mps, walk_window : the pelvis speed over ``walk_window`` frames above
+    ``walk_speed_mps``: ``walk_weight`` × cos(velocity, heading);
+    decay, reopen : the resolved state's leaky sum ``S ← decay S + cues`` re-opens at ``-reopen``;
+    learn_every : frames between colour-model updates once resolved; colour_every : frames
+    between colour samplings once resolved (the ambiguous state samples every frame).
+    """
+
+    margin: float = 3.0
+    min_frames: int = 2
+    fit_weight: float = 1.0
+    fit_clip: float = 1.0
+    feet_weight: float = 2.0
+    head_weight: float = 1.0
+    head_scale: float = 3.0
+    colour_weight: float = 1.0
+    colour_scale: float = 1.0
+    walk_weight: float = 0.3
+    walk_speed_mps: float = 0.4
+    walk_window: int = 8
+    decay: float = 0.8
+    reopen: float = 3.0
+    learn_every: int = 3
+    colour_every: int = 2
+
+
+@dataclass
+class GuardOutcome:
+    """What the guard concluded for a frame: ``swap`` (the mirror's ``(res, terms)`` to report
+    instead of the pose's, or None), ``reason`` ("" or why the frame is not ok), ``cues`` (the
+    frame's evidence terms, for logs and tests)."""
+
+    swap: tuple | None
+    reason: str
+    cues: dict
+
+
+class FrontBackGuard:
+    """See the module docstring.
+
+    Parameters
+    ----------
+    model : BodyModel
+    options : FrontBackOptions
+    fps : frame rate used for the walking speed (frames without timestamps)
+    """
+
+    def __init__(self, model: BodyModel, options: FrontBackOptions = FrontBackOptions()) -> None:
+        self.model = model
+        self.options = options
+        self.appearance = AppearanceModel(model)
+        self.reset()
+
+    def reset(self) -> None:
+        """Open the question (first frame, re-initialisation): the mirror is tracked again."""
+        self.state = AMBIGUOUS
+        self.evidence = 0.0
+        self.frames = 0
+        self.mirror = None  # (params, previous params) of the mirror hypothesis
+        self._pending = AppearanceModel(self.model)  # colours under the pose while ambiguous
+        self._pelvis: list[tuple[float, np.ndarray]] = []
+        self._since_learn = 0
+        self._since_colour = 0
+        self.n_resolved = getattr(self, "n_resolved", 0)
+        self.n_swapped = getattr(self, "n_swapped", 0)
+        self.n_reopened = getattr(self, "n_reopened", 0)
+
+    # ------------------------------------------------------------------ cues
+    def _walk(self, params: np.ndarray, t_s: float) -> float:
+        o = self.options
+        t_idx = np.flatnonzero(self.model.param_kind == ROOT_TRANSLATION)
+        self._pelvis = (self._pelvis + [(t_s, np.asarray(params)[t_idx][:2].copy())])[-o.walk_window:]
+        if len(self._pelvis) < o.walk_window:
+            return 0.0
+        (t0, p0), (t1, p1) = self._pelvis[0], self._pelvis[-1]
+        if not t1 > t0:
+            return 0.0
+        v = (p1 - p0) / (t1 - t0)
+        speed = float(np.linalg.norm(v))
+        if speed < o.walk_speed_mps:
+            return 0.0
+        return float(o.walk_weight * (_heading(self.model, params) @ (v / speed)))
+
+    def _colour_cues(self, params, cams, chs, images) -> tuple[float, float, object]:
+        """(head cue, learned-colour cue, samples) of the pose's labelling (positive: the pose)."""
+        o = self.options
+        if images is None:
+            return 0.0, 0.0, None
+        s = surface_colours(self.model, params, cams, images, chs)
+        head = o.head_weight * float(np.clip(head_cue(self.model, s) / o.head_scale, -1.0, 1.0))
+        colour = 0.0
+        if self.appearance.learned:
+            colour = o.colour_weight * float(np.clip(self.appearance.evidence(s) / o.colour_scale, -1.0, 1.0))
+        return head, colour, s
+
+    # ------------------------------------------------------------------ step
+    def update(self, *, t_s: float, cams: Sequence, chs: Sequence, images: Sequence | None, res, terms, ok: bool,
+               fit: Callable, iou: Callable | None) -> GuardOutcome:
+        """One frame: ``res``/``terms`` the pose's fit (SolverResult, CostTerms); ``ok`` whether the
+        frame is good otherwise; ``fit(start, prediction) -> (res, terms)`` fits another start;
+        ``iou(params) -> float`` the mean silhouette IoU (None: not available)."""
+        if self.state == RESOLVED:
+            return self._watch(t_s, cams, chs, images, res, terms, ok, fit, iou)
+        return self._ambiguous(t_s, cams, chs, images, res, terms, fit, iou)
+
+    def _ambiguous(self, t_s, cams, chs, images, res, terms, fit, iou) -> GuardOutcome:
+        o, model = self.options, self.model
+        p = np.asarray(res.params, dtype=float)
+        if self.mirror is None:
+            start = prev = model.clamp(mirror_params(model, p))
+        else:
+            cur, prev = self.mirror
+            start = model.clamp(2.0 * cur - prev) if prev is not None else cur
+        res_m, terms_m = fit(start, self.mirror[0] if self.mirror is not None else start)
+        pm = np.asarray(res_m.params, dtype=float)
+        self.mirror = (pm, None if self.mirror is None else self.mirror[0])
+        iou_p = iou(p) if iou is not None else 1.0
+        iou_m = iou(pm) if iou is not None else 1.0
+        cost_p = front_back_cost(terms.rms_px(), iou_p, _at_limits(model, p))
+        cost_m = front_back_cost(terms_m.rms_px(), iou_m, _at_limits(model, pm))
+        cues = {"fit": o.fit_weight * float(np.clip(np.nan_to_num(cost_m - cost_p), -o.fit_clip, o.fit_clip))}
+        fp, fm = feet_occupancy(model, p, cams, chs), feet_occupancy(model, pm, cams, chs)
+        cues["feet"] = o.feet_weight * float(fp - fm) if np.isfinite(fp) and np.isfinite(fm) else 0.0
+        head, _, s = self._colour_cues(p, cams, chs, images)
+        if s is not None:
+            _, _, sm = self._colour_cues(pm, cams, chs, images)
+            cues["head"] = 0.5 * (head - o.head_weight * float(np.clip(head_cue(model, sm) / o.head_scale, -1, 1)))
+            if self.appearance.learned:  # learned before (a re-opened question): each labelling against it
+                cues["colour"] = 0.5 * o.colour_weight * float(np.clip(
+                    (self.appearance.evidence(s) - self.appearance.evidence(sm)) / o.colour_scale, -1.0, 1.0))
+            self._pending.update(s)
+        walk_p = self._walk(p, t_s)
+        cues["walk"] = walk_p  # the mirror faces the other way: its cue is the negative
+        d = float(sum(cues.values()))
+        self.evidence += d
+        self.frames += 1
+        cues["sum"] = self.evidence
+        if self.frames >= o.min_frames and abs(self.evidence) >= o.margin:
+            self.state = RESOLVED
+            self.n_resolved += 1
+            swap = None
+            if self.evidence < 0:
+                swap = (res_m, terms_m)
+                self.n_swapped += 1
+                self._pending = self._pending.mirrored()
+            if not self.appearance.learned:
+                self.appearance = self._pending
+            self.mirror = None
+            self.evidence = 0.0
+            self._since_learn = self._since_colour = 0
+            return GuardOutcome(swap, "", cues)
+        return GuardOutcome(None, f"front/back ambiguous (evidence {self.evidence:+.1f} of ±{o.margin:g})", cues)
+
+    def _watch(self, t_s, cams, chs, images, res, terms, ok, fit, iou) -> GuardOutcome:
+        o, model = self.options, self.model
+        p = np.asarray(res.params, dtype=float)
+        pm = model.clamp(mirror_params(model, p))
+        cues = {}
+        fp, fm = feet_occupancy(model, p, cams, chs), feet_occupancy(model, pm, cams, chs)
+        cues["feet"] = o.feet_weight * float(fp - fm) if np.isfinite(fp) and np.isfinite(fm) else 0.0
+        self._since_colour += 1
+        if images is not None and self._since_colour >= o.colour_every:
+            self._since_colour = 0
+            head, colour, s = self._colour_cues(p, cams, chs, images)
+            cues["head"], cues["colour"] = head, colour
+            self._since_learn += 1
+            if ok and s is not None and self._since_learn >= o.learn_every and self.appearance.evidence(s) >= 0.0:
+                self._since_learn = 0
+                self.appearance.update(s)
+        cues["walk"] = self._walk(p, t_s)
+        # only evidence against the pose accumulates: a resolved pose needs no more support
+        self.evidence = min(0.0, o.decay * self.evidence + float(sum(cues.values())))
+        cues["sum"] = self.evidence
+        if self.evidence <= -o.reopen:
+            self.n_reopened += 1
+            walk = self._pelvis
+            self.reset()
+            self._pelvis = walk
+            out = self._ambiguous(t_s, cams, chs, images, res, terms, fit, iou)
+            out.cues["reopened"] = True
+            return out
+        return GuardOutcome(None, "", cues)
