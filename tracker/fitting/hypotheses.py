@@ -11,8 +11,8 @@ Silhouettes cannot tell a T-pose from the same body turned round with left and r
   - ``fit``: the mirror's ``tracker.search.mirror.hypothesis_cost`` (RMS chamfer residual, silhouette
     IoU, joints at their limits — knees and elbows that would have to bend the wrong way) minus
     the pose's;
-  - ``feet``: ``tracker.search.appearance.feet_occupancy`` of the pose minus the mirror's (the feet
-    point forward);
+  - ``feet``: the silhouettes ahead of the ankles (where the pelvis faces) against behind them
+    (``tracker.search.appearance.feet_forward``: the feet point forward);
   - ``head``: ``tracker.search.appearance.head_cue`` (face against back of the head, with the frame's
     colour images);
   - ``colour``: the learned ``tracker.search.appearance.AppearanceModel``'s preference for the pose's
@@ -22,9 +22,10 @@ Silhouettes cannot tell a T-pose from the same body turned round with left and r
   The frames are reported not ok ("front/back ambiguous") until ``|D|`` reaches ``margin``; the
   winner is then kept (the tracker switches to the mirror's fit when it wins) and the colour model
   is learned from it from then on.
-* **resolved**: the cheap cues (feet of the pose against the unfitted mirror, colour) keep running
-  in a leaky sum; when it falls to ``-reopen`` the question is opened again (the frame is reported
-  not ok while the mirror is tracked beside it).
+* **resolved**: every ``check_every`` frames the mirror of the pose is fitted and weighed with the
+  same cues, and in between the feet cue and the learned colours against their mirrored labelling; the
+  evidence against the pose runs in a leaky sum, and when it reaches ``-reopen`` the question is
+  opened again (the frames are reported not ok while the mirror is tracked beside the pose).
 
 The guard never fits anything itself: the tracker passes a ``fit(start, prediction)`` callable.
 """
@@ -37,7 +38,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
-from tracker.search.appearance import AppearanceModel, feet_occupancy, head_cue, mirror_samples, surface_colours
+from tracker.search.appearance import AppearanceModel, feet_forward, head_cue, surface_colours
 from tracker.search.mirror import _at_limits, _heading, front_back_cost, mirror_params
 
 __all__ = ["FrontBackOptions", "FrontBackGuard", "GuardOutcome", "AMBIGUOUS", "RESOLVED"]
@@ -56,9 +57,12 @@ class FrontBackOptions:
     colour_weight, colour_scale : likewise for the learned colour model's evidence;
     walk_weight, walk_speed_mps, walk_window : the pelvis speed over ``walk_window`` frames above
     ``walk_speed_mps``: ``walk_weight`` × cos(velocity, heading);
-    decay, reopen : the resolved state's leaky sum ``S ← decay S + cues`` re-opens at ``-reopen``;
-    learn_every : frames between colour-model updates once resolved; colour_every : frames
-    between colour samplings once resolved (the ambiguous state samples every frame).
+    decay, reopen, suspect : the resolved state's leaky sum ``S ← min(0, decay S + cues)`` re-opens
+    the question at ``-reopen``; frames with ``S`` at or below ``-suspect`` are not ok ("front/back suspect");
+    check_every, check_iterations : frames between the resolved state's full comparisons (the
+    mirror fitted with up to ``check_iterations`` LM steps — the mirror of a contorted pose is
+    itself contorted —, every cue); colour_every : frames between its colour-only checks in between (the learned model
+    against the mirrored labelling); learn_every : colour samplings between colour-model updates.
     """
 
     margin: float = 3.0
@@ -73,10 +77,13 @@ class FrontBackOptions:
     walk_weight: float = 0.3
     walk_speed_mps: float = 0.4
     walk_window: int = 8
-    decay: float = 0.8
-    reopen: float = 3.0
-    learn_every: int = 3
+    decay: float = 0.9
+    reopen: float = 2.5
+    suspect: float = 1.0
+    check_every: int = 10
+    check_iterations: int = 36
     colour_every: int = 2
+    learn_every: int = 3
 
 
 @dataclass
@@ -116,6 +123,7 @@ class FrontBackGuard:
         self._pelvis: list[tuple[float, np.ndarray]] = []
         self._since_learn = 0
         self._since_colour = 0
+        self._since_check = 0
         self.n_resolved = getattr(self, "n_resolved", 0)
         self.n_swapped = getattr(self, "n_swapped", 0)
         self.n_reopened = getattr(self, "n_reopened", 0)
@@ -135,6 +143,13 @@ class FrontBackGuard:
         if speed < o.walk_speed_mps:
             return 0.0
         return float(o.walk_weight * (_heading(self.model, params) @ (v / speed)))
+
+    def _feet(self, params, cams, chs) -> float:
+        """``feet_weight`` × (occupancy ahead of the ankles − behind them), 0 when unclear
+        (``tracker.search.appearance.feet_forward``; the mirror faces the other way: its cue is about
+        the negative)."""
+        ahead, behind = feet_forward(self.model, params, cams, chs)
+        return self.options.feet_weight * float(ahead - behind) if np.isfinite(ahead) and np.isfinite(behind) else 0.0
 
     def _colour_cues(self, params, cams, chs, images) -> tuple[float, float, object]:
         """(head cue, learned-colour cue, samples) of the pose's labelling (positive: the pose)."""
@@ -158,6 +173,28 @@ class FrontBackGuard:
             return self._watch(t_s, cams, chs, images, res, terms, ok, fit, iou)
         return self._ambiguous(t_s, cams, chs, images, res, terms, fit, iou)
 
+    def _compare(self, t_s, cams, chs, images, p, terms, pm, terms_m, iou) -> tuple[dict, object]:
+        """The cues of the pose ``p`` against the fitted mirror ``pm`` (positive: the pose) and the
+        pose's colour samples (None without images)."""
+        o, model = self.options, self.model
+        iou_p = iou(p) if iou is not None else 1.0
+        iou_m = iou(pm) if iou is not None else 1.0
+        cost_p = front_back_cost(terms.rms_px(), iou_p, _at_limits(model, p))
+        cost_m = front_back_cost(terms_m.rms_px(), iou_m, _at_limits(model, pm))
+        cues = {"fit": o.fit_weight * float(np.clip(np.nan_to_num(cost_m - cost_p), -o.fit_clip, o.fit_clip))}
+        cues["feet"] = 0.5 * (self._feet(p, cams, chs) - self._feet(pm, cams, chs))
+        s = None
+        if images is not None:
+            s = surface_colours(model, p, cams, images, chs)
+            sm = surface_colours(model, pm, cams, images, chs)
+            cues["head"] = 0.5 * o.head_weight * float(
+                np.clip(head_cue(model, s) / o.head_scale, -1, 1) - np.clip(head_cue(model, sm) / o.head_scale, -1, 1))
+            if self.appearance.learned:  # each labelling against the colours learned when the pose was right
+                cues["colour"] = 0.5 * o.colour_weight * float(np.clip(
+                    (self.appearance.evidence(s) - self.appearance.evidence(sm)) / o.colour_scale, -1.0, 1.0))
+        cues["walk"] = self._walk(p, t_s)  # the mirror faces the other way: its cue is the negative
+        return cues, s
+
     def _ambiguous(self, t_s, cams, chs, images, res, terms, fit, iou) -> GuardOutcome:
         o, model = self.options, self.model
         p = np.asarray(res.params, dtype=float)
@@ -169,25 +206,10 @@ class FrontBackGuard:
         res_m, terms_m = fit(start, self.mirror[0] if self.mirror is not None else start)
         pm = np.asarray(res_m.params, dtype=float)
         self.mirror = (pm, None if self.mirror is None else self.mirror[0])
-        iou_p = iou(p) if iou is not None else 1.0
-        iou_m = iou(pm) if iou is not None else 1.0
-        cost_p = front_back_cost(terms.rms_px(), iou_p, _at_limits(model, p))
-        cost_m = front_back_cost(terms_m.rms_px(), iou_m, _at_limits(model, pm))
-        cues = {"fit": o.fit_weight * float(np.clip(np.nan_to_num(cost_m - cost_p), -o.fit_clip, o.fit_clip))}
-        fp, fm = feet_occupancy(model, p, cams, chs), feet_occupancy(model, pm, cams, chs)
-        cues["feet"] = o.feet_weight * float(fp - fm) if np.isfinite(fp) and np.isfinite(fm) else 0.0
-        head, _, s = self._colour_cues(p, cams, chs, images)
+        cues, s = self._compare(t_s, cams, chs, images, p, terms, pm, terms_m, iou)
         if s is not None:
-            _, _, sm = self._colour_cues(pm, cams, chs, images)
-            cues["head"] = 0.5 * (head - o.head_weight * float(np.clip(head_cue(model, sm) / o.head_scale, -1, 1)))
-            if self.appearance.learned:  # learned before (a re-opened question): each labelling against it
-                cues["colour"] = 0.5 * o.colour_weight * float(np.clip(
-                    (self.appearance.evidence(s) - self.appearance.evidence(sm)) / o.colour_scale, -1.0, 1.0))
             self._pending.update(s)
-        walk_p = self._walk(p, t_s)
-        cues["walk"] = walk_p  # the mirror faces the other way: its cue is the negative
-        d = float(sum(cues.values()))
-        self.evidence += d
+        self.evidence += float(sum(cues.values()))
         self.frames += 1
         cues["sum"] = self.evidence
         if self.frames >= o.min_frames and abs(self.evidence) >= o.margin:
@@ -202,27 +224,35 @@ class FrontBackGuard:
                 self.appearance = self._pending
             self.mirror = None
             self.evidence = 0.0
-            self._since_learn = self._since_colour = 0
+            self._since_learn = self._since_colour = self._since_check = 0
             return GuardOutcome(swap, "", cues)
         return GuardOutcome(None, f"front/back ambiguous (evidence {self.evidence:+.1f} of ±{o.margin:g})", cues)
 
     def _watch(self, t_s, cams, chs, images, res, terms, ok, fit, iou) -> GuardOutcome:
         o, model = self.options, self.model
         p = np.asarray(res.params, dtype=float)
-        pm = model.clamp(mirror_params(model, p))
-        cues = {}
-        fp, fm = feet_occupancy(model, p, cams, chs), feet_occupancy(model, pm, cams, chs)
-        cues["feet"] = o.feet_weight * float(fp - fm) if np.isfinite(fp) and np.isfinite(fm) else 0.0
+        cues: dict = {}
+        self._since_check += 1
         self._since_colour += 1
-        if images is not None and self._since_colour >= o.colour_every:
-            self._since_colour = 0
-            head, colour, s = self._colour_cues(p, cams, chs, images)
-            cues["head"], cues["colour"] = head, colour
+        s = None
+        if self._since_check >= o.check_every:  # the mirror fitted and weighed as while ambiguous
+            self._since_check = self._since_colour = 0
+            start = model.clamp(mirror_params(model, p))
+            res_m, terms_m = fit(start, start, o.check_iterations)
+            cues, s = self._compare(t_s, cams, chs, images, p, terms, np.asarray(res_m.params, float), terms_m, iou)
+        else:
+            self._walk(p, t_s)
+            cues["feet"] = self._feet(p, cams, chs)
+            if images is not None and self.appearance.learned and self._since_colour >= o.colour_every:
+                self._since_colour = 0
+                s = surface_colours(model, p, cams, images, chs)
+                cues["colour"] = o.colour_weight * float(np.clip(self.appearance.evidence(s) / o.colour_scale,
+                                                                 -1.0, 1.0))
+        if s is not None:
             self._since_learn += 1
-            if ok and s is not None and self._since_learn >= o.learn_every and self.appearance.evidence(s) >= 0.0:
+            if ok and self._since_learn >= o.learn_every and self.appearance.evidence(s) >= 0.0:
                 self._since_learn = 0
                 self.appearance.update(s)
-        cues["walk"] = self._walk(p, t_s)
         # only evidence against the pose accumulates: a resolved pose needs no more support
         self.evidence = min(0.0, o.decay * self.evidence + float(sum(cues.values())))
         cues["sum"] = self.evidence
@@ -234,4 +264,7 @@ class FrontBackGuard:
             out = self._ambiguous(t_s, cams, chs, images, res, terms, fit, iou)
             out.cues["reopened"] = True
             return out
+        if self.evidence <= -o.suspect:
+            return GuardOutcome(None, f"front/back suspect (evidence {self.evidence:+.1f}, re-opened at "
+                                      f"-{o.reopen:g})", cues)
         return GuardOutcome(None, "", cues)

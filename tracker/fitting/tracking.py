@@ -172,7 +172,8 @@ class Tracker:
         guard): from an automatic initialisation and after every re-initialisation the pose's mirror
         is tracked too and frames are not ok ("front/back ambiguous") until the evidence (fit,
         feet, colour of the frame's ``images``, walking direction) separates them; a pose given
-        as ``initial_params`` is taken as resolved
+        as ``initial_params`` is taken as resolved; with the guard the periodic check of
+        ``TrackerOptions.front_back_every`` is not run (the guard's own checks replace it)
 
     Attributes
     ----------
@@ -306,9 +307,11 @@ class Tracker:
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
         bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
         ("" or why the frame is not ok although the fit is good)."""
-        def fit(start, prediction):
+        def fit(start, prediction, iterations=None):
+            opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
+                                                                      ftol=min(self.options.ftol, 2e-3))
             r, cost = fit_frame(self.model, cams, chs, start, prediction=prediction, sliding=self.sliding,
-                                solver=self.solver, options=self.options)
+                                solver=self.solver, options=opts)
             return r, cost.evaluate(np.asarray(r.params))
 
         iou = (lambda p: float(views().score(p))) if views is not None else None
@@ -390,14 +393,12 @@ class Tracker:
                     restarted = True  # no velocity across a re-initialisation
                     if self.guard is not None:
                         self.guard.reset()
-        if self.options.front_back_every > 0 and views is not None and not restarted:
+        if self.options.front_back_every > 0 and views is not None and not restarted and self.guard is None:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
                 self._since_front_back = 0
                 turned = self._front_back(cams, chs, res, terms, views)
-                if turned is not None and self.guard is not None:
-                    self.guard.reset()  # the guard weighs the mirror against the pose from here
-                elif turned is not None:
+                if turned is not None:
                     res, terms = turned
                     rms, inside = terms.rms_px(), terms.inside_fraction()
                     self._last_iou = None  # the IoU recorded was the other hypothesis's

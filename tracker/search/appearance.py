@@ -34,7 +34,7 @@ from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
 
 __all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "mirror_samples", "AppearanceModel", "head_cue",
-           "feet_occupancy", "colour_features", "SKIN_BGR"]
+           "feet_occupancy", "feet_forward", "colour_features", "SKIN_BGR"]
 
 FRONT, BACK = 0, 1
 #: A generic skin colour (BGR, 0–255) for the head cue when the hands and forearms show none.
@@ -292,6 +292,54 @@ def feet_occupancy(model: BodyModel, params: np.ndarray, cameras: Sequence[Camer
     if not seen.any():
         return float("nan")
     return float(np.mean(inside[seen > 0] / seen[seen > 0]))
+
+
+def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], chamfer: Sequence, *,
+                 reach_m=(0.08, 0.11, 0.14), height_m: float = 0.035, max_ankle_m: float = 0.15,
+                 max_offset_m: float = 0.15, inside_px: float = 1.5) -> tuple[float, float]:
+    """Whether the feet reach forward the way the pelvis faces, for a standing pose.
+
+    For each leg whose ankle is near the floor (``max_ankle_m``) and within ``max_offset_m`` of
+    the vertical through its hip, points ``reach_m`` ahead of the hip joint along the pelvis
+    heading and as far behind it, ``height_m`` above the floor, are tested against the
+    silhouettes (``feet_occupancy``'s test).  Returns the mean fractions ``(ahead, behind)`` (NaN,
+    NaN when no leg stands or no camera sees the points).  Unlike ``feet_occupancy`` it does not
+    follow the model's feet: a turned-round fit can slide and twist its legs until its feet lie in
+    the silhouettes, not its hips.
+    """
+    from tracker.body.kinematics import joint_centre_array
+    from tracker.search.mirror import _heading
+
+    p = np.asarray(params, dtype=float)
+    jc = joint_centre_array(model, forward(model, p))
+    names = list(model.joint_names)
+    refs = []
+    for side in ("left", "right"):
+        if f"{side}_ankle" not in names or f"{side}_hip" not in names:
+            continue
+        ankle, hip = jc[names.index(f"{side}_ankle")], jc[names.index(f"{side}_hip")]
+        if ankle[2] < max_ankle_m and np.hypot(*(ankle[:2] - hip[:2])) < max_offset_m:
+            refs.append(hip[:2])
+    h = _heading(model, p)
+    if not refs or not np.any(h):
+        return float("nan"), float("nan")
+    reach = np.asarray(reach_m, dtype=float)
+    out = []
+    for sign in (1.0, -1.0):
+        pts = np.concatenate([np.column_stack([r[0] + sign * reach * h[0], r[1] + sign * reach * h[1],
+                                               np.full(reach.size, height_m)]) for r in refs])
+        inside, seen = np.zeros(len(pts)), np.zeros(len(pts))
+        for cam, ch in zip(cameras, chamfer):
+            if ch is None:
+                continue
+            uv = cam.project(pts)
+            ok = (cam.depth(pts) > 0.05) & np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) \
+                & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+            if ok.any():
+                inside[ok] += ch.sample(uv[ok]).d_sil <= inside_px
+                seen[ok] += 1
+        out.append(float(np.mean(inside[seen > 0] / seen[seen > 0])) if seen.any() else float("nan"))
+    return out[0], out[1]
 
 
 def images_for(cameras: Sequence[Camera], images: Mapping[str, np.ndarray] | None):
