@@ -65,8 +65,8 @@ class FrontBackOptions:
     against the mirrored labelling); learn_every : colour samplings between colour-model updates.
     """
 
-    margin: float = 3.0
-    min_frames: int = 2
+    margin: float = 2.0
+    min_frames: int = 1
     fit_weight: float = 1.0
     fit_clip: float = 1.0
     feet_weight: float = 2.0
