@@ -29,6 +29,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from tracker.search.hull import _common_view_bounds, common_view_bounds, visual_hull  # noqa: E402
 from tracker.body.kinematics import forward  # noqa: E402
 from tracker.body.model import load_model  # noqa: E402
@@ -109,6 +111,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-init", action="store_true", help="skip the initialise/recover timings")
     ap.add_argument("--trials", type=int, default=0, help="initialisation accuracy trials per camera count")
     args = ap.parse_args(argv)
+    ref_ms = machine_ref_ms()
     model = load_model("knossow40")
     rng = np.random.default_rng(0)
     truth = model.random_params(rng, fraction=0.3)
@@ -127,7 +130,8 @@ def main(argv=None) -> int:
     if not args.no_init:
         from tracker.search.initialise import initialise
         from tracker.body.kinematics import joint_centre_array
-        from tracker.search.recovery import recover, turn_about_vertical
+        from tracker.search.candidates import turn_about_vertical
+        from tracker.search.recovery import recover
 
         views = {c.name: s for c, s in zip(cams, sils)}
         ref = model.zero()
@@ -148,8 +152,9 @@ def main(argv=None) -> int:
     if args.trials > 0:
         rows += [bench_accuracy(model, n, args.trials) for n in (6, 4)]
     if args.json:
-        print(json.dumps(rows, indent=1))
+        print(json.dumps({"machine_ref_ms": ref_ms, "rows": rows}, indent=1))
     else:
+        print(f"machine_ref_ms={ref_ms:.2f}")
         for r in rows:
             print("  ".join(f"{k}={v}" for k, v in r.items()))
     return 0

@@ -41,6 +41,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from tracker.imaging.contours import extremal_contours  # noqa: E402
 from tracker.imaging.jacobian import contour_jacobian  # noqa: E402
 from tracker.body.kinematics import forward  # noqa: E402
@@ -137,7 +139,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.poses < 1 or args.repeat < 1 or args.fd_poses < 0:
         parser.error("--poses and --repeat must be >= 1, --fd-poses >= 0")
-    res = run(args.model, args.poses, args.repeat, args.seed, min(args.fd_poses, args.poses))
+    ref_ms = machine_ref_ms()
+    res = {"machine_ref_ms": ref_ms, **run(args.model, args.poses, args.repeat, args.seed, min(args.fd_poses, args.poses))}
     if args.json:
         print(json.dumps(res))
     else:

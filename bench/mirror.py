@@ -39,13 +39,15 @@ from machine_ref import machine_ref_ms  # noqa: E402
 def run_seed(seed: int, args) -> dict:
     from capture.session import load_session
     from service.offline import track_session
-    from tracker.synthetic.tpose import make_tpose_session, mirror_errors, mirrored_frames
+    from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.tpose import mean_error_m, mirrored_frames, tpose_subject
 
     root = Path(args.cache) / (f"tpose_{seed}_{args.cameras}_{args.size[0]}x{args.size[1]}_{args.hold}_{args.move}"
                                f"_{args.shoes}")
     if not (root / "ground_truth.jsonl").is_file():
-        make_tpose_session(root, seed=seed, cameras=args.cameras, size=tuple(args.size), hold_s=args.hold,
-                           move_s=args.move, shoes=args.shoes)
+        motion, palette = tpose_subject(seed, hold_s=args.hold, move_s=args.move, shoes=args.shoes)
+        make_synthetic_session(f"tpose_{seed}", root, cameras=args.cameras, size=tuple(args.size), seed=seed,
+                               n_background=10, retargeted=motion, palette=palette)
     truth = [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
     fps = 1e9 / max(truth[1]["timestamp_ns"] - truth[0]["timestamp_ns"], 1)
     t0 = time.perf_counter()
@@ -55,7 +57,7 @@ def run_seed(seed: int, args) -> dict:
     first_s = int(round(fps))
     mirrored = set(mirrored_frames(records, truth))
     late = [r for r in records if r["frame"] >= first_s]
-    errs = [mirror_errors(r["joints"], truth[r["frame"]]["joints"])[0] for r in late if "joints" in r]
+    errs = [mean_error_m(r, truth[r["frame"]]) for r in late if "joints" in r]
     return {
         "seed": seed, "frames": len(records),
         "mirrored": len(mirrored), "mirrored_after_1s": len([f for f in mirrored if f >= first_s]),

@@ -35,6 +35,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from service.commands import demo as demo_cmd  # noqa: E402
 from service.commands.worker import PRELOAD_ENV  # noqa: E402
 from service.demo import run_demo  # noqa: E402
@@ -114,6 +116,7 @@ def main(argv=None) -> int:
                         help="live: camera workers decode the session into memory before streaming it (a camera "
                              "that delivers decoded frames; without it the replay's FFV1 decoding is measured too)")
     opts = parser.parse_args(argv)
+    ref_ms = machine_ref_ms()
     if opts.preload:  # inherited by the worker processes (service/commands/worker.py --preload)
         os.environ[PRELOAD_ENV] = "1"
     with tempfile.TemporaryDirectory() as tmp:
@@ -126,6 +129,7 @@ def main(argv=None) -> int:
     # live, also poses over the whole replay window
     result["poses_per_s"] = round(summary.frames / opts.duration_s, 2) if opts.live else None
     result["cpu_by_component"] = cpu.percent()
+    result["machine_ref_ms"] = round(ref_ms, 2)
     if opts.json:
         print(json.dumps(result))
     else:

@@ -31,6 +31,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from segmentation import (BackgroundModel, SegmentationParams, clean_silhouette, distance_to_mask,  # noqa: E402
                           segment_frame, silhouette_edges, silhouette_from_distance)
 from segmentation.distance import content_box, quantise  # noqa: E402
@@ -248,6 +250,7 @@ def main(argv=None) -> int:
     CLOCK = time.process_time if args.cpu else time.perf_counter
     cv2.setNumThreads(1)
     result = {
+        "machine_ref_ms": machine_ref_ms(),
         "threads": 1,
         "clock": "process_time" if args.cpu else "perf_counter",
         "loadavg_at_start": list(os.getloadavg()),

@@ -1,6 +1,6 @@
 """Tracker benchmark on a synthetic session (hop, CMU 131_03): iterations, accuracy, speed.
 
-A session is rendered with ``tracker.synthetic.synth.make_synthetic_session`` (6 ring cameras, 800x600,
+A session is rendered with ``service.synthetic_session.make_synthetic_session`` (6 ring cameras, 800x600,
 textured room, shadows, pixel noise; FFV1 video) into a temporary folder (or ``--session``), each
 frame is segmented once (``segmentation.pipeline.segment_frame`` against a background model from
 the session's background videos) and the same chamfer images are then tracked three ways:
@@ -52,11 +52,14 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine_ref import machine_ref_ms  # noqa: E402
+
 from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
 from service.offline import background_models, session_model  # noqa: E402
-from tracker.synthetic.synth import bundled_motion, make_synthetic_session  # noqa: E402
+from service.synthetic_session import make_synthetic_session  # noqa: E402
+from tracker.synthetic.synth import bundled_motion  # noqa: E402
 from tracker.fitting.cost import ChamferCost  # noqa: E402
 from tracker.fitting.tracking import Tracker, TrackerOptions  # noqa: E402
 
@@ -133,6 +136,7 @@ def main(argv=None) -> int:
     ap.add_argument("--auto-init", action="store_true", help="initialise from the silhouettes, not the truth")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)
+    ref_ms = machine_ref_ms()
     w, h = (int(v) for v in args.size.lower().split("x"))
     with tempfile.TemporaryDirectory() as tmp:
         root = args.session or Path(tmp) / "hop"
@@ -163,6 +167,7 @@ def main(argv=None) -> int:
     lm_ms = median(lm_sub, "latency_ms")
     lsq_ms = median(lsq_sub, "latency_ms")
     result = {
+        "machine_ref_ms": ref_ms,
         "model": model.name, "dof": model.n_params, "frames": len(main_run), "cameras": len(cameras),
         "size": [w, h], "init": "auto" if args.auto_init else "ground_truth_frame0",
         "iterations_median": median(main_run, "iterations"),

@@ -16,23 +16,14 @@ the nearest point of the segment ``{s * mu : s in shadow_range}``::
     s = clip(B / A, *shadow_range),   d = (C - 2 s B + s^2 A) / min(s, 1)^2        (d >= 0)
 
 The division by ``s^2`` (the same scaling as OpenCV's MOG2 shadow test) makes a darker
-"shadow" match the background's colour more closely; measured on random synthetic scenes it
-raises the frames with IoU >= 0.95 from 77 % to 88 % when clothing may be a darker copy of the
-wall colour, and keeps every cast-shadow pixel background.
+"shadow" match the background's colour more closely.  For neutral (grey / white) background
+colours this axis is exactly the Y axis, i.e. the paper's relaxation; for coloured backgrounds
+(a green floor) it is the physically right one.  With ``shadow_range = (1, 1)`` it is the plain
+Mahalanobis distance.
 
-For neutral (grey / white) background colours this axis is exactly the Y axis, i.e. the
-paper's relaxation; for coloured backgrounds (a green floor) it is the physically right one.
-With ``shadow_range = (1, 1)`` it is the plain Mahalanobis distance.  Measured on the synthetic
-scenes (green floor, shadows 30-50 % darker): Y relaxation alone (``shadow_range = (1, 1)``,
-``luma_relax`` up to 8) left 100 % of the shadow pixels foreground; the brightness axis makes them
-background, and with it ``luma_relax = 2`` only lowered the worst-frame IoU (0.949 -> 0.938 over
-20 frames), hence the default 1.
-
-Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only; the default, by
-measurement in ``bench/segmentation.py``): on uu_studio the MPEG-4 background is almost noiseless
-(median per-pixel sd Y 0.4, U 0, V 0 levels; ~1 % of pixels have sd > 0.5 in all three), so the
-variance floor ``min_sigma`` dominates and the cross terms change nothing measurable (held-out
-foreground 0.000 % with both, identical synthetic IoU), while ``"full"`` costs ~10-40 % more.
+Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only; the default: the
+variance floor ``min_sigma`` dominates on nearly noiseless backgrounds and the cross terms change
+nothing measurable).  Measurements behind these choices: docs/tuning.md, "Segmentation".
 All per-frame work is a handful of OpenCV float32 array operations into reused buffers.
 ``BGR2YUV`` has OpenCV's YUV coefficients without the +128 offsets and without uint8 clipping.
 """
@@ -67,8 +58,20 @@ BAND_PIXELS = 65536  # pixels per band of rows in the distance computation (meas
 
 
 def evenly_spaced(frames: Iterable[np.ndarray], count: int) -> list[np.ndarray]:
-    """About ``count`` items spread evenly over an iterable of unknown length, holding at most
-    ``2 * count`` at a time (for a median background from a long session)."""
+    """About ``count`` items spread evenly over an iterable of unknown length.
+
+    Holds at most ``2 * count`` at a time (for a median background from a long session).
+
+    Parameters
+    ----------
+    frames : iterable
+    count : int
+        At least 1.
+
+    Returns
+    -------
+    list
+    """
     if count < 1:
         raise ValueError(f"count: expected >= 1, got {count!r}")
     kept, stride = [], 1
@@ -92,25 +95,40 @@ def _downsample(image: np.ndarray) -> np.ndarray:
 
 
 def bgr_to_yuv(image_bgr: np.ndarray) -> np.ndarray:
-    """Centred YUV ``(h, w, 3)`` float32 of a BGR uint8 image ``(h, w, 3)`` (Y in 0..255, U, V about 0)."""
+    """Centred YUV of a BGR image (Y in 0..255, U and V about 0).
+
+    Parameters
+    ----------
+    image_bgr : ndarray, shape (h, w, 3), uint8
+
+    Returns
+    -------
+    ndarray, shape (h, w, 3), float32
+    """
     return cv2.transform(image_bgr.astype(np.float32), BGR2YUV)
 
 
 class BackgroundModel:
     """Per-pixel Gaussian background in centred YUV; see the module docstring.
 
-    Attributes (read-only by convention):
-        mean_yuv : (h, w, 3) float32, centred YUV mean.
-        cov_yuv : (h, w, 6) float32, learned covariance terms yy, uu, vv, yu, uv, yv (before
-            regularisation); the off-diagonal terms are zero for ``covariance="diag"``.
-        covariance : "full" or "diag".
-        luma_relax : factor on the Y variance (>= 1).
-        shadow_range : (s_lo, s_hi) brightness factors still explained as background.
-        min_sigma : floor of the per-channel standard deviation (YUV levels).
-
     ``update`` changes the mean in place (slow adaptation); everything else is fixed.  One model
     serves one camera stream: ``distance`` reuses scratch buffers, so do not call it from two
     threads at once.
+
+    Parameters
+    ----------
+    mean_yuv : ndarray, shape (h, w, 3), float32
+        Centred YUV mean.
+    cov_yuv : ndarray, shape (h, w, 6), float32
+        Covariance terms yy, uu, vv, yu, uv, yv (before regularisation; the off-diagonal terms
+        are zeroed for ``covariance="diag"``).
+    covariance : {"diag", "full"}
+    luma_relax : float
+        Factor on the Y variance (>= 1).
+    shadow_range : (float, float)
+        ``(s_lo, s_hi)`` brightness factors still explained as background.
+    min_sigma : float
+        Floor of the per-channel standard deviation, YUV levels.
     """
 
     def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "diag",
@@ -149,9 +167,18 @@ class BackgroundModel:
     # ----------------------------------------------------------------- construction
     @classmethod
     def from_frames(cls, frames: Iterable[np.ndarray], **options) -> "BackgroundModel":
-        """Learn mean and covariance from background frames (BGR uint8 ``(h, w, 3)`` each, >= 2).
+        """Learn mean and covariance from background frames.
 
-        ``options``: ``covariance``, ``luma_relax``, ``shadow_range``, ``min_sigma`` (see class).
+        Parameters
+        ----------
+        frames : iterable of ndarray, each shape (h, w, 3), uint8
+            At least 2 BGR frames of the empty scene.
+        **options
+            ``covariance``, ``luma_relax``, ``shadow_range``, ``min_sigma`` (see the class).
+
+        Returns
+        -------
+        BackgroundModel
         """
         n = 0
         s1 = s2 = None
@@ -180,8 +207,18 @@ class BackgroundModel:
     def from_median(cls, frames: Sequence[np.ndarray], **options) -> "BackgroundModel":
         """Background from the temporal median of session frames (the person must move).
 
-        Variances are robust: ``(1.4826 * MAD)^2`` per channel; covariance is diagonal.
-        ``frames``: sequence of >= 3 BGR uint8 ``(h, w, 3)`` frames.
+        Variances are robust: ``(1.4826 MAD)^2`` per channel; the covariance is diagonal.
+
+        Parameters
+        ----------
+        frames : sequence of ndarray, each shape (h, w, 3), uint8
+            At least 3 BGR frames.
+        **options
+            As :meth:`from_frames`.
+
+        Returns
+        -------
+        BackgroundModel
         """
         frames = list(frames)
         if len(frames) < 3:
@@ -237,10 +274,18 @@ class BackgroundModel:
         return int(self.mean_yuv.shape[1]), int(self.mean_yuv.shape[0])
 
     def distance(self, image_bgr: np.ndarray, *, roi=None) -> np.ndarray:
-        """Squared Mahalanobis distance (shadow-relaxed) of each pixel, float32 ``(y1-y0, x1-x0)``.
+        """Squared Mahalanobis distance (shadow-relaxed) of each pixel.
 
-        ``image_bgr``: full image ``(h, w, 3)`` uint8; ``roi = (x0, y0, x1, y1)`` limits the work
-        to that box (the result covers only the box).
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+            The full image.
+        roi : (int, int, int, int), optional
+            ``(x0, y0, x1, y1)``: limit the work (and the result) to that box.
+
+        Returns
+        -------
+        ndarray, shape (y1 - y0, x1 - x0), float32
         """
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         x0, y0, x1, y1 = check_roi(roi, self.size)
@@ -300,9 +345,19 @@ class BackgroundModel:
         return ws
 
     def coarse_distance(self, image_bgr: np.ndarray) -> np.ndarray:
-        """The distance at half resolution, float32 ``(ceil(h/2), ceil(w/2))``: 2x2 block means of
-        the image against 2x2 block means of the model (~4x cheaper; a first pass that finds where
-        the person is, e.g. for an automatic ROI).  Pixel ``(i, j)`` covers full pixels ``2i..2i+1``."""
+        """The distance at half resolution: 2x2 block means of the image against those of the model.
+
+        About four times cheaper; a first pass that finds where the person is (e.g. for an automatic
+        ROI).  Pixel (i, j) covers full pixels 2i..2i+1, 2j..2j+1.
+
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+
+        Returns
+        -------
+        ndarray, shape (ceil(h/2), ceil(w/2)), float32
+        """
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         coarse = self._coarse_model()
         small = _downsample(image_bgr)
@@ -316,9 +371,15 @@ class BackgroundModel:
         return self._coarse
 
     def update(self, image_bgr: np.ndarray, foreground: np.ndarray, *, rate: float = 0.01) -> None:
-        """Slow adaptation: ``mu += rate * (p - mu)`` where ``foreground == 0`` (in place).
+        """Slow adaptation in place: ``mu += rate (p - mu)`` where ``foreground`` is 0.
 
-        ``foreground``: ``(h, w)`` uint8/bool, non-zero = person (do not learn there).
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+        foreground : ndarray, shape (h, w), uint8 or bool
+            Non-zero = person (not learned there).
+        rate : float
+            In (0, 1].
         """
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         fg = check_mask(foreground, "foreground", shape=self.mean_yuv.shape[:2])
@@ -335,7 +396,16 @@ class BackgroundModel:
 
     # ----------------------------------------------------------------- persistence
     def save(self, path) -> Path:
-        """Write the model as ``.npz`` (no pickles); returns the path."""
+        """Write the model as ``.npz`` (no pickles).
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         np.savez_compressed(
             path, format_version=np.int64(_FORMAT_VERSION), mean_yuv=self.mean_yuv, cov_yuv=self.cov_yuv,
@@ -345,7 +415,21 @@ class BackgroundModel:
 
     @classmethod
     def load(cls, path) -> "BackgroundModel":
-        """Read a model written by :meth:`save`; a malformed file raises ``ValueError`` naming it."""
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        BackgroundModel
+
+        Raises
+        ------
+        ValueError
+            A malformed file (named).
+        """
         path = Path(path)
         try:
             with np.load(path, allow_pickle=False) as z:

@@ -8,7 +8,26 @@ __all__ = ["check_image_bgr", "check_mask", "check_roi", "check_finite_array"]
 
 
 def check_image_bgr(image: np.ndarray, name: str = "image_bgr", *, size: tuple[int, int] | None = None) -> np.ndarray:
-    """Return ``image`` if it is a ``(h, w, 3)`` uint8 BGR image (of ``size = (w, h)`` when given)."""
+    """Validate a BGR image.
+
+    Parameters
+    ----------
+    image : ndarray, shape (h, w, 3), uint8
+    name : str
+        Named in the error.
+    size : (int, int), optional
+        Required (w, h), pixels.
+
+    Returns
+    -------
+    ndarray
+        ``image`` itself.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Not a uint8 array of that shape (the message names ``name``).
+    """
     if not isinstance(image, np.ndarray):
         raise TypeError(f"{name}: expected a numpy array, got {type(image).__name__}")
     if image.dtype != np.uint8:
@@ -22,7 +41,20 @@ def check_image_bgr(image: np.ndarray, name: str = "image_bgr", *, size: tuple[i
 
 
 def check_mask(mask: np.ndarray, name: str, *, shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Return ``mask`` as a 2-D uint8 array (0 / non-zero); bool is accepted and converted."""
+    """Validate a mask and view it as uint8 (0 / non-zero); bool is accepted.
+
+    Parameters
+    ----------
+    mask : ndarray, shape (h, w), uint8 or bool
+    name : str
+        Named in the error.
+    shape : (int, int), optional
+        Required (h, w).
+
+    Returns
+    -------
+    ndarray, shape (h, w), uint8
+    """
     if not isinstance(mask, np.ndarray):
         raise TypeError(f"{name}: expected a numpy array, got {type(mask).__name__}")
     if mask.dtype == bool:
@@ -37,7 +69,20 @@ def check_mask(mask: np.ndarray, name: str, *, shape: tuple[int, int] | None = N
 
 
 def check_finite_array(a, name: str, *, ndim: int | None = None) -> np.ndarray:
-    """Return ``a`` as a float array, raising if it is not finite (NaN / inf) or has the wrong rank."""
+    """Validate a real array without NaN or inf.
+
+    Parameters
+    ----------
+    a : array_like
+    name : str
+        Named in the error.
+    ndim : int, optional
+        Required rank.
+
+    Returns
+    -------
+    ndarray
+    """
     arr = np.asarray(a)
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise TypeError(f"{name}: expected real numbers, got dtype {arr.dtype}")
@@ -49,9 +94,21 @@ def check_finite_array(a, name: str, *, ndim: int | None = None) -> np.ndarray:
 
 
 def check_roi(roi, size: tuple[int, int], name: str = "roi") -> tuple[int, int, int, int]:
-    """Validate ``roi = (x0, y0, x1, y1)`` (half-open, pixels) inside an image of ``size = (w, h)``.
+    """Validate a region of interest inside an image.
 
-    ``None`` means the whole image.  Returns plain ints.
+    Parameters
+    ----------
+    roi : (int, int, int, int) or None
+        ``(x0, y0, x1, y1)``, half-open, pixels; None: the whole image.
+    size : (int, int)
+        (w, h) of the image, pixels.
+    name : str
+        Named in the error.
+
+    Returns
+    -------
+    (int, int, int, int)
+        ``(x0, y0, x1, y1)`` as plain ints.
     """
     w, h = int(size[0]), int(size[1])
     if roi is None:

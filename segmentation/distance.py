@@ -28,7 +28,15 @@ __all__ = ["ChamferImages", "ChamferSample", "chamfer_images", "distance_to_mask
 
 
 class ChamferSample(NamedTuple):
-    """Sampled distances (pixels) and their gradients d/d(u, v): ``(n,)``, ``(n, 2)``, ``(n,)``, ``(n, 2)``."""
+    """Sampled distances and their gradients d/d(u, v), pixels.
+
+    Attributes
+    ----------
+    d_sil : ndarray, shape (n,)
+    grad_sil : ndarray, shape (n, 2)
+    d_edge : ndarray, shape (n,)
+    grad_edge : ndarray, shape (n, 2)
+    """
 
     d_sil: np.ndarray
     grad_sil: np.ndarray
@@ -37,10 +45,20 @@ class ChamferSample(NamedTuple):
 
 
 def distance_to_mask(mask: np.ndarray, *, max_distance_px: float, precise: bool = True) -> np.ndarray:
-    """Euclidean distance ``(h, w)`` float32 from each pixel to the nearest non-zero pixel of ``mask``
-    (0 on the mask), truncated at ``max_distance_px``.  No mask pixel: ``max_distance_px`` everywhere.
+    """Euclidean distance from each pixel to the nearest non-zero pixel of a mask, truncated.
 
-    ``precise=True``: exact L2 (``DIST_MASK_PRECISE``); ``False``: the 5x5 chamfer approximation.
+    Parameters
+    ----------
+    mask : ndarray, shape (h, w), uint8 or bool
+    max_distance_px : float
+        Truncation, pixels (everywhere when the mask is empty).
+    precise : bool
+        Exact L2 (``DIST_MASK_PRECISE``); False: the 5x5 chamfer approximation.
+
+    Returns
+    -------
+    ndarray, shape (h, w), float32
+        0 on the mask.
     """
     mask = check_mask(mask, "mask")
     if cv2.countNonZero(mask) == 0:  # OpenCV would return ~1e19 (no zero pixel in its input)
@@ -51,15 +69,41 @@ def distance_to_mask(mask: np.ndarray, *, max_distance_px: float, precise: bool 
 
 
 def quantise(distance: np.ndarray, *, resolution_px: float, dtype) -> np.ndarray:
-    """Round ``distance / resolution_px`` to ``dtype`` (uint8 or uint16); values must fit."""
+    """Round ``distance / resolution_px`` to an unsigned integer type (values must fit).
+
+    Parameters
+    ----------
+    distance : ndarray, float32
+        Pixels.
+    resolution_px : float
+        Pixels per step.
+    dtype : numpy.uint8 or numpy.uint16
+
+    Returns
+    -------
+    ndarray of ``dtype``, shape of ``distance``
+    """
     if dtype == np.uint8:
         return cv2.convertScaleAbs(distance, alpha=1.0 / resolution_px)
     return (distance * np.float32(1.0 / resolution_px) + np.float32(0.5)).astype(np.uint16)
 
 
 def content_box(masks, *, margin_px: int, region: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
-    """Bounding box ``(x0, y0, x1, y1)`` of the union of ``masks`` grown by ``margin_px`` and
-    clipped to ``region = (0, 0, w, h)``-style box of the masks; ``(0, 0, 0, 0)`` when all are empty."""
+    """Bounding box of the union of masks, grown and clipped.
+
+    Parameters
+    ----------
+    masks : sequence of ndarray, each shape (h, w), uint8
+    margin_px : int
+        Growth, pixels.
+    region : (int, int, int, int)
+        Clip box ``(x0, y0, x1, y1)``.
+
+    Returns
+    -------
+    (int, int, int, int)
+        ``(x0, y0, x1, y1)``; ``(0, 0, 0, 0)`` when every mask is empty.
+    """
     boxes = [cv2.boundingRect(m) for m in masks]
     boxes = [b for b in boxes if b[2] > 0 and b[3] > 0]
     if not boxes:
@@ -120,9 +164,25 @@ def _check_uv(uv) -> np.ndarray:
 
 
 def sample_bilinear(image: np.ndarray, uv, *, offset_xy=(0, 0), fill: float) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinear value ``(n,)`` and gradient d/d(u, v) ``(n, 2)`` of a float image ``(h, w)`` stored at
-    ``offset_xy`` in the full image, at full-image pixel coordinates ``uv`` ``(n, 2)``; outside the
-    stored array the image is ``fill`` (the float path of :meth:`ChamferImages.sample`)."""
+    """Bilinear value and gradient of a float image stored at an offset in the full image.
+
+    Outside the stored array the image is ``fill`` (the float path of :meth:`ChamferImages.sample`).
+
+    Parameters
+    ----------
+    image : ndarray, shape (h, w)
+    uv : ndarray, shape (n, 2)
+        Full-image pixel coordinates.
+    offset_xy : (int, int)
+        (x, y) of the array's top-left pixel in the full image.
+    fill : float
+
+    Returns
+    -------
+    value : ndarray, shape (n,)
+    grad : ndarray, shape (n, 2)
+        d/d(u, v).
+    """
     uv = _check_uv(uv)
     image = np.asarray(image, dtype=np.float64)
     if image.size == 0:
@@ -135,13 +195,22 @@ def sample_bilinear(image: np.ndarray, uv, *, offset_xy=(0, 0), fill: float) -> 
 class ChamferImages:
     """Quantised, truncated distance images of one camera frame.
 
-    silhouette_q, edges_q : (h, w) uint8 or uint16, same shape; ``value * resolution_px`` is the
-        distance in pixels to the silhouette (0 inside) / to the nearest edge pixel.
-    offset_xy : (x, y) of the arrays' top-left pixel in the full image.
-    resolution_px : pixels per quantisation step.
-    max_distance_px : truncation distance (a whole number of steps); outside the arrays
-        every distance is this value.
-    image_size : (w, h) of the full image.
+    A ``tracker.fitting.sampler.ChamferSampler`` (``sample``) that also holds the silhouette array
+    the tracker's reverse term reads (``SilhouetteChamfer``).
+
+    Attributes
+    ----------
+    silhouette_q, edges_q : ndarray, shape (h, w), uint8 or uint16
+        Same shape; ``value * resolution_px`` is the distance in pixels to the silhouette (0
+        inside) / to the nearest edge pixel.
+    offset_xy : (int, int)
+        (x, y) of the arrays' top-left pixel in the full image.
+    resolution_px : float
+        Pixels per quantisation step.
+    max_distance_px : float
+        Truncation distance (a whole number of steps); outside the arrays every distance is this.
+    image_size : (int, int)
+        (w, h) of the full image.
     """
 
     silhouette_q: np.ndarray
@@ -166,15 +235,30 @@ class ChamferImages:
         return int(round(self.max_distance_px / self.resolution_px))
 
     def dequantised(self) -> tuple[np.ndarray, np.ndarray]:
-        """Float32 distance images (pixels) of the stored region: silhouette, edges."""
+        """Float distance images of the stored region, pixels.
+
+        Returns
+        -------
+        silhouette, edges : ndarray, shape (h, w), float32
+        """
         r = np.float32(self.resolution_px)
         return self.silhouette_q.astype(np.float32) * r, self.edges_q.astype(np.float32) * r
 
     def sample(self, uv) -> ChamferSample:
-        """Bilinear distances (pixels) and gradients d/d(u, v) at full-image points ``uv`` ``(n, 2)``.
+        """Bilinear distances and gradients at full-image points; never NaN.
 
-        Works directly on the quantised arrays; never NaN.  See the module docstring for the
-        pixel-centre convention and the behaviour outside the stored region.
+        Works directly on the quantised arrays.  See the module docstring for the pixel-centre
+        convention and the behaviour outside the stored region.
+
+        Parameters
+        ----------
+        uv : ndarray, shape (n, 2)
+            Pixel coordinates (u, v).
+
+        Returns
+        -------
+        ChamferSample
+            Distances (pixels) and gradients d/d(u, v) to the silhouette and to the edges.
         """
         uv = _check_uv(uv)
         n = len(uv)
@@ -194,13 +278,29 @@ def chamfer_images(silhouette: np.ndarray, edges: np.ndarray, *, max_distance_px
                    crop: bool = True, offset_xy=(0, 0), image_size=None) -> ChamferImages:
     """Distance images of a silhouette and an edge map, truncated, quantised and cropped.
 
-    ``silhouette``, ``edges``: ``(h, w)`` uint8/bool masks of the same shape, covering the box at
-    ``offset_xy`` of an image of ``image_size = (w, h)`` (default: the masks are the full image).
-    ``max_distance_px`` must be a whole number of ``resolution_px`` steps; uint8 storage when that
-    number is <= 255, else uint16 (<= 65535).  ``crop=True`` keeps only the content's box grown
-    by ``max_distance_px`` (exact: everything outside is at the truncation value).
-    ``precise``: exact L2 for the silhouette distance, else the 5x5 chamfer mask (max error ~2 % of
-    the distance); ``precise_edges``: the same for the edge distance (None: as ``precise``).
+    Parameters
+    ----------
+    silhouette, edges : ndarray, shape (h, w), uint8 or bool
+        Masks covering the box at ``offset_xy`` of the full image.
+    max_distance_px : float
+        Truncation, pixels; a whole number of ``resolution_px`` steps (uint8 storage up to 255
+        steps, else uint16 up to 65535).
+    resolution_px : float
+        Pixels per quantisation step.
+    precise, precise_edges : bool, bool or None
+        Exact L2 for the silhouette / edge distance, else the 5x5 chamfer mask (approximate:
+        docs/tuning.md, "Segmentation"); ``precise_edges`` None: as ``precise``.
+    crop : bool
+        Keep only the content's box grown by ``max_distance_px`` (exact: everything outside is at
+        the truncation value).
+    offset_xy : (int, int)
+        (x, y) of the masks' top-left pixel in the full image.
+    image_size : (int, int), optional
+        (w, h) of the full image (default: the masks' size).
+
+    Returns
+    -------
+    ChamferImages
     """
     sil = check_mask(silhouette, "silhouette")
     edg = check_mask(edges, "edges", shape=sil.shape)

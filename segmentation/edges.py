@@ -18,7 +18,18 @@ _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 
 
 def silhouette_boundary(silhouette: np.ndarray) -> np.ndarray:
-    """Inner boundary ``(h, w)`` uint8 0/255: silhouette pixels with a 4-neighbour outside it."""
+    """Inner boundary of a silhouette: its pixels with a 4-neighbour outside it.
+
+    Parameters
+    ----------
+    silhouette : ndarray, shape (h, w), uint8 or bool
+        Non-zero = body.
+
+    Returns
+    -------
+    ndarray, shape (h, w), uint8
+        0 / 255.
+    """
     sil = check_mask(silhouette, "silhouette")
     sil = cv2.compare(sil, 0, cv2.CMP_GT)
     return cv2.subtract(sil, cv2.erode(sil, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=0))
@@ -26,12 +37,26 @@ def silhouette_boundary(silhouette: np.ndarray) -> np.ndarray:
 
 def silhouette_edges(image: np.ndarray, silhouette: np.ndarray, *, low: float = 30.0, high: float = 90.0,
                      dilate_px: int = 3, blur_sigma: float = 1.0, boundary: bool = True) -> np.ndarray:
-    """Edge map ``(h, w)`` uint8 0/255: Canny edges of ``image`` inside the silhouette dilated by
-    ``dilate_px``, plus (``boundary=True``) the silhouette's inner boundary.
+    """Canny edges inside the dilated silhouette, plus (``boundary``) its inner boundary.
 
-    ``image``: ``(h, w)`` uint8 luminance or ``(h, w, 3)`` uint8 BGR (converted to grey on the crop);
-    ``silhouette``: ``(h, w)`` uint8/bool mask.  ``low``/``high``: Canny hysteresis thresholds on
-    the Sobel gradient magnitude (L1) of the image blurred with ``blur_sigma`` (0 skips the blur).
+    Parameters
+    ----------
+    image : ndarray, shape (h, w) or (h, w, 3), uint8
+        Luminance, or BGR (converted to grey on the crop).
+    silhouette : ndarray, shape (h, w), uint8 or bool
+    low, high : float
+        Canny hysteresis thresholds on the Sobel gradient magnitude (L1).
+    dilate_px : int
+        Dilation of the silhouette before the edges are kept, pixels.
+    blur_sigma : float
+        Gaussian blur before Canny, pixels (0 skips it).
+    boundary : bool
+        Add the silhouette's inner boundary.
+
+    Returns
+    -------
+    ndarray, shape (h, w), uint8
+        0 / 255 edge map.
     """
     if not isinstance(image, np.ndarray) or image.dtype != np.uint8:
         raise TypeError(f"image: expected a uint8 numpy array, got {getattr(image, 'dtype', type(image))}")

@@ -20,21 +20,31 @@ __all__ = ["FrameSegmentation", "SegmentationParams", "segment_frame"]
 class SegmentationParams:
     """Options of :func:`segment_frame` (defaults tuned on uu_studio and the synthetic scenes).
 
-    low, high : hysteresis pair on the squared Mahalanobis distance.
-    person_area_px : expected person area in pixels (None: 2 % of the image).
-    min_area_fraction : components below this fraction of ``person_area_px`` are dropped.
-    max_hole_fraction : holes below this fraction of their component's area are filled.
-    open_px, close_px : radii of the morphological opening / closing.
-    max_components : keep only the largest N components (None: all that pass; 1 suits one person in
-        a cluttered studio and keeps the chamfer crop small).
-    canny_low, canny_high, edge_dilate_px, blur_sigma : edge detection inside the silhouette.
-    auto_roi, auto_roi_margin_px : when no ``roi`` is given, find one with a half-resolution pass
-        (:meth:`BackgroundModel.coarse_distance` + clean-up) and process only the box around what it
-        finds, grown by the margin (full resolution there); nothing found: an empty segmentation.
-        On uu_studio the result equals the full-image one (IoU 1.0) at about half the cost.
-    max_distance_px, resolution_px, precise, precise_edges : chamfer images (see
-        :func:`chamfer_images`); by default the silhouette distance is exact L2 and the edge distance
-        uses the 5x5 chamfer mask (error <= 0.9 px at 48 px, 2.5x cheaper; edges are noisy anyway).
+    Measurements behind the defaults: docs/tuning.md, "Segmentation".
+
+    Parameters
+    ----------
+    low, high : float
+        Hysteresis pair on the squared Mahalanobis distance.
+    person_area_px : float or None
+        Expected person area in pixels (None: a fiftieth of the image).
+    min_area_fraction : float
+        Components below this fraction of ``person_area_px`` are dropped.
+    max_hole_fraction : float
+        Holes below this fraction of their component's area are filled.
+    open_px, close_px : int
+        Radii of the morphological opening / closing, pixels.
+    max_components : int or None
+        Keep only the largest N components (None: all that pass; 1 suits one person in a
+        cluttered studio and keeps the chamfer crop small).
+    canny_low, canny_high, edge_dilate_px, blur_sigma : float, float, int, float
+        Edge detection inside the silhouette (:func:`silhouette_edges`).
+    auto_roi, auto_roi_margin_px : bool, int
+        Without a ``roi``, find one with a half-resolution pass and process only the box around
+        what it finds, grown by the margin in pixels; nothing found: an empty segmentation.
+    max_distance_px, resolution_px, precise, precise_edges : float, float, bool, bool
+        Chamfer images (:func:`chamfer_images`); by default the edge distance uses the cheaper
+        5x5 chamfer mask (edges are noisy anyway).
     """
 
     low: float = 16.0
@@ -69,7 +79,7 @@ class SegmentationParams:
                 raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)!r}")
 
     def min_area_px(self, image_size: tuple[int, int]) -> float:
-        """Smallest component kept, in pixels, for an image of ``(w, h)``."""
+        """Smallest component kept, pixels, for an image of ``image_size = (w, h)``."""
         person = self.person_area_px if self.person_area_px is not None else 0.02 * image_size[0] * image_size[1]
         return self.min_area_fraction * person
 
@@ -78,11 +88,17 @@ class SegmentationParams:
 class FrameSegmentation:
     """Result of :func:`segment_frame` for one camera frame.
 
-    silhouette, edges : (h, w) uint8 0/255, full image (zero outside the ROI).
-    chamfer : the quantised distance images (cropped, with offset).
-    foreground_fraction : silhouette pixels / image pixels.
-    roi : (x0, y0, x1, y1) that was processed at full resolution ((0, 0, 0, 0): nothing found by
-        the automatic ROI's first pass).
+    Attributes
+    ----------
+    silhouette, edges : ndarray, shape (h, w), uint8
+        0 / 255, full image (zero outside the ROI).
+    chamfer : ChamferImages
+        The quantised distance images (cropped, with offset).
+    foreground_fraction : float
+        Silhouette pixels / image pixels.
+    roi : (int, int, int, int)
+        ``(x0, y0, x1, y1)`` processed at full resolution ((0, 0, 0, 0): the automatic ROI's first
+        pass found nothing).
     """
 
     silhouette: np.ndarray
@@ -94,8 +110,22 @@ class FrameSegmentation:
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
                   params: SegmentationParams | None = None) -> FrameSegmentation:
-    """Segment one BGR uint8 frame ``(h, w, 3)`` against ``model``; only ``roi = (x0, y0, x1, y1)``
-    is processed when given.  Does not adapt the model (call ``model.update`` for that)."""
+    """Segment one frame against a background model: silhouette, edges and chamfer images.
+
+    Does not adapt the model (call ``model.update`` for that).
+
+    Parameters
+    ----------
+    model : BackgroundModel
+    image_bgr : ndarray, shape (h, w, 3), uint8
+    roi : (int, int, int, int), optional
+        ``(x0, y0, x1, y1)``: only that box is processed (default: the automatic ROI of ``params``).
+    params : SegmentationParams, optional
+
+    Returns
+    -------
+    FrameSegmentation
+    """
     params = params or SegmentationParams()
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w, h = model.size

@@ -32,12 +32,29 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
                              min_area_px: float = 400.0, max_hole_fraction: float = 0.05,
                              open_px: int = 1, close_px: int = 2, max_components: int | None = None,
                              roi=None) -> np.ndarray:
-    """Clean binary silhouette ``(h, w)`` uint8 (0 / 255) of a distance image ``(h, w)`` float32.
+    """Clean binary silhouette of a background distance image (hysteresis, morphology, components, holes).
 
-    ``roi = (x0, y0, x1, y1)`` (pixels of ``distance``): only that box is processed, the rest
-    of the output is 0.  ``open_px`` / ``close_px`` are the radii of the morphological opening
-    and closing (0 skips).  ``max_components``: keep only that many of the largest components
-    (e.g. 1 for one person in a cluttered studio; None keeps all that pass).
+    Parameters
+    ----------
+    distance : ndarray, shape (h, w), float32
+        Squared Mahalanobis distance (``BackgroundModel.distance``); must be finite.
+    low, high : float
+        Hysteresis pair: pixels above ``low`` in components holding a pixel above ``high``.
+    min_area_px : float
+        Smaller components are dropped, pixels.
+    max_hole_fraction : float
+        Holes below this fraction of their component's area are filled.
+    open_px, close_px : int
+        Radii of the morphological opening and closing, pixels (0 skips).
+    max_components : int or None
+        Keep only that many of the largest components (None: all that pass).
+    roi : (int, int, int, int), optional
+        ``(x0, y0, x1, y1)``: only that box is processed, the rest of the output is 0.
+
+    Returns
+    -------
+    ndarray, shape (h, w), uint8
+        0 / 255.
     """
     if not isinstance(distance, np.ndarray) or distance.ndim != 2:
         raise ValueError(f"distance: expected a 2-D array, got {getattr(distance, 'shape', type(distance))}")
@@ -55,8 +72,11 @@ def silhouette_from_distance(distance: np.ndarray, *, low: float = 16.0, high: f
 def clean_silhouette(distance: np.ndarray, *, low: float, high: float, min_area_px: float,
                      max_hole_fraction: float, open_px: int, close_px: int, max_components: int | None,
                      roi=None) -> np.ndarray:
-    """:func:`silhouette_from_distance` without the finiteness pass over ``distance`` (for callers
-    whose distance is known finite, e.g. :meth:`BackgroundModel.distance` output)."""
+    """:func:`silhouette_from_distance` without its finiteness pass over ``distance``.
+
+    For callers whose distance is known finite (e.g. :meth:`BackgroundModel.distance` output);
+    parameters and result as :func:`silhouette_from_distance`.
+    """
     if not (0 <= low <= high) or not np.isfinite(high):
         raise ValueError(f"low, high: expected 0 <= low <= high < inf, got {low!r}, {high!r}")
     h, w = distance.shape
@@ -118,7 +138,20 @@ def _draw_component(out, contours, hier, i: int, max_hole_area_px: float) -> Non
 
 
 def largest_components(mask: np.ndarray, *, count: int = 2) -> np.ndarray:
-    """Pixel areas of the ``count`` largest 8-connected components of ``mask``, descending (for stats/tests)."""
+    """Pixel areas of the largest 8-connected components of a mask, for statistics and tests.
+
+    Parameters
+    ----------
+    mask : ndarray, shape (h, w)
+        Non-zero = foreground.
+    count : int
+        How many.
+
+    Returns
+    -------
+    ndarray of int, shape (count,)
+        Descending; zero-padded.
+    """
     n, _, stats, _ = cv2.connectedComponentsWithStats((mask > 0).astype(np.uint8), connectivity=8)
     areas = np.sort(stats[1:, cv2.CC_STAT_AREA])[::-1]
     return np.pad(areas[:count], (0, max(0, count - areas.size)))

@@ -2,7 +2,7 @@
 
 A textured background (smooth colour field, tiles, stripes and blobs), a person-like shape
 made of ellipses and polygons in clothing / skin colours, a cast shadow beside the person (the
-background's B, G, R scaled by 0.5-0.7, i.e. darkened 30-50 %), and Gaussian sensor noise.
+background's B, G, R scaled by a factor in 0.5-0.7), and Gaussian sensor noise.
 """
 
 from __future__ import annotations
@@ -17,10 +17,21 @@ __all__ = ["SyntheticScene", "synthetic_scene"]
 
 @dataclass(frozen=True)
 class SyntheticScene:
-    """background_frames : (n_bg, h, w, 3) uint8 empty-scene frames (noise only).
-    frames : (n, h, w, 3) uint8 frames with the person and the shadow.
-    person_masks : (n, h, w) bool true silhouettes.  shadow_masks : (n, h, w) bool shadow pixels
-    (not covered by the person).  clean_background : (h, w, 3) float32 noise-free background."""
+    """A seeded synthetic scene with its known answers.
+
+    Attributes
+    ----------
+    background_frames : ndarray, shape (n_bg, h, w, 3), uint8
+        Empty-scene frames (noise only).
+    frames : ndarray, shape (n, h, w, 3), uint8
+        Frames with the person and the shadow.
+    person_masks : ndarray of bool, shape (n, h, w)
+        True silhouettes.
+    shadow_masks : ndarray of bool, shape (n, h, w)
+        Shadow pixels not covered by the person.
+    clean_background : ndarray, shape (h, w, 3), float32
+        Noise-free background.
+    """
 
     background_frames: np.ndarray
     frames: np.ndarray
@@ -89,12 +100,27 @@ def _clothing_colour(rng, bg: np.ndarray, low: float, high: float, avoid: bool):
 
 def synthetic_scene(rng: np.random.Generator, *, size: tuple[int, int] = (640, 480), n_background: int = 50,
                     n_frames: int = 8, noise_sigma: float = 3.0, avoid_shadow_like: bool = True) -> SyntheticScene:
-    """A seeded scene of ``size = (w, h)``; the person walks left to right over ``n_frames``.
+    """A seeded scene; the person walks left to right over ``n_frames``.
 
-    ``avoid_shadow_like``: redraw clothing colours that equal a 40-110 % brightness copy of more
-    than 2 % of the background (there colour alone cannot separate a person from a shadow, so a
-    known-answer scene would not be solvable); ``False`` keeps any random colour (the benchmark
-    measures how often such scenes fail).
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    size : (int, int)
+        (w, h), pixels.
+    n_background : int
+        Empty-scene frames.
+    n_frames : int
+        Frames with the person.
+    noise_sigma : float
+        Gaussian sensor noise, grey levels.
+    avoid_shadow_like : bool
+        Redraw clothing colours that equal a copy at 0.4-1.1 times the brightness of more than a
+        fiftieth of the background (there colour alone cannot separate a person from a shadow);
+        False keeps any random colour (the benchmark measures how often such scenes fail).
+
+    Returns
+    -------
+    SyntheticScene
     """
     w, h = size
     bg = _background(rng, w, h)

@@ -31,6 +31,7 @@ COMMANDS = {
     "view": "view",
     "export": "export",
     "stream": "stream",
+    "review": "review",
 }
 
 

@@ -30,13 +30,18 @@ import numpy as np
 
 from service.wire.messages import MessageError
 from service.wire.records import PoseRecord
+from service.outputs.posefile import ExportError, fps_from_records, read_pose_records, write_pose_records  # noqa: F401 (re-exported)
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
 JOINT_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
 
 
-class ExportError(ValueError):
-    """A pose file cannot be read or exported; the message names the file (and line)."""
+
+
+
+
+
+
 
 
 @dataclass(frozen=True)
@@ -51,45 +56,6 @@ class BvhExport:
     joints: int
     first_frame: int = 0
     up: str = "y"
-
-
-def read_pose_records(path) -> list[PoseRecord]:
-    """Every pose record of a JSONL file (blank lines skipped); ExportError names ``file:line``."""
-    path = Path(path)
-    try:
-        lines = path.read_bytes().splitlines()
-    except OSError as exc:
-        raise ExportError(f"{path}: cannot read ({exc.strerror})") from None
-    out = []
-    for i, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            out.append(PoseRecord.from_bytes(line))
-        except MessageError as exc:
-            raise ExportError(f"{path}:{i}: {exc}") from None
-    return out
-
-
-def write_pose_records(path, records: Iterable[PoseRecord]) -> int:
-    """Write records as JSONL; returns the count."""
-    n = 0
-    with open(path, "wb") as f:
-        for rec in records:
-            f.write(rec.to_bytes() + b"\n")
-            n += 1
-    return n
-
-
-def fps_from_records(records: Sequence[PoseRecord], default: float = 25.0) -> float:
-    """Frame rate from the median timestamp step per frame-id step (``default`` if undetermined)."""
-    frames = np.array([r.frame for r in records], float)
-    ts = np.array([r.timestamp_ns for r in records], float)
-    dframe, dts = np.diff(frames), np.diff(ts)
-    ok = (dframe > 0) & (dts > 0)
-    if not ok.any():
-        return default
-    return float(1e9 / np.median(dts[ok] / dframe[ok]))
 
 
 def _params_matrix(model, records: Sequence[PoseRecord], rows: np.ndarray, where: str) -> tuple[np.ndarray, int]:

@@ -24,14 +24,15 @@ _EXPORTS = {
     "tracker.fitting.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
     "tracker.fitting.tracking": ("Tracker", "TrackerOptions"),
     "tracker.search.hull": ("VoxelHull", "visual_hull"),
-    "tracker.search.initialise": ("InitResult", "initialise"),
+    "tracker.search.refine": ("InitResult",),
+    "tracker.search.initialise": ("SearchOptions", "initialise"),
     "tracker.search.recovery": ("LossMonitor", "recover"),
     "tracker.search.mirror": ("mirror_params", "resolve_front_back"),
     "tracker.imaging.render": ("render_labels", "render_silhouettes", "internal_edges"),
     "tracker.synthetic.scene": ("ring_cameras",),
     "tracker.synthetic.bvh": ("Bvh", "BvhError", "load_bvh"),
     "tracker.synthetic.retarget": ("retarget_bvh",),
-    "tracker.synthetic.synth": ("make_synthetic_session", "bundled_motion"),
+    "tracker.synthetic.synth": ("bundled_motion",),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -31,7 +31,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=None, help="frame rate (default: from the timestamps)")
 
 
-def _model(args, records):
+def model_for_export(args, records):
+    """The body model the records were fitted with, sized from --height-m or --session (else the model default)."""
     from service.export import ExportError
     from tracker.body.model import ModelError, load_model
 
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
             fps = make_timeline(records, fps=args.fps, where=args.poses).fps
             records = smooth_records(records, *smooth, fps)
         if args.bvh:
-            out = write_bvh(args.bvh, _model(args, records), records, fps=args.fps, up=args.up or "y")
+            out = write_bvh(args.bvh, model_for_export(args, records), records, fps=args.fps, up=args.up or "y")
             print(f"wrote {out.path}: {out.frames} frames at {out.fps:.2f} fps (ids {out.first_frame}.."
                   f"{out.first_frame + out.frames - 1}), {out.joints} joints, {out.up.upper()} up "
                   f"({out.repeated} frames without an ok pose hold the previous one)")

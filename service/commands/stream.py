@@ -135,14 +135,14 @@ def _host_port(text: str) -> tuple[str, int]:
 
 
 def _run_vmc(args, source, smoother) -> int:
-    from service.commands.export import _model
+    from service.commands.export import model_for_export
     from service.outputs.vmc import VmcSender, run_bridge
 
     host, port = _host_port(args.to)
 
     def sender_for(rec):
         args.model = args.model or rec.get("model") or source.model_name
-        sender = VmcSender(host, port, _model(args, [rec]))
+        sender = VmcSender(host, port, model_for_export(args, [rec]))
         print(f"streaming VMC to {host}:{port} (model {sender.frames.model.name}, smoothing {args.smooth})",
               flush=True)
         return sender

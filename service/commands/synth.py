@@ -42,7 +42,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tracker.synthetic.bvh import BvhError
     from tracker.body.model import ModelError
-    from tracker.synthetic.synth import bundled_motion, make_synthetic_session
+    from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.synth import bundled_motion
 
     from service.progress import Progress
 

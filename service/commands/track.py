@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
 from tracker.body.model import ModelError, available_models
 from service.offline import background_models, session_model, summarise, track_session
@@ -26,25 +27,11 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
     parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
+    parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
+                        help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
+                             "EM blobs and inverse kinematics (Caillette & Howard)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
-
-
-def parse_frames(text: str | None) -> range | None:
-    """``"A:B"`` -> ``range(A, B)``; ``"A:"`` -> from A on; ``":B"`` -> up to B."""
-    if text is None:
-        return None
-    parts = text.split(":")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        a = int(parts[0]) if parts[0] else 0
-        b = int(parts[1]) if parts[1] else 2**62
-    except ValueError:
-        raise ValueError(f"--frames: expected A:B (frame ids), got {text!r}") from None
-    if a < 0 or b <= a:
-        raise ValueError(f"--frames: expected 0 <= A < B, got {text!r}")
-    return range(a, b)
 
 
 def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
@@ -67,7 +54,7 @@ def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     try:
         session = load_session(args.session)
-        frames = parse_frames(args.frames)
+        frames = parse_frame_range(args.frames)
         cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
         model = session_model(session, args.model)
         init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
@@ -76,13 +63,14 @@ def run(args: argparse.Namespace) -> int:
         backgrounds, how = background_models(session, names, frames=frames)
         print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
               f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
-        total = _frame_count(session, frames)
+        total = count_frames(session, names[0], frames) if names else None
         records = []
         t0 = time.perf_counter()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         with open(args.out, "w", encoding="utf-8") as out:
             for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
+                                     method=args.method):
                 out.write(json.dumps(rec) + "\n")
                 records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
                 _progress(len(records), total, time.perf_counter() - t0, rec)
@@ -93,26 +81,6 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)
     return 0 if summary["frames"] else 1
-
-
-def _frame_count(session, frames: range | None) -> int | None:
-    """Frames to expect (for the ETA) from camera 0's timestamps/images count; None if unknown."""
-    try:
-        import cv2
-
-        cam = session.cameras[0]
-        if cam.video is None:
-            return None
-        cap = cv2.VideoCapture(str(cam.video))
-        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        cap.release()
-    except Exception:  # noqa: BLE001 - the ETA is optional
-        return None
-    if n <= 0:
-        return None
-    if frames is not None:
-        n = max(0, min(n, frames.stop) - frames.start)
-    return n
 
 
 def _progress(done: int, total: int | None, elapsed_s: float, rec: dict) -> None:

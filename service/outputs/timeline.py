@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from service.export import ExportError, fps_from_records
+from service.outputs.posefile import ExportError, fps_from_records
 from service.wire.records import PoseRecord
 
 MAX_ROWS = 5_000_000

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from service.cli import main
-from tracker.synthetic.synth import bundled_motion, make_synthetic_session
+from service.synthetic_session import make_synthetic_session
+from tracker.synthetic.synth import bundled_motion
 
 N_FRAMES = 8
 

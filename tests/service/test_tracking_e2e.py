@@ -14,7 +14,8 @@ import pytest
 
 from capture.session import load_session
 from service.offline import track_session
-from tracker.synthetic.synth import bundled_motion, make_synthetic_session
+from service.synthetic_session import make_synthetic_session
+from tracker.synthetic.synth import bundled_motion
 
 
 def _truth(root):

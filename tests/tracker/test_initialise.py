@@ -7,8 +7,10 @@ import pytest
 
 from segmentation.distance import chamfer_images
 from tracker.search.hull import visual_hull
-from tracker.search.initialise import (InitResult, ScoreViews, estimate_height, feet_direction, initialise,
-                                model_top_m, pose_candidates, rendered_views, sized_model)
+from tracker.search.candidates import estimate_height, feet_direction, model_top_m, pose_candidates, sized_model
+from tracker.search.initialise import SearchOptions, initialise
+from tracker.search.refine import InitResult
+from tracker.search.scoring import ScoreViews, rendered_views
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import load_model
 from tracker.imaging.render import internal_edges, render_label_images
@@ -212,7 +214,7 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
     the trap automatic initialisation fell into on the demo), the full refinement of both
     hypotheses picks the true heading: the mirrored crouch has to contort (joints at limits,
     lower IoU, larger chamfer residual)."""
-    from tracker.search.mirror import mirror_params, resolve_front_back
+    from tracker.search.mirror import compare_front_back, mirror_params
 
     cams = ring_cameras(4, size=(320, 240), start_deg=20.0)
     model, truth, sils, chamfer = _clip_frame("scaled_131_03", 0.0, cams)
@@ -220,8 +222,8 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
     start = mirror_params(model, truth)
     assert _heading_error_deg(model, start, truth) > 170
     forward_dir = forward(model, truth).rotation[0][:2, 0]
-    res, fb = resolve_front_back(model, cams, sils, chamfer, start, details=True,
-                                 feet_direction=forward_dir / np.linalg.norm(forward_dir))
+    fb = compare_front_back(model, cams, sils, chamfer, start, feet_direction=forward_dir / np.linalg.norm(forward_dir))
+    res = fb.choice(model)
     assert np.all(fb.feet == 0.0)  # bent knees: the feet cue is not trusted
     assert res.label == "mirrored" and fb.mirrored[fb.best] and np.array_equal(res.params, fb.params[fb.best])
     assert _heading_error_deg(model, res.params, truth) < 10.0
@@ -235,15 +237,15 @@ def test_resolve_front_back_turns_a_mirrored_crouch_round():
 def test_feet_cue_counts_for_straight_legs():
     """A T-pose (its mirror casts nearly the same silhouettes): the feet cue adds its full weight
     to the hypothesis facing away from the feet, nothing to the other, and the truth is kept."""
-    from tracker.search.mirror import resolve_front_back
+    from tracker.search.mirror import compare_front_back
 
     model = load_model("knossow40")
     cams = ring_cameras(4, size=(320, 240))
     truth = _reference(model, np.random.default_rng(11), (0.0, 0.0))
     sils, chamfer = _views(model, truth, cams)
     facing = np.array([np.cos(truth[5]), np.sin(truth[5])])
-    res, fb = resolve_front_back(model, cams, sils, chamfer, truth, feet_direction=facing, feet_weight=0.5,
-                                 details=True)
+    fb = compare_front_back(model, cams, sils, chamfer, truth, feet_direction=facing, feet_weight=0.5)
+    res = fb.choice(model)
     assert res.label == "kept" and _heading_error_deg(model, res.params, truth) < 5.0
     assert np.all(fb.feet[~fb.mirrored] < 0.05) and np.all(fb.feet[fb.mirrored] > 0.95)
 
@@ -262,8 +264,8 @@ def test_initialise_heading_at_low_resolution(clip, start_s):
 
 def test_score_views_partial_render_equals_full(rng):
     """Scoring a pose as the parts a chain moves drawn onto the other parts rendered once (what
-    ``tracker.search.recovery.limb_search`` does) gives the same IoU as rendering every part."""
-    from tracker.search.recovery import limb_chains
+    ``tracker.search.candidates.limb_search`` does) gives the same IoU as rendering every part."""
+    from tracker.search.candidates import limb_chains
 
     model = load_model("knossow40")
     cams = ring_cameras(4, size=(320, 240))
@@ -298,7 +300,7 @@ def test_elbow_search_bends_the_forearms_four_cameras_hide():
         sils, chamfer = rendered_views(mot.model, mot.params[frame], cams)
         truth = joint_centre_array(mot.model, forward(mot.model, mot.params[frame]))
         for elbows in (True, False):
-            res = initialise(mot.model, cams, sils, chamfer, elbows=elbows)
+            res = initialise(mot.model, cams, sils, chamfer, options=SearchOptions(elbows=elbows))
             assert ("+elbows/" in res.label) <= elbows
             errs[elbows].append(np.linalg.norm(joint_centre_array(mot.model, forward(mot.model, res.params)) - truth,
                                                axis=1).mean())

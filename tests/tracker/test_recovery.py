@@ -6,13 +6,15 @@ import numpy as np
 import pytest
 
 from tracker.fitting.cost import ChamferCost
-from tracker.search.initialise import chamfer_from_silhouette, initialise, rendered_views
+from tracker.search.initialise import SearchOptions, initialise
+from tracker.search.scoring import chamfer_from_silhouette, rendered_views
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import load_model
-from tracker.search.recovery import LossMonitor, LossState, limb_chains, recover, turn_about_vertical
+from tracker.search.candidates import limb_chains, turn_about_vertical
+from tracker.search.recovery import LossMonitor, LossState, recover
 from tracker.imaging.render import render_silhouettes
 from tracker.synthetic.scene import ring_cameras
-from tracker.fitting.tracking import fit_frame
+from tracker.fitting.tracking import TrackerOptions, fit_frame
 
 
 def test_monitor_counts_consecutive_bad_frames():
@@ -70,14 +72,14 @@ def test_wrong_warm_start_is_flagged_lost_and_recovered():
     mon = LossMonitor(max_rms_px=6.0, min_inside_fraction=0.6, patience=3)
     assert mon.update(cost.evaluate(truth)).state == "ok"
     # the tracker's own fit from the warm start ends far off and is flagged, three frames running
-    fit, _ = fit_frame(model, cams, chamfer, last_good)
+    fit, _ = fit_frame(model, cams, dict(zip(views, chamfer)), last_good)
     terms = cost.evaluate(fit.params)
     truth_joints = joint_centre_array(model, forward(model, truth))
     warm_err = np.linalg.norm(joint_centre_array(model, terms.pose) - truth_joints, axis=1)
     assert warm_err.mean() > 0.1
     states = [mon.update(terms) for _ in range(3)]
     assert [s.state for s in states] == ["suspect", "suspect", "lost"]
-    res = initialise(model, cams, views, hint=last_good)  # what Tracker calls: a hint runs recover
+    res = recover(model, cams, views, None, last_good, options=TrackerOptions().recover_search)  # the Tracker's call
     err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
                          - joint_centre_array(model, forward(model, truth)), axis=1)
     assert err.mean() < 0.030, dict(zip(model.joint_names, np.round(1e3 * err)))
@@ -103,7 +105,7 @@ def test_real_dancer_initialise_then_recover(shared_data):
 
     from capture.calib_formats import read_projection_matrix
     from tracker.search.hull import visual_hull
-    from tracker.search.initialise import estimate_height
+    from tracker.search.candidates import estimate_height
 
     folder = shared_data / "dancer_8view"
     masks = [cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in sorted(folder.glob("silh_cam*.pbm"))]
@@ -168,7 +170,8 @@ def test_lost_hop_recovers_in_the_cheap_local_stage(k, gap):
     res = recover(model, cams, sils, chamfer, last)
     assert res.label.startswith("local/") and res.candidates < 200, res.label
     assert res.score >= 0.87 and error(res.params) < 0.030
-    assert initialise(model, cams, sils, chamfer, hint=last).label.startswith("local/")  # the Tracker's call
+    options = TrackerOptions().recover_search
+    assert recover(model, cams, sils, chamfer, last, options=options).label.startswith("local/")  # the Tracker's
 
 
 def test_local_stage_falls_back_to_the_full_search():
@@ -178,7 +181,7 @@ def test_local_stage_falls_back_to_the_full_search():
     model, last, truth = mot.model, mot.params[50], mot.params[58]
     cams = ring_cameras(4, size=(640, 480), start_deg=20.0)
     sils, chamfer = rendered_views(model, truth, cams)
-    res = recover(model, cams, sils, chamfer, last, accept_iou=1.01)  # no IoU reaches 1.01
+    res = recover(model, cams, sils, chamfer, last, options=SearchOptions.for_recovery(accept_iou=1.01))  # none reaches
     assert res.label.split("/")[0] in ("last", "hint", "T", "A", "T/A", "A/T") and res.candidates > 200
     err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
                          - joint_centre_array(model, forward(model, truth)), axis=1)

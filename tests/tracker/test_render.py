@@ -16,9 +16,8 @@ from tracker.imaging.render import (
     render_label_images,
     render_labels,
     render_silhouettes,
-    ring_cameras,
 )
-from tracker.synthetic.scene import pixel_rays
+from tracker.synthetic.scene import pixel_rays, ring_cameras
 
 
 @pytest.fixture(scope="module")

@@ -138,7 +138,7 @@ def test_lost_track_recovers_from_the_silhouettes(cameras):
     """A jump the local fit cannot follow (the subject turned 90° and stepped 0.8 m between two
     frames): bad frames are reported ``ok: false`` and, after ``patience`` of them, the pose is
     searched again from the silhouettes (seeded by the last good pose) and tracking resumes."""
-    from tracker.search.recovery import turn_about_vertical
+    from tracker.search.candidates import turn_about_vertical
 
     rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
     model, p0 = rt.model, rt.params[0]

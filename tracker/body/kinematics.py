@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tracker.kernels import forward_kinematics
 from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 
 __all__ = ["Pose", "forward", "body_jacobian", "point_jacobian", "joint_centres", "so3_exp", "so3_left_jacobian"]
@@ -55,7 +56,17 @@ def _skew(w: np.ndarray) -> np.ndarray:
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotation vectors (..., 3) -> matrices (..., 3, 3)."""
+    """Rodrigues' formula: rotation vectors to matrices.
+
+    Parameters
+    ----------
+    w : ndarray, shape (..., 3)
+        Rotation vectors, radians.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
     w = np.asarray(w, dtype=float)
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
     K = _skew(w)
@@ -67,7 +78,17 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 
 
 def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
-    """Left Jacobian of SO(3) at rotation vector w (3,): ``[J_l(w) dw]× = d exp(w) exp(w)ᵀ``."""
+    """Left Jacobian of SO(3): ``[J_l(w) dw]× = d exp(w) exp(w)ᵀ``.
+
+    Parameters
+    ----------
+    w : ndarray, shape (3,)
+        Rotation vector, radians.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
     w = np.asarray(w, dtype=float)
     theta = float(np.linalg.norm(w))
     K = _skew(w)
@@ -102,7 +123,12 @@ class Pose:
     screw_v: np.ndarray
 
     def part2world(self) -> np.ndarray:
-        """Homogeneous transforms, shape (n_parts, 4, 4)."""
+        """Homogeneous part2world transforms.
+
+        Returns
+        -------
+        ndarray, shape (n_parts, 4, 4)
+        """
         n = self.rotation.shape[0]
         T = np.zeros((n, 4, 4))
         T[:, :3, :3] = self.rotation
@@ -111,7 +137,18 @@ class Pose:
         return T
 
     def to_world(self, part: np.ndarray, points_part: np.ndarray) -> np.ndarray:
-        """Points (n, 3) given in the frames of parts ``part`` (n,) -> world (n, 3)."""
+        """Points given in part frames, in world coordinates.
+
+        Parameters
+        ----------
+        part : ndarray of int, shape (n,)
+        points_part : ndarray, shape (n, 3)
+            Metres, in the frame of ``part``.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+        """
         return np.einsum("nij,nj->ni", self.rotation[part], points_part) + self.translation[part]
 
 
@@ -119,16 +156,23 @@ _PLANS: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionar
 
 
 def _plan(model: BodyModel) -> tuple:
-    """Per-model constants of ``forward`` (cached): per part ``(part, parent, joint params)``, and the
-    indices of the root-translation, root-rotation and joint-rotation parameters."""
+    """Per-model constants of ``forward`` (cached), the arguments of
+    ``tracker.kernels.forward_kinematics`` after ``params``: joint axes, parents, each part's joint
+    parameters (``dof_idx[dof_ptr[p]:dof_ptr[p + 1]]``), rest rotations, offsets, and the indices of
+    the root-translation and root-rotation parameters."""
     plan = _PLANS.get(model)
     if plan is None:
         kind = model.param_kind
-        parts = tuple((p, int(model.parent[p]),
-                       tuple(int(k) for k in np.flatnonzero((model.param_part == p) & (kind == JOINT_ROTATION))))
-                      for p in range(model.n_parts))
-        plan = (parts, np.flatnonzero(kind == ROOT_TRANSLATION), np.flatnonzero(kind == ROOT_ROTATION),
-                np.flatnonzero(kind == JOINT_ROTATION))
+        dofs = [np.flatnonzero((model.param_part == p) & (kind == JOINT_ROTATION)) for p in range(model.n_parts)]
+        ptr = np.concatenate([[0], np.cumsum([len(d) for d in dofs])]).astype(np.intp)
+        ti, ri = np.flatnonzero(kind == ROOT_TRANSLATION), np.flatnonzero(kind == ROOT_ROTATION)
+        if len(ti) != 3 or len(ri) != 3 or np.any(model.parent[:1] >= 0):
+            raise ValueError(f"model {model.name!r}: forward expects part 0 as the root with 3 translation "
+                             "and 3 rotation parameters")
+        plan = tuple(np.ascontiguousarray(a) for a in (
+            np.asarray(model.param_axis, dtype=float), np.asarray(model.parent, dtype=np.intp), ptr,
+            np.concatenate(dofs).astype(np.intp), np.asarray(model.rest_rotation, dtype=float),
+            np.asarray(model.offset, dtype=float), ti.astype(np.intp), ri.astype(np.intp)))
         _PLANS[model] = plan
     return plan
 
@@ -138,50 +182,34 @@ def forward(model: BodyModel, params: np.ndarray) -> Pose:
 
     Parameters
     ----------
+    model : BodyModel
     params : ndarray, shape (n_params,)
+
+    Returns
+    -------
+    Pose
     """
     params = np.asarray(params, dtype=float)
     if params.shape != (model.n_params,):
         raise ValueError(f"params must have shape ({model.n_params},) for model {model.name!r}, got {params.shape}")
-    parts, ti, ri, ji = _plan(model)
-    n_parts, n_params = model.n_parts, model.n_params
-    R = np.empty((n_parts, 3, 3))
-    t = np.empty((n_parts, 3))
-    R_at = np.zeros((n_params, 3, 3))  # joint frame before each joint parameter's own rotation
-    t_at = np.zeros((n_params, 3))
-    # all joint-DOF rotations at once: Rot(axis, λ) for every rotational parameter
-    dof_rot = so3_exp(model.param_axis * params[:, None])
-    root_t = params[ti]
-    root_r = params[ri]
-    R_root = so3_exp(root_r)
-    rest, offset = model.rest_rotation, model.offset
-    for p, par, ks in parts:
-        if par < 0:
-            Rb = R_root @ rest[p]
-            tb = root_t + R_root @ offset[p]
-        else:
-            Rb = R[par] @ rest[p]
-            tb = R[par] @ offset[p] + t[par]
-        for k in ks:
-            R_at[k] = Rb
-            t_at[k] = tb
-            Rb = Rb @ dof_rot[k]
-        R[p] = Rb
-        t[p] = tb
-    w = np.zeros((n_params, 3))
-    v = np.zeros((n_params, 3))
-    w[ji] = np.einsum("kij,kj->ki", R_at[ji], model.param_axis[ji])
-    v[ji] = np.cross(t_at[ji], w[ji])
-    # root screws
-    v[ti] = np.eye(3)
-    Jl = so3_left_jacobian(root_r)
-    w[ri] = Jl.T  # column j of J_l is the screw of r_j
-    v[ri] = np.cross(root_t, w[ri])
+    # part2world = parent2world · Trans(offset) · Rot(rest) · Π Rot(axis, λ), parents first; the
+    # screws as in the module docstring (one compiled loop: tracker.kernels.forward_kinematics)
+    R, t, w, v = forward_kinematics(params, *_plan(model))
     return Pose(params, R, t, w, v)
 
 
 def body_jacobian(model: BodyModel, pose: Pose) -> np.ndarray:
-    """J_H for every part: kinematic screws (ω; v) per parameter, shape (n_parts, 6, n_params)."""
+    """J_H for every part: the kinematic screws (ω; v) of the parameters that move it.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    ndarray, shape (n_parts, 6, n_params)
+    """
     screws = np.concatenate([pose.screw_w, pose.screw_v], axis=1).T  # (6, n_params)
     return screws[None, :, :] * model.affects[:, None, :]
 
@@ -206,11 +234,33 @@ def point_jacobian(model: BodyModel, pose: Pose, part: np.ndarray, points_world:
 
 
 def joint_centres(model: BodyModel, pose: Pose) -> dict[str, np.ndarray]:
-    """Named joint centres in world coordinates (metres), each shape (3,)."""
+    """Named joint centres in world coordinates.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    dict str -> ndarray, shape (3,)
+        Metres.
+    """
     pts = pose.to_world(model.joint_part, model.joint_point)
     return {name: pts[i] for i, name in enumerate(model.joint_names)}
 
 
 def joint_centre_array(model: BodyModel, pose: Pose) -> np.ndarray:
-    """Joint centres in ``model.joint_names`` order, shape (n_joints, 3)."""
+    """Joint centres in ``model.joint_names`` order.
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+
+    Returns
+    -------
+    ndarray, shape (n_joints, 3)
+        Metres, world.
+    """
     return pose.to_world(model.joint_part, model.joint_point)

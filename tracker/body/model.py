@@ -66,7 +66,17 @@ class ModelError(ValueError):
 
 
 def euler_xyz_deg(angles) -> np.ndarray:
-    """Intrinsic X-then-Y-then-Z rotation from degrees, shape (3, 3)."""
+    """Intrinsic X-then-Y-then-Z rotation.
+
+    Parameters
+    ----------
+    angles : (float, float, float)
+        Degrees.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
     rx, ry, rz = np.radians(np.asarray(angles, dtype=float))
     cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
     Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
@@ -140,12 +150,14 @@ class BodyModel:
         return self.n_params
 
     def part_index(self, name: str) -> int:
+        """Index of a part by name; KeyError naming the model when absent."""
         try:
             return self.part_names.index(name)
         except ValueError:
             raise KeyError(f"model {self.name!r} has no part {name!r}") from None
 
     def param_index(self, name: str) -> int:
+        """Index of a parameter (``"<part>.<dof>"``) by name; KeyError naming the model when absent."""
         try:
             return self.param_names.index(name)
         except ValueError:
@@ -156,14 +168,46 @@ class BodyModel:
         return np.zeros(self.n_params)
 
     def clamp(self, params: np.ndarray) -> np.ndarray:
-        """Project parameters (..., n_params) onto the joint limits."""
+        """Project parameters onto the joint limits.
+
+        Parameters
+        ----------
+        params : ndarray, shape (..., n_params)
+
+        Returns
+        -------
+        ndarray, shape (..., n_params)
+        """
         return np.clip(params, self.lower, self.upper)
 
     def within_limits(self, params: np.ndarray, *, tol: float = 1e-9) -> np.ndarray:
+        """Whether parameters are within the joint limits.
+
+        Parameters
+        ----------
+        params : ndarray, shape (..., n_params)
+        tol : float
+            Slack, in the parameters' units (radians, metres).
+
+        Returns
+        -------
+        ndarray of bool, shape (...)
+        """
         return np.all((params >= self.lower - tol) & (params <= self.upper + tol), axis=-1)
 
     def random_params(self, rng: np.random.Generator, *, fraction: float = 1.0) -> np.ndarray:
-        """A random pose within ``fraction`` of each joint's range (root: ±1 m, any heading)."""
+        """A random pose within ``fraction`` of each joint's range (root: ±1 m, any heading, small tilt).
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+        fraction : float
+            Share of each joint's range around its middle.
+
+        Returns
+        -------
+        ndarray, shape (n_params,)
+        """
         finite = np.isfinite(self.lower)
         lo, hi = np.where(finite, self.lower, 0.0), np.where(finite, self.upper, 0.0)
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo) * fraction
@@ -177,10 +221,24 @@ class BodyModel:
         return p
 
     def with_height(self, height_m: float, *, segment_lengths: Mapping[str, float] | None = None) -> "BodyModel":
+        """The same model sized for another subject.
+
+        Parameters
+        ----------
+        height_m : float
+            Subject height, metres.
+        segment_lengths : mapping str -> float, optional
+            Explicit segment lengths, metres (``load_model``).
+
+        Returns
+        -------
+        BodyModel
+        """
         return load_model(self.name, height_m=height_m, segment_lengths=segment_lengths)
 
 
 def available_models() -> list[str]:
+    """Names of the bundled model files (``tracker/body/models/*.toml``)."""
     return sorted(p.stem for p in MODELS_DIR.glob("*.toml"))
 
 
@@ -194,12 +252,22 @@ def load_model(
 
     Parameters
     ----------
+    name_or_path : str or Path
+        A bundled model's name, or a model TOML file.
     height_m : float, optional
-        Subject height (default 1.75 m); every length scales with it.
-    segment_lengths : mapping, optional
-        Explicit lengths in metres for named segments (see each model file's
-        ``segment`` keys, e.g. ``upper_arm``, ``thigh``), overriding the
-        anthropometric ratios along that segment's axis.
+        Subject height in metres (default ``DEFAULT_HEIGHT_M``); every length scales with it.
+    segment_lengths : mapping str -> float, optional
+        Explicit lengths in metres for named segments (the model file's ``segment`` keys, e.g.
+        ``upper_arm``, ``thigh``), overriding the anthropometric ratios along that segment's axis.
+
+    Returns
+    -------
+    BodyModel
+
+    Raises
+    ------
+    ModelError
+        Unknown model, malformed file (named), or a height outside 0.5-2.6 m.
     """
     path = Path(name_or_path)
     if not path.suffix:

@@ -11,8 +11,9 @@ is the image gradient of the distance times the contour-point Jacobian (IJCV 200
 Distances are truncated at ``truncate_px`` (zero gradient beyond), so clutter and a missing limb
 add a bounded constant; the solver's robust loss (IRLS) does the rest.
 
-``chamfer`` objects are anything with ``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2),
-d_edge (n,), grad_edge (n, 2))`` in pixels, e.g. ``segmentation.distance.ChamferImages``.
+``chamfer`` objects are ``tracker.fitting.sampler.ChamferSampler``: anything with
+``sample(uv (n, 2)) -> (d_sil (n,), grad_sil (n, 2), d_edge (n,), grad_edge (n, 2))`` in pixels,
+e.g. ``segmentation.distance.ChamferImages``.
 
 **Reverse term** (optional, ``reverse_weight > 0``): the chamfer cost above is model → image
 only, so a limb whose contour lies inside the silhouette (e.g. over the torso) is not pulled
@@ -47,14 +48,19 @@ import numpy as np
 
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours, extremal_contours
-from tracker.imaging.jacobian import apply_screws, contour_image_motion
+from tracker.imaging.jacobian import contour_image_motion
+from tracker.kernels import assemble, reverse_terms, sample_chamfer
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
-from tracker.imaging.visibility import covered_rays, hidden_points
+from tracker.imaging.visibility import hidden_points
 
 __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+# placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
+_NO_MOTION, _NO_SCREWS = np.zeros((0, 2, 6)), np.zeros((6, 0))
+_NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+_RAY_RANGE_M = 50.0  # boundary-sample rays are followed this far (tracker.visibility.covered_rays)
 
 
 def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
@@ -86,22 +92,14 @@ def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
 
 
 class _StackedChamfer:
-    """The quantised ``ChamferImages`` of all cameras stacked into one, so that one ``sample`` call
-    serves every camera (one call per evaluation instead of one per camera).
-
-    Camera c's arrays sit in a block of rows of their own, 2 pixels inside a border of the
-    truncation code; a point is clipped to 1.5 pixels outside its camera's array first, so its
-    2x2 stencil never reaches another camera's block and it reads exactly what
+    """The quantised ``ChamferImages`` of all cameras behind one ``sample`` call: each camera's
+    points are sampled by one compiled call on its own arrays (no copy), reading exactly what its
     ``ChamferImages.sample`` reads (the truncation value, zero gradient, off the stored array).
-    ``build`` returns None unless every object is a ``ChamferImages`` with the same
-    resolution, truncation and dtype."""
+    ``build`` returns None unless every object is a ``ChamferImages`` with the same resolution,
+    truncation and dtype."""
 
-    PAD = 2
-
-    def __init__(self, images, chamfer_cls, placement) -> None:
-        self.images = images
-        self.chamfer_cls = chamfer_cls
-        self.placement = placement  # (n_cams, 6): ox, oy, w, h, block row, 0
+    def __init__(self, chamfer) -> None:
+        self.chamfer = list(chamfer)
 
     @classmethod
     def build(cls, chamfer: Sequence):
@@ -113,40 +111,63 @@ class _StackedChamfer:
         if any(ch.resolution_px != first.resolution_px or ch.max_distance_px != first.max_distance_px
                or ch.silhouette_q.dtype != first.silhouette_q.dtype for ch in chamfer):
             return None
-        pad = cls.PAD
-        hs = [ch.silhouette_q.shape[0] for ch in chamfer]
-        ws = [ch.silhouette_q.shape[1] for ch in chamfer]
-        rows0 = np.concatenate([[0], np.cumsum([h + 2 * pad for h in hs])])
-        sil = np.full((int(rows0[-1]), max(ws) + 2 * pad), first.max_code, dtype=first.silhouette_q.dtype)
-        edge = sil.copy()
-        for ch, r0, h, w in zip(chamfer, rows0, hs, ws):
-            sil[r0 + pad:r0 + pad + h, pad:pad + w] = ch.silhouette_q
-            edge[r0 + pad:r0 + pad + h, pad:pad + w] = ch.edges_q
-        images = ChamferImages(sil, edge, (0, 0), first.resolution_px, first.max_distance_px, first.image_size)
-        placement = np.array([[ch.offset_xy[0], ch.offset_xy[1], w, h, r0] for ch, r0, h, w
-                              in zip(chamfer, rows0, hs, ws)], dtype=float)
-        return cls(images, ChamferImages, placement)
+        return cls(chamfer)
 
     def sample(self, uv: np.ndarray, cam: np.ndarray):
         """``ChamferImages.sample`` of camera ``cam`` (n,) at its pixels ``uv`` (n, 2)."""
-        ox, oy, w, h, r0 = self.placement[cam].T
-        x = np.clip(uv[:, 0] - ox, -1.5, w + 0.5) + self.PAD
-        y = np.clip(uv[:, 1] - oy, -1.5, h + 0.5) + (r0 + self.PAD)
-        return self.images.sample(np.stack([x, y], axis=1))
+        d, grad = self.sample_rows(uv, cam, np.arange(len(uv)))
+        return d[:, 0], grad[:, 0], d[:, 1], grad[:, 1]
+
+    def sample_rows(self, uv: np.ndarray, cam: np.ndarray, rows: np.ndarray, *, truncate_px: float | None = None,
+                    edge_weight: float = 1.0, out=None):
+        """Distances (n, 2) (silhouette, edge) and gradients (n, 2, 2) at rows ``rows`` (n,) of
+        ``uv`` (N, 2), ``cam`` (N,); distances above ``truncate_px`` clipped with zero gradient,
+        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``).  With
+        ``out = (d (N, 2), grad (N, 2, 2))`` they are written to rows ``rows`` of those instead."""
+        rows = np.asarray(rows, dtype=np.intp)
+        cr = np.asarray(cam)[rows]
+        if out is None:
+            d, grad = np.empty((rows.size, 2)), np.empty((rows.size, 2, 2))
+            dest = np.arange(rows.size)
+        else:
+            d, grad = out
+            dest = rows
+        if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
+            order = np.argsort(cr, kind="stable")
+            rows, cr, dest = rows[order], cr[order], dest[order]
+        bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
+        uv = np.ascontiguousarray(uv, dtype=float)
+        trunc = np.inf if truncate_px is None else float(truncate_px)
+        for c, ch in enumerate(self.chamfer):
+            b0, b1 = bounds[c], bounds[c + 1]
+            if b1 > b0:
+                sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
+                sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
+                               float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
+                               float(edge_weight), d, grad, dest[b0:b1])
+        return d, grad
 
 
 @dataclass(frozen=True, eq=False)
 class CostTerms:
     """The cost evaluated at one pose.
 
-    pose : Pose; contours : Contours (N rows over the cost's cameras)
-    used : (N,) bool, rows that contribute
-    d_sil, d_edge : (N,) truncated distances in pixels (0 where not used)
-    residuals : (2 N + K,), or fewer when compact (module docstring; K reverse residuals)
-    jacobian : (len(residuals), n_params) or None
-    boundary_dist : (K,) distance in pixels from each observed boundary sample to the nearest used
-        contour point of its camera (0 where the sample lies on the predicted silhouette, inf where
-        that camera has no contour point), or None without the reverse term
+    Attributes
+    ----------
+    pose : Pose
+    contours : Contours
+        N rows over the cost's cameras.
+    used : ndarray of bool, shape (N,)
+        Rows that contribute.
+    d_sil, d_edge : ndarray, shape (N,)
+        Truncated distances, pixels (0 where not used).
+    residuals : ndarray, shape (2 N + K,)
+        Or fewer when compact (module docstring; K reverse residuals).
+    jacobian : ndarray, shape (len(residuals), n_params), or None
+    boundary_dist : ndarray, shape (K,), or None
+        Distance in pixels from each observed boundary sample to the nearest used contour point of
+        its camera (0 on the predicted silhouette, inf where that camera has no contour point);
+        None without the reverse term.
     """
 
     pose: Pose
@@ -179,11 +200,9 @@ class CostTerms:
         """RMS of the used residuals (both terms), pixels (NaN if none); with ``max_px``, of those
         at most ``max_px`` only (the inliers: see ``outlier_fraction``).
 
-        The tracker's quality figure is the plain RMS: a few large residuals dominate it (hop
-        session at the true poses: 3.4 px; 6.5 % of the edge residuals above 5 px make 71 % of the
-        sum of squares — upper arms and torso where the model's contour crosses the silhouette and
-        the image shows no edge, and feet that the segmentation lost in 1–2 cameras (0.8 % of the
-        residuals truncated at 30 px make 33 %)); the inlier RMS measures the fit on the rest."""
+        The tracker's quality figure is the plain RMS: a few large residuals dominate it (contour
+        crossing the torso where the image shows no edge, feet the segmentation lost; measured
+        shares: docs/tuning.md, "Cost"); the inlier RMS measures the fit on the rest."""
         n = self.n_used
         if not n:
             return float("nan")
@@ -211,7 +230,8 @@ class ChamferCost:
     ----------
     model : BodyModel
     cameras : sequence of Camera, length n_cams (only the cameras with an image this frame)
-    chamfer : sequence, length n_cams, of objects with ``sample(uv)`` (see module docstring)
+    chamfer : sequence, length n_cams, of ChamferSampler (``tracker.fitting.sampler``), aligned with
+        ``cameras`` (``in_camera_order`` of the mapping the rest of the tracker takes)
     sliding : use the sliding term B of the contour Jacobian (IJCV 2008 §5, ``tracker.imaging.jacobian``)
     n_samples : contour points per side of each part
     truncate_px : distances above it are clipped (zero gradient); None keeps the images' own
@@ -219,7 +239,7 @@ class ChamferCost:
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse term (module
         docstring); off at weight 0.  Boundary samples come from the chamfer objects'
         ``silhouette_q``; ``reverse_cover_px`` None (the default) turns the on-silhouette test
-        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.initialise.refine`` leaves it
+        off (the tracker turns it on, ``TrackerOptions``; ``tracker.search.refine.refine`` leaves it
         off: its searches from far-off poses rely on the pull of all far samples).
     visibility : ``"step"`` (default): occlusion is recomputed where the Jacobian is evaluated
         (each linearisation point) and that set of rows is kept for the trial steps from it;
@@ -259,11 +279,11 @@ class ChamferCost:
             self.boundary = [np.zeros((0, 2)) for _ in chamfer]
         self.n_reverse = sum(len(b) for b in self.boundary)
         self._boundary_all = np.concatenate(self.boundary) if self.n_reverse else np.zeros((0, 2))
-        # nearest contour point of a boundary sample y: argmin over x of |x|² − 2 y·x (|y|² is the
-        # same for every x), one product (k, 3) @ (3, n) per camera with (−2 y, 1) and (x, |x|²)
-        self._boundary_aug = [np.concatenate([-2.0 * b, np.ones((len(b), 1))], axis=1) for b in self.boundary]
+        self._boundary_cam = np.repeat(np.arange(len(self.boundary)), [len(b) for b in self.boundary])
         self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
         self._rays = _pixel_rays(cameras, self.boundary) if self.reverse_cover_px is not None else None
+        self._ray_dirs = self._rays[0] if self._rays is not None else np.zeros((self.n_reverse, 3))
+        self._focal = np.array([c.matrix[0, 0] for c in cameras], dtype=float)
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
@@ -279,26 +299,28 @@ class ChamferCost:
         d = np.zeros((N, 2))
         grad = np.zeros((N, 2, 2))
         rows = np.flatnonzero(used)
-        d[rows], grad[rows] = self._sample_rows(contours, rows)
+        if self._stacked is not None:
+            self._stacked.sample_rows(contours.uv, contours.cam, rows, truncate_px=self.truncate_px,
+                                      edge_weight=self.edge_weight, out=(d, grad))
+        else:
+            d[rows], grad[rows] = self._sample_rows(contours, rows)
         return d, grad
 
     def _sample_rows(self, contours: Contours, rows: np.ndarray):
         """Distances (n, 2) and gradients (n, 2, 2) (silhouette, edge) at contour rows ``rows`` (n,),
         truncated and weighted."""
+        if self._stacked is not None:
+            return self._stacked.sample_rows(contours.uv, contours.cam, rows, truncate_px=self.truncate_px,
+                                             edge_weight=self.edge_weight)
         d = np.zeros((rows.size, 2))
         grad = np.zeros((rows.size, 2, 2))
-        if self._stacked is not None:
-            ds, gs, de, ge = self._stacked.sample(contours.uv[rows], contours.cam[rows])
-            d[:, 0], d[:, 1] = ds, de
-            grad[:, 0], grad[:, 1] = gs, ge
-        else:
-            cam = contours.cam[rows]
-            for c, ch in enumerate(self.chamfer):
-                sel = np.flatnonzero(cam == c)
-                if sel.size:
-                    ds, gs, de, ge = ch.sample(contours.uv[rows[sel]])
-                    d[sel, 0], d[sel, 1] = ds, de
-                    grad[sel, 0], grad[sel, 1] = gs, ge
+        cam = contours.cam[rows]
+        for c, ch in enumerate(self.chamfer):  # other chamfer objects: one call per camera
+            sel = np.flatnonzero(cam == c)
+            if sel.size:
+                ds, gs, de, ge = ch.sample(contours.uv[rows[sel]])
+                d[sel, 0], d[sel, 1] = ds, de
+                grad[sel, 0], grad[sel, 1] = gs, ge
         if self.truncate_px is not None:
             over = d > self.truncate_px
             d[over] = self.truncate_px
@@ -309,56 +331,35 @@ class ChamferCost:
 
     def _reverse(self, pose: Pose, contours: Contours, used: np.ndarray):
         """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)
-        (0 for a sample on the predicted silhouette)."""
-        K = self.n_reverse
-        nearest = np.full(K, -1)  # matched contour row of each boundary sample (-1: camera has none)
-        per_cam = contours.n_points // max(len(self.cameras), 1)
-        xa = np.empty((contours.n_points, 3))  # (u, v, u² + v²) per contour row
-        xa[:, :2] = contours.uv
-        xa[:, 2] = np.einsum("ij,ij->i", contours.uv, contours.uv)
-        k0 = 0
-        for c, ya in enumerate(self._boundary_aug):
-            k1 = k0 + len(ya)
-            if k1 > k0:
-                rows = np.flatnonzero(used[c * per_cam:(c + 1) * per_cam])
-                if rows.size:
-                    rows += c * per_cam
-                    nearest[k0:k1] = rows[np.argmin(ya @ xa[rows].T, axis=1)]
-            k0 = k1
-        has = nearest >= 0
-        diff = self._boundary_all - contours.uv[nearest]
-        dist = np.linalg.norm(diff, axis=1)
-        dist_all = np.where(has, dist, np.inf)
-        far = has & (dist > self.reverse_min_px)
-        if self._rays is not None and far.any():
-            # a sample on the predicted silhouette (e.g. on an end cap, or between two contour
-            # samples) is explained by the model: no residual, whatever its nearest contour point.
-            # (Tested at every evaluation: reusing a linearisation point's answer at the trial
-            # points let steps that uncover samples look free; hop: MPJPE 7.7 -> 10.3 mm.)
-            idx = np.flatnonzero(far)
-            dirs, cam = self._rays
-            margin = self.reverse_cover_px * self._px_depth(pose)  # (n_cams, n_parts) metres
-            on = covered_rays(self.model, pose, self.cameras, cam[idx], dirs[idx], margin_m=margin)
-            far[idx[on]] = False
-            dist_all[idx[on]] = 0.0
-        r = np.where(far, dist - self.reverse_min_px, 0.0)
-        match = np.where(far, nearest, -1)
-        unit = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
-        if self.truncate_px is not None:
-            over = r > self.truncate_px
-            r[over] = self.truncate_px
-            match[over] = -1
-        return self.reverse_weight * r, match, unit, dist_all
+        (0 for a sample on the predicted silhouette) (``tracker.kernels.reverse_terms``).
 
-    def _px_depth(self, pose: Pose) -> np.ndarray:
-        """Metres per pixel at each part's origin in each camera, (n_cams, n_parts)."""
+        A sample on the predicted silhouette (e.g. on an end cap, or between two contour samples)
+        is explained by the model: no residual, whatever its nearest contour point.  (Tested at
+        every evaluation: reusing a linearisation point's answer at the trial points let steps
+        that uncover samples look free: see docs/tuning.md, Cost.)"""
+        per_cam = contours.n_points // max(len(self.cameras), 1)
         st = stack_cameras(self.cameras)
-        depth = np.einsum("cj,pj->cp", st.rotation[:, 2, :], pose.translation) + st.translation[:, 2:3]
-        focal = np.array([c.matrix[0, 0] for c in self.cameras])
-        return np.maximum(depth, 0.0) / focal[:, None]
+        return reverse_terms(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam, self.reverse_min_px,
+                             np.inf if self.truncate_px is None else self.truncate_px, self.reverse_weight,
+                             -1.0 if self.reverse_cover_px is None else self.reverse_cover_px, self._ray_dirs,
+                             self._focal, self.model.cones, pose.rotation, pose.translation, st.rotation,
+                             st.translation, _RAY_RANGE_M)
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
-        """Residuals (and Jacobian) at ``params`` (n_params,).  See the module docstring for the layout."""
+        """Residuals (and Jacobian) at a pose; see the module docstring for the layout.
+
+        Parameters
+        ----------
+        params : ndarray, shape (n_params,)
+        jacobian : bool
+            Also the Jacobian (a new linearisation point: occlusion recomputed with ``"step"``).
+        compact : bool
+            Keep only the residuals that can be non-zero (what the LM solver takes).
+
+        Returns
+        -------
+        CostTerms
+        """
         params = np.asarray(params, dtype=float)
         fresh = self.visibility == "always" or (self.visibility in ("frame", "step") and self._frozen_visible is None)
         if self.visibility == "step" and jacobian and not (self._cache is not None and self._cache[-1]
@@ -398,47 +399,24 @@ class ChamferCost:
             self._cache = (params.copy(), pose, contours, used, d, grad, rev, fresh)
             self.n_evaluations += 1
         urows = np.flatnonzero(used)
-        if compact:
-            # a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
-            # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations
-            keep = (d[urows] != 0.0) | (grad[urows] != 0.0).any(axis=2)  # (n_used, 2)
-            r = d[urows][keep]
-        else:
-            r = d.ravel()
-        if rev is not None:
-            rkeep = rev[0] != 0.0 if compact else slice(None)  # a matched sample has r > 0
-            r = np.concatenate([r, rev[0][rkeep]])
-        J = None
+        # compact: a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
+        # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations.
+        # Residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and reverse
+        # directions are applied there, then the parts' screws (tracker.kernels.assemble)
         if jacobian:
-            # residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and
-            # reverse directions are applied there, then one product with the parts' screws
-            n_p = self.model.n_params
             Mx = contour_image_motion(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            Mu = grad[urows] @ Mx  # (n_used, 2, 2) @ (n_used, 2, 6)
-            part = contours.part[urows]
-            Mr = rp = None
-            if rev is not None:
-                _, match, unit, _ = rev
-                m = match >= 0
-                pos = np.searchsorted(urows, match[m])  # matched rows are used rows
-                Mr = np.zeros((self.n_reverse, 6))
-                Mr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Mx[pos])[:, 0]
-                rp = np.zeros(self.n_reverse, dtype=part.dtype)
-                rp[m] = part[pos]
-            if compact:
-                rows6 = [Mu[keep]] + ([] if Mr is None else [Mr[rkeep]])
-                parts = [np.broadcast_to(part[:, None], keep.shape)[keep]] + ([] if rp is None else [rp[rkeep]])
-                J = apply_screws(self.model, pose, np.concatenate(rows6), np.concatenate(parts))
-            else:
-                J = np.zeros((contours.n_points, 2, n_p))
-                J[urows] = apply_screws(self.model, pose, Mu.reshape(-1, 6), np.repeat(part, 2)).reshape(-1, 2, n_p)
-                J = J.reshape(-1, n_p)
-                if Mr is not None:
-                    J = np.concatenate([J, apply_screws(self.model, pose, Mr, rp)])
+            screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
+        else:
+            Mx, screws = _NO_MOTION, _NO_SCREWS
+        rev_r, match, unit = (rev[0], rev[1], rev[2]) if rev is not None else (_NO_REV, _NO_MATCH, _NO_UNIT)
+        r, J = assemble(d, grad, urows, rev_r, bool(compact), bool(jacobian), Mx, contours.part, match, unit,
+                        self.reverse_weight, screws, self.model.affects)
+        if not jacobian:
+            J = None
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):
-        """``fun(x, jacobian) -> (r, J | None)`` for ``tracker.fitting.solver``."""
+        """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` as ``evaluate``."""
 
         def fun(x, jacobian):
             t = self.evaluate(x, jacobian=jacobian, compact=compact)

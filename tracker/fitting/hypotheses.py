@@ -39,7 +39,7 @@ import numpy as np
 
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.search.appearance import AppearanceModel, feet_forward, head_cue, surface_colours
-from tracker.search.mirror import _at_limits, _heading, front_back_cost, mirror_params
+from tracker.search.mirror import front_back_cost, joints_at_limits, mirror_params, pelvis_heading
 
 __all__ = ["FrontBackOptions", "FrontBackGuard", "GuardOutcome", "AMBIGUOUS", "RESOLVED"]
 
@@ -142,7 +142,7 @@ class FrontBackGuard:
         speed = float(np.linalg.norm(v))
         if speed < o.walk_speed_mps:
             return 0.0
-        return float(o.walk_weight * (_heading(self.model, params) @ (v / speed)))
+        return float(o.walk_weight * (pelvis_heading(self.model, params) @ (v / speed)))
 
     def _feet(self, params, cams, chs) -> float:
         """``feet_weight`` × (occupancy ahead of the ankles − behind them), 0 when unclear
@@ -179,8 +179,8 @@ class FrontBackGuard:
         o, model = self.options, self.model
         iou_p = iou(p) if iou is not None else 1.0
         iou_m = iou(pm) if iou is not None else 1.0
-        cost_p = front_back_cost(terms.rms_px(), iou_p, _at_limits(model, p))
-        cost_m = front_back_cost(terms_m.rms_px(), iou_m, _at_limits(model, pm))
+        cost_p = front_back_cost(terms.rms_px(), iou_p, joints_at_limits(model, p))
+        cost_m = front_back_cost(terms_m.rms_px(), iou_m, joints_at_limits(model, pm))
         cues = {"fit": o.fit_weight * float(np.clip(np.nan_to_num(cost_m - cost_p), -o.fit_clip, o.fit_clip))}
         cues["feet"] = 0.5 * (self._feet(p, cams, chs) - self._feet(pm, cams, chs))
         s = None

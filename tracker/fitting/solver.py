@@ -50,10 +50,22 @@ ResidualFn = Callable[[np.ndarray, bool], tuple]
 class SolverResult:
     """Outcome of a solve.
 
-    params : ndarray (n,), within the bounds; cost : robust data cost + prior at ``params``;
-    rms_px : root mean square of the data residuals ``r`` (unweighted); iterations : linear solves
-    (trial steps) taken; status : one of the module's status codes; message : words for it;
-    n_evaluations : residual evaluations.
+    Attributes
+    ----------
+    params : ndarray, shape (n,)
+        Within the bounds; read-only.
+    cost : float
+        Robust data cost + prior at ``params``.
+    rms_px : float
+        RMS of the data residuals ``r`` (unweighted), residual units (pixels).
+    iterations : int
+        Linear solves (trial steps) taken.
+    status : int
+        One of the module's status codes (``success``: converged or ran out of iterations).
+    message : str
+        Words for it.
+    n_evaluations : int
+        Residual evaluations.
     """
 
     params: np.ndarray
@@ -70,7 +82,19 @@ class SolverResult:
 
 
 def robust_weights(r: np.ndarray, *, loss: str, f_scale: float) -> np.ndarray:
-    """IRLS weights ``ρ'(r)/r`` ``(m,)`` for ``loss`` in ``linear``, ``huber``, ``cauchy``."""
+    """IRLS weights ``ρ'(r)/r``.
+
+    Parameters
+    ----------
+    r : ndarray, shape (m,)
+    loss : {"linear", "huber", "cauchy"}
+    f_scale : float
+        Scale of the loss, residual units.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+    """
     if loss == "linear":
         return np.ones_like(r)
     a = np.abs(r) / f_scale
@@ -82,7 +106,19 @@ def robust_weights(r: np.ndarray, *, loss: str, f_scale: float) -> np.ndarray:
 
 
 def robust_cost(r: np.ndarray, *, loss: str, f_scale: float) -> float:
-    """``Σ ρ(r_i)`` with ``ρ(r) = r²/2`` near 0 (scipy's convention, scaled by ``f_scale²``)."""
+    """``Σ ρ(r_i)`` with ``ρ(r) = r²/2`` near 0 (scipy's convention, scaled by ``f_scale²``).
+
+    Parameters
+    ----------
+    r : ndarray, shape (m,)
+    loss : {"linear", "huber", "cauchy"}
+    f_scale : float
+        Scale of the loss, residual units.
+
+    Returns
+    -------
+    float
+    """
     if loss == "linear":
         return 0.5 * float(r @ r)
     a = np.abs(r) / f_scale
@@ -122,18 +158,29 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
 
     Parameters
     ----------
-    fun : callable ``fun(x, jacobian) -> (r (m,), J (m, n) | None)``; ``m`` may change with ``x``.
-    x0 : ndarray (n,), the start (projected onto the bounds).
-    lower, upper : ndarray (n,) or None; ±inf for unbounded.
-    prior : ndarray (n,) or None (= x0); prior_weight : (n,) or scalar weights (per unit² of x).
-    loss, f_scale : robust loss and its scale in residual units (pixels).
-    ftol : stop when an accepted step lowers the cost by less than ``ftol`` × cost.
-    xtol : stop when ``‖δ‖ ≤ xtol (‖x‖ + xtol)``.
-    rtol : stop after an accepted step that changes no residual by more than ``rtol``
-        (linearised, ``max |J δ|``, residual units: "no contour point moved rtol pixels").
-    damping : initial μ (relative to the diagonal).
-    min_diagonal, diagonal_floor : the damping diagonal is ``max(diag, min_diagonal,
+    fun : callable
+        ``fun(x, jacobian) -> (r (m,), J (m, n) or None)``; ``m`` may change with ``x``.
+    x0 : ndarray, shape (n,)
+        The start (projected onto the bounds).
+    lower, upper : ndarray, shape (n,), or None
+        Bounds; ±inf for unbounded.
+    prior, prior_weight : ndarray, shape (n,), or None; ndarray or float
+        Prior centre (None: ``x0``) and weights per unit² of x.
+    loss, f_scale : str, float
+        Robust loss and its scale in residual units (pixels).
+    max_iterations, ftol, xtol, gtol : int, float, float, float
+        Trial steps; stop when an accepted step lowers the cost by less than ``ftol`` × cost, when
+        ``‖δ‖ ≤ xtol (‖x‖ + xtol)``, or when the gradient is below ``gtol``.
+    rtol : float
+        Stop after an accepted step that changes no residual by more than ``rtol`` (linearised,
+        ``max |J δ|``, residual units: "no contour point moved rtol pixels").
+    damping, min_diagonal, diagonal_floor : float
+        Initial μ (relative to the diagonal); the damping diagonal is ``max(diag, min_diagonal,
         diagonal_floor × max(diag))``, so weakly observed parameters are damped too.
+
+    Returns
+    -------
+    SolverResult
     """
     x, lo, hi, xp, pw = _check_inputs(x0, lower, upper, prior, prior_weight)
     robust_weights(np.zeros(1), loss=loss, f_scale=f_scale)  # validates loss
@@ -156,27 +203,33 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
         sw = np.sqrt(robust_weights(r, loss=loss, f_scale=f_scale))  # IRLS weights are >= 0
         Js = J * sw[:, None]
         A = Js.T @ Js  # a product with its own transpose: one symmetric rank-k update (syrk)
-        A[np.diag_indices(x.size)] += pw
+        A.flat[::x.size + 1] += pw
         g = Js.T @ (sw * r) + pw * (x - xp)
         # freeze parameters at a bound that the gradient pushes outward
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-        if np.max(np.abs(g[free]), initial=0.0) <= gtol:
+        all_free = bool(free.all())
+        if np.max(np.abs(g if all_free else g[free]), initial=0.0) <= gtol:
             status = CONVERGED_GRADIENT
             break
-        Af = A[np.ix_(free, free)]
-        gf = g[free]
+        Af = A if all_free else A[np.ix_(free, free)]
+        gf = g if all_free else g[free]
         diag = np.diag(Af)
         diag = np.maximum(diag, max(min_diagonal, diagonal_floor * float(diag.max(initial=0.0))))
         accepted = False
         while it < max_iterations:
             it += 1
+            damped = Af.copy()
+            damped.flat[::damped.shape[0] + 1] += mu * diag
             try:
-                step_f = -np.linalg.solve(Af + mu * np.diag(diag), gf)
+                step_f = -np.linalg.solve(damped, gf)
             except np.linalg.LinAlgError:
                 mu, nu = mu * nu, nu * 2.0
                 continue
-            step = np.zeros_like(x)
-            step[free] = step_f
+            if all_free:
+                step = step_f
+            else:
+                step = np.zeros_like(x)
+                step[free] = step_f
             x_new = np.clip(x + step, lo, hi)
             step = x_new - x
             small_step = np.linalg.norm(step) <= xtol * (np.linalg.norm(x) + xtol)
@@ -237,9 +290,20 @@ def _result(x, cost, r, it, status, message, n_eval) -> SolverResult:
 def least_squares_fd(fun: ResidualFn, x0, *, lower=None, upper=None, prior=None, prior_weight=None,
                      loss: str = "huber", f_scale: float = 5.0, max_iterations: int = 20,
                      ftol: float = 1e-3, xtol: float = 1e-5) -> SolverResult:
-    """The speed baseline: ``scipy.optimize.least_squares`` (TRF) with a 2-point finite-difference
-    Jacobian on the same problem (``fun``'s residual vector must keep its length).  ``iterations``
-    counts scipy's Jacobian evaluations."""
+    """The speed baseline: ``scipy.optimize.least_squares`` (TRF) with a finite-difference Jacobian.
+
+    The same problem as ``levenberg_marquardt`` (``fun``'s residual vector must keep its length);
+    ``iterations`` counts scipy's Jacobian evaluations.
+
+    Parameters
+    ----------
+    fun, x0, lower, upper, prior, prior_weight, loss, f_scale, max_iterations, ftol, xtol
+        As ``levenberg_marquardt``.
+
+    Returns
+    -------
+    SolverResult
+    """
     from scipy.optimize import least_squares
 
     x, lo, hi, xp, pw = _check_inputs(x0, lower, upper, prior, prior_weight)

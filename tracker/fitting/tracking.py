@@ -8,7 +8,7 @@ now and then or when those look suspect the silhouette IoU; ``TrackerOptions``) 
 record.  A frame whose quality is below the thresholds is reported
 ``ok: false`` ("poor fit"); after ``patience`` such frames in a row (``tracker.search.recovery.LossMonitor``)
 the pose is searched again from the silhouettes, seeded by the last good pose
-(``tracker.search.initialise.initialise(hint=...)``).  Without ``initial_params`` the first frame is
+(``tracker.search.recovery.recover``).  Without ``initial_params`` the first frame is
 initialised from the silhouettes.
 
 Never raises on data: a frame that cannot be solved (no camera, all silhouettes empty, no
@@ -21,111 +21,161 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
 
+import cv2
 import numpy as np
 
 from capture.camera import Camera
+from tracker.body.kinematics import joint_centre_array
+from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
 from tracker.fitting.hypotheses import FrontBackGuard, FrontBackOptions
-from tracker.body.kinematics import joint_centre_array
-from tracker.search.initialise import ScoreViews, initialise
-from tracker.search.mirror import hypothesis_cost, mirror_params
-from tracker.body.model import ROOT_TRANSLATION, BodyModel
-from tracker.search.recovery import LossMonitor
+from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
+from tracker.search.initialise import SearchOptions, initialise
+from tracker.search.mirror import hypothesis_cost, mirror_params
+from tracker.search.recovery import LossMonitor, recover
+from tracker.search.scoring import ScoreViews
 
 __all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
 
 
 @dataclass(frozen=True)
 class TrackerOptions:
-    """Fitting options (defaults tuned on the synthetic hop session, see bench/tracker.py).
+    """Fitting options of the ``Tracker`` (defaults tuned on the synthetic hop session, bench/tracker.py).
 
-    n_samples : contour points per side of a part; visibility : when occlusion is recomputed
-    (``tracker.fitting.cost.ChamferCost``); max_iterations : LM trial steps per frame;
-    ftol, xtol, rtol : LM stopping rules (relative cost change, step size, largest linearised
-    residual change in px; ``tracker.fitting.solver.levenberg_marquardt``);
-    loss, f_scale : robust loss on the pixel residuals; truncate_px : distance truncation;
-    prior_m, prior_rad : prior weights per m² (root translation) and per rad² (rotations), in
-    units of px² residual, towards the last fitted pose (not the extrapolation);
-    reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px : the reverse (silhouette →
-    model) term of ``tracker.fitting.cost`` (weight 0 turns it off; hop session with the on-silhouette
-    test ``reverse_cover_px`` 1: MPJPE 7.7 mm at reverse_min_px 2, 8.2 mm and a frame flagged at
-    4, 11.7 mm at 6; without the test: 9.4 mm at 8, 10.8 mm at 2; the test costs ~26 % more time
-    per frame (hop, reverse_min_px 2, one run: 20.2 against 16.0 ms); these figures move by ±1–2 mm
-    with small changes: the right arm is lost for a few frames around 58–60 and 65–90 in some runs);
-    damping, diagonal_floor : LM initial damping and damping-diagonal floor;
-    constant_velocity : start from ``2 p_t − p_{t−1}`` (hop session: median 3 iterations instead
-    of 5, mean joint error 9.1 mm instead of 11.6 mm);
-    max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px : the RMS limit of a good frame is
-    ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median RMS of the last rms_window good
-    frames))``: the RMS level is set by the segmentation (shadows, missing edges), not by the pose
-    (hop session: median 3.5 px, correlation of per-frame RMS with joint error 0.01; a fixed 6 px
-    flagged a frame at 7.1 px whose joint error was 23 mm);
-    min_inside_fraction, min_iou : a frame worse than these (or than the RMS limit) is reported
-    ``ok: false``; the IoU of the model's silhouettes with the observed ones
-    (``tracker.search.initialise.ScoreViews`` at half resolution) catches a wrong pose that fits the
-    contours well locally (RMS, inside fraction) yet misses or overshoots whole limbs (hop
-    session: good frames ≥ 0.87; a half-followed 90° turn and 0.8 m jump, 77 mm off: 0.77);
-    iou_every, iou_check_coverage : rendering it costs ~5 ms, so it is checked (when the frame
-    brings silhouettes) every ``iou_every`` frames, after a bad frame, and whenever a cheap figure
-    is suspicious: coverage (observed silhouette boundary near the model's contour, the reverse
-    term's figure) below ``iou_check_coverage``, RMS above ¾ of its limit, or an inside fraction
-    within 0.1 of its limit (``iou_every=1``: every frame);
-    front_back_every, front_back_iterations, front_back_margin : the front/back check: silhouettes
-    hardly tell a body from its mirror (``tracker.search.mirror``), so a track can run turned round and
-    pass every figure above (or fail them, as a poor fit, until recovery).  Every
-    ``front_back_every`` frames that bring silhouettes (0: never; not on a frame that was just
-    re-initialised), the mirror of the fitted pose is fitted too (``front_back_iterations`` LM
-    steps) and both are scored by ``tracker.search.mirror.hypothesis_cost`` (RMS + 10 × (1 − IoU) + 0.1
-    per joint at a limit); when the mirror scores ``front_back_margin`` lower it is taken and
-    fitted to convergence (4 × ``front_back_iterations`` steps).  A check costs one fit and two
-    IoU renders (hop, one core shared with other work: ~60 ms, 2.4 median frames; ≈ 1 ms per
-    frame on average at 60: a turned track is found within 2 s at 30 fps).  The full check,
-    ``tracker.search.mirror.resolve_front_back`` (1–3 s), kept the mirrored pose on the test's clip: not used.
+    Each field's meaning and unit is commented where it is declared; the measured effect of the
+    settings and their tuning history are in docs/tuning.md, "Tracker".
+
+    Parameters
+    ----------
+    n_samples, visibility, max_iterations, ftol, xtol, rtol, damping, diagonal_floor
+        The fit: ``ChamferCost`` sampling and occlusion, ``levenberg_marquardt`` stopping and damping.
+    loss, f_scale, truncate_px, prior_m, prior_rad
+        Robust loss and its scale, distance truncation, priors towards the last fitted pose.
+    reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px
+        The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
+    constant_velocity
+        Start each fit from the constant-velocity extrapolation.
+    max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
+        Quality limits of a good frame (a worse frame is reported ``ok: false``).
+    iou_every, iou_check_coverage
+        When the silhouette IoU check (costly: a render) runs.
+    front_back_every, front_back_iterations, front_back_margin
+        The periodic front/back check.
+    initialise_search, recover_search : SearchOptions
+        The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
 
+    #: contour points per side of a part
     n_samples: int = 8
+    #: when occlusion is recomputed (``ChamferCost``: "step", "frame", "always", "none")
     visibility: str = "step"
+    #: LM trial steps per frame
     max_iterations: int = 12
+    #: LM stops at this relative cost change
     ftol: float = 3e-2
+    #: ... or this relative step size
     xtol: float = 1e-4
+    #: ... or when the largest linearised residual change is below this, px
     rtol: float = 1.0
+    #: robust loss on the pixel residuals (``tracker.fitting.solver``)
     loss: str = "huber"
+    #: its scale, px
     f_scale: float = 3.0
+    #: distances above it are clipped (zero gradient), px
     truncate_px: float = 30.0
+    #: prior weight on the root translation towards the last fitted pose (not the extrapolation), px² per m²
     prior_m: float = 200.0
+    #: prior weight on the rotations towards the last fitted pose, px² per rad²
     prior_rad: float = 30.0
+    #: weight of the silhouette -> model term (0: off)
     reverse_weight: float = 1.0
+    #: observed boundary samples per camera of that term
     reverse_samples: int = 150
+    #: a sample nearer than this to the model's contour has no residual, px
     reverse_min_px: float = 2.0
+    #: a sample on the model's silhouette grown by this has no residual, px (None: test off; it is
+    #: what makes knossow54 and 4-camera tracking converge, at a cost per frame)
     reverse_cover_px: float | None = 1.0
+    #: LM initial damping
     damping: float = 1e-3
+    #: floor of the damping diagonal
     diagonal_floor: float = 0.0
+    #: start from ``2 p_t - p_{t-1}`` (fewer iterations, lower joint error on the hop)
     constant_velocity: bool = True
+    #: the RMS limit of a good frame is ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median
+    #: RMS of the last rms_window good frames))``: the RMS level is set by the segmentation (shadows,
+    #: missing edges), not by the pose, px
     max_rms_px: float = 6.0
     rms_ratio: float = 2.5
     rms_window: int = 30
     max_rms_ceiling_px: float = 15.0
+    #: a frame with fewer contour points on the silhouettes is bad (a drifted model sticks out)
     min_inside_fraction: float = 0.6
+    #: a frame whose silhouette IoU (``ScoreViews`` at half resolution) is lower is bad: it catches a
+    #: pose that fits the contours locally yet misses or overshoots whole limbs
     min_iou: float = 0.8
+    #: the IoU is checked (when the frame brings silhouettes) every ``iou_every`` frames, after a bad
+    #: frame, and when a cheap figure is near its limit: coverage below ``iou_check_coverage``, RMS
+    #: above ¾ of its limit, or an inside fraction within 0.1 of its limit (1: every frame)
     iou_every: int = 10
     iou_check_coverage: float = 0.8
+    #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
+    #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
+    #: mirror of the fit is fitted too (``front_back_iterations`` LM steps); when its
+    #: ``hypothesis_cost`` is ``front_back_margin`` lower it is taken and fitted to convergence
     front_back_every: int = 60
     front_back_iterations: int = 12
     front_back_margin: float = 0.5
+    #: the first frame's search (``tracker.search.initialise.initialise``)
+    initialise_search: SearchOptions = SearchOptions()
+    #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
+    #: candidates, as the initialisation
+    recover_search: SearchOptions = SearchOptions.for_recovery(keep=3)
 
 
 def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
-    """Per-parameter prior weights (n_params,): ``prior_m`` on root translation, ``prior_rad`` else."""
+    """Per-parameter prior weights: ``prior_m`` on the root translation, ``prior_rad`` on rotations.
+
+    Parameters
+    ----------
+    model : BodyModel
+    options : TrackerOptions
+
+    Returns
+    -------
+    ndarray, shape (n_params,)
+        px² per m² or per rad².
+    """
     return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
 
 
-def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, start: np.ndarray, *,
+def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
               prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
               options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
-    """Fit one frame from ``start`` (n_params,) with the prior term towards ``prediction`` (default
-    ``start``); returns the solver result and the cost object."""
-    cost = ChamferCost(model, cameras, chamfer, sliding=sliding, n_samples=options.n_samples,
+    """Fit one frame from ``start`` with the prior term towards ``prediction``.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera
+    chamfer : mapping str -> ChamferSampler
+        Camera name -> sampler (``tracker.fitting.sampler``), at least every camera of ``cameras``.
+    start : ndarray, shape (n_params,)
+    prediction : ndarray, shape (n_params,), optional
+        Centre of the prior (default ``start``).
+    sliding : bool
+        Use the sliding term of the contour Jacobian.
+    solver : {"lm", "lsq"}
+        Analytic LM, or scipy with finite differences.
+    options : TrackerOptions
+
+    Returns
+    -------
+    result : SolverResult
+    cost : ChamferCost
+    """
+    cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
                        visibility=options.visibility, truncate_px=options.truncate_px,
                        reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
                        reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
@@ -145,7 +195,10 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: Sequence, st
 
 def _silhouette_empty(chamfer, silhouette) -> bool:
     if silhouette is not None:
-        return not np.any(silhouette)
+        s = np.asarray(silhouette)
+        if s.ndim == 2 and s.dtype == np.uint8 and s.size:
+            return cv2.countNonZero(s) == 0
+        return not np.any(s)
     q = getattr(chamfer, "silhouette_q", None)
     if q is None:
         return False
@@ -223,7 +276,7 @@ class Tracker:
             self.guard.state = "resolved"
 
     def predict(self) -> np.ndarray | None:
-        """Start pose for the next frame (n_params,) or None before initialisation."""
+        """Start pose for the next frame (constant velocity when enabled), shape (n_params,); None before initialisation."""
         if self.params is None:
             return None
         if self.options.constant_velocity and self.previous is not None:
@@ -233,8 +286,12 @@ class Tracker:
     def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
         """Initialisation (hint None) or recovery from silhouettes; raises ValueError on failure."""
         self.n_initialisations += 1
-        res = initialise(self.model, cams, {c.name: silhouettes[c.name] for c in cams},
-                         {c.name: chamfer[c.name] for c in cams}, hint=hint)
+        sils = {c.name: silhouettes[c.name] for c in cams}
+        chs = {c.name: chamfer[c.name] for c in cams}
+        if hint is None:
+            res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
+        else:
+            res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
         return self.model.clamp(np.asarray(res.params, dtype=float))
 
     def _fit(self, cams, chs, start):
@@ -245,7 +302,7 @@ class Tracker:
         return res, terms, terms.rms_px(), terms.inside_fraction()
 
     def rms_limit(self) -> float:
-        """RMS (px) above which the current frame is bad (see ``TrackerOptions``)."""
+        """RMS (pixels) above which the current frame is bad (``TrackerOptions.max_rms_px``)."""
         o = self.options
         lim = o.max_rms_px
         if self._good_rms:
@@ -315,7 +372,7 @@ class Tracker:
             return r, cost.evaluate(np.asarray(r.params))
 
         iou = (lambda p: float(views().score(p))) if views is not None else None
-        out = self.guard.update(t_s=1e-9 * record["timestamp_ns"], cams=cams, chs=chs,
+        out = self.guard.update(t_s=1e-9 * record["timestamp_ns"], cams=cams, chs=[chs[c.name] for c in cams],
                                 images=[images[c.name] for c in cams] if images and all(c.name in images for c in cams)
                                 else None, res=res, terms=terms, ok=not bad, fit=fit, iou=iou)
         record["front_back"] = self.guard.state
@@ -331,11 +388,24 @@ class Tracker:
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None,
              images: Mapping[str, np.ndarray] | None = None) -> dict:
-        """Fit one frame set and return its pose record (a JSON-ready dict).
+        """Fit one frame set and return its pose record (a JSON-ready dict, DESIGN.md).
 
-        ``chamfer``: camera name -> ChamferImages (a camera absent this frame is left out);
-        ``silhouettes``: camera name -> (h, w) mask, needed for (re)initialisation only;
-        ``images``: camera name -> (h, w, 3) BGR frame, optional (the front/back guard's colours).
+        Parameters
+        ----------
+        frame_id : int
+        timestamp_ns : int
+        chamfer : mapping str -> ChamferSampler
+            Camera name -> sampler; a camera absent this frame is left out.
+        silhouettes : mapping str -> ndarray, shape (h, w), optional
+            Camera name -> mask; needed for (re)initialisation and the IoU checks.
+        images : mapping str -> ndarray, shape (h, w, 3), optional
+            Camera name -> BGR frame: the front/back guard's colour cues (``tracker.fitting.hypotheses``).
+
+        Returns
+        -------
+        dict
+            ``frame, timestamp_ns, model, ok, cameras, latency_ms`` and, when solved, ``params, joints,
+            rms_px, iterations, inside_fraction, coverage`` (``iou`` when checked); ``reason`` when not ok.
         """
         t0 = self.clock()
         record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
@@ -354,7 +424,7 @@ class Tracker:
         if not names:
             return fail("no camera with a non-empty silhouette")
         cams = [self.cameras[n] for n in names]
-        chs = [chamfer[n] for n in names]
+        chs = {n: chamfer[n] for n in names}
         can_search = silhouettes is not None and all(n in silhouettes for n in names)
         start = self.predict()
         if start is None:

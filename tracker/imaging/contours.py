@@ -34,7 +34,8 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera, project_many, stack_cameras
+from capture.camera import Camera, stack_cameras
+from tracker.kernels import contour_points, ruling_angles
 from tracker.body.kinematics import Pose
 from tracker.body.model import BodyModel
 from tracker.imaging.visibility import hidden_points
@@ -132,21 +133,13 @@ def contour_generator_angles(cones: np.ndarray, m: np.ndarray) -> tuple[np.ndarr
         ``D > 0``: the camera is outside the cone, the rulings exist.  Where it is
         not, ``theta`` holds the (finite) angles computed with ``D`` clipped to 0.
     """
-    a, b, k = cones[..., 0], cones[..., 1], cones[..., 2]
-    F = -b * m[..., 0]
-    G = -a * m[..., 1]
-    H = a * b * (1.0 + k * m[..., 2])
-    D = F * F + G * G - H * H
-    real = D > 1e-12 * (F * F + G * G + H * H)
-    sq = np.sqrt(np.maximum(D, 0.0))
-    hmf, hpf = H - F, H + F
-    # t± = (-G ± √D) / (H - F) = (H + F) / (-G ∓ √D); pick the form whose numerator does not cancel
-    num_p = np.where(G <= 0, -G + sq, hpf)
-    den_p = np.where(G <= 0, hmf, -G - sq)
-    num_m = np.where(G >= 0, -G - sq, hpf)
-    den_m = np.where(G >= 0, hmf, -G + sq)
-    theta = 2.0 * np.arctan2(np.stack([num_p, num_m], -1), np.stack([den_p, den_m], -1))
-    return theta, real
+    # F = -b m1, G = -a m2, H = a b (1 + k m3), D = F² + G² - H²; t± = (-G ± √D) / (H - F) =
+    # (H + F) / (-G ∓ √D), each root taken in the form whose numerator does not cancel
+    # (tracker.kernels._ruling_angles)
+    cones, m = np.broadcast_arrays(np.asarray(cones, dtype=float)[..., :3], np.asarray(m, dtype=float))
+    shape = m.shape[:-1]
+    theta, real = ruling_angles(np.ascontiguousarray(cones.reshape(-1, 3)), np.ascontiguousarray(m.reshape(-1, 3)))
+    return theta.reshape(shape + (2,)), real.reshape(shape)
 
 
 def extremal_contours(
@@ -184,36 +177,15 @@ def extremal_contours(
     if pose.rotation.shape[0] != model.n_parts:
         raise ValueError(f"pose: has {pose.rotation.shape[0]} parts, model {model.name!r} has {model.n_parts}")
     n_cams, n_parts = len(cameras), model.n_parts
-    C = camera_centres(cameras)  # (n_cams, 3) world
-    R, t = pose.rotation, pose.translation  # part2world (n_parts, 3, 3), (n_parts, 3)
-    # camera centres in every part frame: m = R^T (C - t), (n_cams, n_parts, 3)
-    m = np.einsum("pji,cpj->cpi", R, C[:, None, :] - t[None, :, :])
-    theta, real = contour_generator_angles(model.cones[None, :, :], m)  # (n_cams, n_parts, 2), (n_cams, n_parts)
     zs = sample_heights(model, n_samples)  # (n_parts, n_samples)
-    a, b, k = model.cones[:, 0], model.cones[:, 1], model.cones[:, 2]
-    scale = 1.0 + k[:, None] * zs  # (n_parts, n_samples)
-    # world point = (1 + k z) (a cos θ R e1 + b sin θ R e2) + (z R e3 + t): a ruling direction per
-    # (camera, part, side) times a scale per (part, sample), plus an axis point per (part, sample)
-    ruling = (a[None, :, None, None] * np.cos(theta)[..., None]) * R[None, :, None, :, 0] + (
-        b[None, :, None, None] * np.sin(theta)[..., None]
-    ) * R[None, :, None, :, 1]  # (n_cams, n_parts, 2, 3)
-    axis = zs[:, :, None] * R[:, None, :, 2] + t[:, None, :]  # (n_parts, n_samples, 3)
-    world = ruling[:, :, :, None, :] * scale[None, :, None, :, None] + axis[None, :, None, :, :]
+    st = stack_cameras(cameras)  # world2cam rotations (n_cams, 3, 3), translations (n_cams, 3), intrinsics
+    size = np.array([cam.size for cam in cameras], dtype=float)  # (n_cams, 2)
+    # per (camera, part): the rulings' angles from the camera centre in the part frame (module
+    # docstring); per sample: world point (1 + k z) (a cos θ R e1 + b sin θ R e2) + z R e3 + t,
+    # projected (tracker.kernels.contour_points)
+    theta, points, uv, valid = contour_points(model.cones, pose.rotation, pose.translation, zs, st.rotation,
+                                              st.translation, st.intrinsics, st.distortion, size)
     shape = (n_cams, n_parts, 2, n_samples)
-    points = world.reshape(-1, 3)
-    n_per_cam = n_parts * 2 * n_samples
-    st = stack_cameras(cameras)  # world2cam rotations (n_cams, 3, 3), translations (n_cams, 3)
-    world_c = world.reshape(n_cams, n_per_cam, 3)
-    depth = world_c @ st.rotation[:, 2, :, None] + st.translation[:, None, 2:3]  # (n_cams, n, 1)
-    uv = project_many(cameras, world_c)  # points behind a camera project to junk; flagged invalid below
-    size = np.array([cam.size for cam in cameras], dtype=float) - 1.0  # (n_cams, 2)
-    with np.errstate(invalid="ignore"):  # Camera.in_image, False for NaN
-        inside = (uv[..., 0] >= 0.0) & (uv[..., 1] >= 0.0)
-        inside &= (uv[..., 0] <= size[:, 0, None]) & (uv[..., 1] <= size[:, 1, None])
-    uv = uv.reshape(-1, 2)
-    valid = inside.reshape(-1) & (depth.reshape(-1) > 1e-6)
-    valid &= np.broadcast_to(real[:, :, None, None], shape).reshape(-1)
-    uv[~valid] = 0.0  # finite junk where the point is not seen
     idx = _row_indices(shape)
     visible = valid
     if visibility:
@@ -226,7 +198,7 @@ def extremal_contours(
         part=idx[1],
         side=idx[2],
         z=np.broadcast_to(zs[None, :, None, :], shape).reshape(-1),
-        theta=np.broadcast_to(theta[..., None], shape).reshape(-1),
+        theta=theta,
         points=points,
         uv=uv,
         valid=valid,

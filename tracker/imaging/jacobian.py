@@ -40,8 +40,9 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera, project_many_with_jacobian
-from tracker.imaging.contours import Contours, camera_centres
+from capture.camera import Camera, stack_cameras
+from tracker.imaging.contours import Contours
+from tracker.kernels import image_motion, projection_jacobians, screw_rows
 from tracker.body.kinematics import Pose
 from tracker.body.model import BodyModel
 
@@ -70,34 +71,15 @@ def _check(model: BodyModel, pose: Pose, cameras: Sequence[Camera], contours: Co
         raise ValueError(f"cameras: {len(cameras)} given, contours were computed for {contours.n_cams}")
 
 
-def _sliding_terms(model, pose, centres, contours, r):
-    """Per-point pieces of the sliding term B = e ⊗ w, shapes (n, 3) and (n, 6).
-
-    ``e = R X_θ / (-f_θ)`` and ``w = (C × R n, R n)``.  θ, f_θ, R n and C are constant along
-    a ruling, so everything but the (1 + k z) factor of X_θ is computed once per (camera,
-    part, side) and gathered with one index."""
-    ns = contours.n_samples
-    cam, part = contours.cam[::ns], contours.part[::ns]  # per ruling (n_cams * n_parts * 2,)
-    th = contours.theta[::ns]
-    a, b, k = model.cones[part, 0], model.cones[part, 1], model.cones[part, 2]
-    R, t = pose.rotation[part], pose.translation[part]
-    C = centres[cam]
-    cos, sin = np.cos(th), np.sin(th)
-    m = np.einsum("nji,nj->ni", R, C - t)  # camera centre in the part frame
-    f_theta = b * m[:, 0] * sin - a * m[:, 1] * cos
-    # f_θ² = F² + G² - H² = D at a root: where contours.py finds no real ruling (D below its
-    # threshold, the camera inside or on the cone) there is no sliding; those rows are not valid
-    F, G, H = -b * m[:, 0], -a * m[:, 1], a * b * (1.0 + k * m[:, 2])
-    degenerate = f_theta * f_theta <= 1e-12 * (F * F + G * G + H * H)
-    f_theta = np.where(degenerate, np.inf, f_theta)
-    per_ruling = np.empty((cam.size, 9))  # e / (1 + k z), C × nw, nw
-    per_ruling[:, 0:3] = R[:, :, 0] * (a * sin / f_theta)[:, None] - R[:, :, 1] * (b * cos / f_theta)[:, None]
-    nw = R[:, :, 0] * (b * cos)[:, None] + R[:, :, 1] * (a * sin)[:, None] - R[:, :, 2] * (a * b * k)[:, None]
-    per_ruling[:, 3:6] = np.cross(C, nw)
-    per_ruling[:, 6:9] = nw
-    g = per_ruling[r // ns]
-    scale = 1.0 + model.cones[contours.part[r], 2] * contours.z[r]
-    return g[:, 0:3] * scale[:, None], g[:, 3:9]
+def _motion(model, pose, cameras, contours, r, JI, sliding):
+    """``JI (A + B)`` of contour rows ``r`` (n,) for per-row Jacobians ``JI`` (n, d, 3), (n, d, 6)
+    (``tracker.kernels.image_motion``: the sliding term B = e ⊗ w with ``e = R X_θ / (-f_θ)`` and
+    ``w = (C × R n, R n)``; none where f_θ² is below its threshold: no real ruling, those rows are
+    not valid)."""
+    st = stack_cameras(cameras)
+    return image_motion(np.ascontiguousarray(contours.points[r]), np.ascontiguousarray(JI), contours.cam[r],
+                        contours.part[r], contours.z[r], contours.theta[r], model.cones, pose.rotation,
+                        pose.translation, st.rotation, st.translation, bool(sliding))
 
 
 def contour_motion(
@@ -111,6 +93,11 @@ def contour_motion(
 ) -> np.ndarray:
     """A + B per contour point: the point's velocity per unit screw of its part.
 
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
     Returns
     -------
     ndarray, shape (n, 3, 6)
@@ -118,22 +105,7 @@ def contour_motion(
     """
     _check(model, pose, cameras, contours)
     r = _select(contours, rows)
-    Y = contours.points[r]
-    out = np.zeros((r.size, 3, 6))
-    # A = [-[Y]x  I]
-    out[:, 0, 1], out[:, 0, 2] = Y[:, 2], -Y[:, 1]
-    out[:, 1, 0], out[:, 1, 2] = -Y[:, 2], Y[:, 0]
-    out[:, 2, 0], out[:, 2, 1] = Y[:, 1], -Y[:, 0]
-    out[:, 0, 3] = out[:, 1, 4] = out[:, 2, 5] = 1.0
-    if sliding:
-        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
-        out += e[:, :, None] * w[:, None, :]
-    return out
-
-
-def _affects_float(model: BodyModel) -> np.ndarray:
-    """``model.affects`` as 0.0 / 1.0, shape (n_parts, n_params) (cheaper to multiply by)."""
-    return model.affects.astype(float)
+    return _motion(model, pose, cameras, contours, r, np.broadcast_to(np.eye(3), (r.size, 3, 3)), sliding)
 
 
 def _screws(model: BodyModel, pose: Pose) -> np.ndarray:
@@ -150,11 +122,21 @@ def contour_point_jacobian(
     sliding: bool = True,
     rows=None,
 ) -> np.ndarray:
-    """dY/dΦ = (A + B) J_H of the contour points in the world, shape (n, 3, n_params)."""
+    """dY/dΦ = (A + B) J_H of the contour points in the world.
+
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
+    Returns
+    -------
+    ndarray, shape (n, 3, n_params)
+        Metres per unit parameter; n = N or len(rows).
+    """
     r = _select(contours, rows)
     V = contour_motion(model, pose, cameras, contours, sliding=sliding, rows=r)
-    J = (V.reshape(-1, 6) @ _screws(model, pose)).reshape(r.size, 3, model.n_params)
-    return J * model.affects[contours.part[r]][:, None, :]
+    return apply_screws(model, pose, V.reshape(-1, 6), np.repeat(contours.part[r], 3)).reshape(r.size, 3, model.n_params)
 
 
 def contour_image_motion(
@@ -168,41 +150,48 @@ def contour_image_motion(
 ) -> np.ndarray:
     """J_I (A + B) of the contour points: image velocity per unit screw of the point's part.
 
+    ``contour_jacobian`` is this times the part's screws (``apply_screws``); a caller that combines
+    rows (image gradients, directions) can do so here, on 6 columns instead of n_params.
+
+    Parameters
+    ----------
+    model, pose, cameras, contours, sliding, rows
+        As ``contour_jacobian``.
+
     Returns
     -------
     ndarray, shape (n, 2, 6)
-        Pixels per unit screw ``(ω; v)`` (world); n = N or len(rows).  ``contour_jacobian``
-        is this times the part's screws (``apply_screws``); a caller that combines rows (image
-        gradients, directions) can do so here, on 6 columns instead of n_params.
+        Pixels per unit screw ``(ω; v)`` (world); n = N or len(rows).
     """
     _check(model, pose, cameras, contours)
     r = _select(contours, rows)
-    Y = contours.points[r]
-    JI = project_many_with_jacobian(cameras, Y, cam_index=contours.cam[r])[1]  # invalid rows: junk, as their uv
     # J_I A: row j of J_I gives (Y × j, j);  J_I B: (J_I e) ⊗ (C × nw, nw)
-    M = np.empty((r.size, 2, 6))
-    j0, j1, j2 = JI[:, :, 0], JI[:, :, 1], JI[:, :, 2]
-    y0, y1, y2 = Y[:, 0, None], Y[:, 1, None], Y[:, 2, None]
-    M[:, :, 0] = y1 * j2 - y2 * j1
-    M[:, :, 1] = y2 * j0 - y0 * j2
-    M[:, :, 2] = y0 * j1 - y1 * j0
-    M[:, :, 3:] = JI
-    if sliding:
-        e, w = _sliding_terms(model, pose, camera_centres(cameras), contours, r)
-        JIe = j0 * e[:, 0, None] + j1 * e[:, 1, None] + j2 * e[:, 2, None]  # (n, 2)
-        M += JIe[:, :, None] * w[:, None, :]
-    return M
+    st = stack_cameras(cameras)
+    JI = projection_jacobians(st.rotation, st.translation, st.intrinsics, st.distortion,
+                              np.ascontiguousarray(contours.points[r]), contours.cam[r])  # invalid rows: junk
+    return _motion(model, pose, cameras, contours, r, JI, sliding)
 
 
 def apply_screws(model: BodyModel, pose: Pose, motion: np.ndarray, part: np.ndarray) -> np.ndarray:
-    """Rows of per-screw motion times J_H of their parts: ``motion (n, 6) -> (n, n_params)``.
+    """Rows of per-screw motion times J_H of their parts.
 
     ``motion`` row i is a linear functional of the screw of part ``part[i]`` (e.g. one row of
     ``contour_image_motion``); the result is its derivative with respect to the parameters
-    (``J_H`` = the parameters' screws, masked by ``model.affects``)."""
-    J = motion @ _screws(model, pose)
-    J *= _affects_float(model)[part]
-    return J
+    (``J_H`` = the parameters' screws, masked by ``model.affects``).
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+    motion : ndarray, shape (n, 6)
+    part : ndarray of int, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n, n_params)
+    """
+    return screw_rows(np.ascontiguousarray(motion, dtype=float), np.asarray(part, dtype=np.intp),
+                      np.ascontiguousarray(_screws(model, pose)), model.affects)
 
 
 def contour_jacobian(

@@ -33,7 +33,6 @@ import numpy as np
 from capture.camera import Camera
 from tracker.body.kinematics import Pose
 from tracker.body.model import BodyModel
-from tracker.synthetic.scene import ring_cameras
 
 __all__ = [
     "cone_points",
@@ -43,7 +42,6 @@ __all__ = [
     "render_silhouettes",
     "internal_edges",
     "fill_convex_hulls",
-    "ring_cameras",
     "BACKGROUND",
 ]
 
@@ -159,7 +157,23 @@ def render_label_images(
     n_z: int = 4,
     near_m: float = 0.01,
 ) -> list[np.ndarray]:
-    """Part-label images for several cameras, each (h, w) int16 (``BACKGROUND`` = -1)."""
+    """Part-label images for several cameras (painter's order by depth; the module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+    pose : Pose
+    cameras : sequence of Camera
+    n_theta, n_z : int
+        Points per cross-section and cross-sections per part (``cone_points``).
+    near_m : float
+        Points nearer than this in front of a camera are dropped, metres.
+
+    Returns
+    -------
+    list of ndarray, each shape (h, w), int16
+        Part index per pixel, ``BACKGROUND`` (-1) where no part is.
+    """
     pts = body_points(model, pose, n_theta=n_theta, n_z=n_z)  # (P, M, 3)
     centres = part_centres(model, pose)
     labels_out = []
@@ -175,12 +189,22 @@ def render_label_images(
 
 
 def render_labels(model: BodyModel, pose: Pose, camera: Camera, **kwargs) -> np.ndarray:
-    """Part-label image, shape (h, w) int16: part index, -1 background (painter's order by depth)."""
+    """``render_label_images`` for one camera: shape (h, w) int16, part index or -1."""
     return render_label_images(model, pose, [camera], **kwargs)[0]
 
 
 def render_silhouettes(model: BodyModel, pose: Pose, cameras: Sequence[Camera], **kwargs) -> list[np.ndarray]:
-    """Silhouette masks, one per camera, each (h, w) uint8 with 255 on the body."""
+    """Silhouette masks, one per camera, each shape (h, w) uint8 with 255 on the body.
+
+    Parameters
+    ----------
+    model, pose, cameras, **kwargs
+        As ``render_label_images``.
+
+    Returns
+    -------
+    list of ndarray, each shape (h, w), uint8
+    """
     return [np.where(lab >= 0, 255, 0).astype(np.uint8) for lab in render_label_images(model, pose, cameras, **kwargs)]
 
 

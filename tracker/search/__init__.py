@@ -1,4 +1,9 @@
-"""Finding the body without a warm start: visual hull, pose candidates, front/back, initialisation, recovery.
+"""Finding the body without a warm start, as a bottom-up chain of modules (each imports only those above it):
+
+``hull`` (visual hull) -> ``scoring`` (validated views, IoU of a pose) -> ``candidates`` (hypotheses
+placed on the hull, limb search) -> ``refine`` (staged LM, elbows) -> ``mirror`` (front or back)
+-> ``initialise`` (``SearchOptions``, the T/A-pose search) -> ``recovery`` (loss detection, any-pose
+search from the last good pose).
 """
 
 from __future__ import annotations
@@ -7,9 +12,15 @@ import importlib
 
 _EXPORTS = {
     "tracker.search.hull": ('VoxelHull', 'visual_hull', 'common_view_bounds', 'render_hull', 'silhouette_iou'),
-    "tracker.search.initialise": ('InitResult', 'initialise', 'refine', 'ScoreViews', 'prepare_inputs', 'pose_candidates', 'estimate_height', 'sized_model'),
-    "tracker.search.mirror": ('FrontBack', 'mirror_params', 'mirror_map', 'front_back_cost', 'hypothesis_cost', 'resolve_front_back'),
-    "tracker.search.recovery": ('LossMonitor', 'LossState', 'recover', 'local_search', 'limb_search'),
+    "tracker.search.scoring": ('ScoreViews', 'SearchInputs', 'prepare_inputs', 'chamfer_from_silhouette',
+                               'rendered_views'),
+    "tracker.search.candidates": ('pose_candidates', 'feet_direction', 'estimate_height', 'sized_model',
+                                  'limb_search', 'limb_chains', 'turn_about_vertical'),
+    "tracker.search.refine": ('InitResult', 'refine', 'refine_best', 'elbow_search'),
+    "tracker.search.mirror": ('FrontBack', 'mirror_params', 'mirror_map', 'front_back_cost', 'hypothesis_cost',
+                              'compare_front_back', 'resolve_front_back'),
+    "tracker.search.initialise": ('SearchOptions', 'initialise', 'search_candidates'),
+    "tracker.search.recovery": ('LossMonitor', 'LossState', 'recover', 'local_search'),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -268,7 +268,7 @@ def _toe_points(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
 def feet_occupancy(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], chamfer: Sequence, *,
                    inside_px: float = 1.5) -> float:
     """Mean over the toe points of the model's feet at ``params`` (points along each foot's axis
-    at 55–85 % of its length, ahead of the ankle) of the fraction of cameras whose silhouette
+    at half to nearly all of its length, ahead of the ankle) of the fraction of cameras whose silhouette
     holds them (silhouette distance ≤ ``inside_px``, from the ``ChamferImages``).  1: the feet
     lie where the images show feet; NaN when the model has no feet or no camera sees them."""
     feet, local = _toe_points(model)
@@ -308,7 +308,7 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     the silhouettes, not its hips.
     """
     from tracker.body.kinematics import joint_centre_array
-    from tracker.search.mirror import _heading
+    from tracker.search.mirror import pelvis_heading
 
     p = np.asarray(params, dtype=float)
     jc = joint_centre_array(model, forward(model, p))
@@ -320,7 +320,7 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
         ankle, hip = jc[names.index(f"{side}_ankle")], jc[names.index(f"{side}_hip")]
         if ankle[2] < max_ankle_m and np.hypot(*(ankle[:2] - hip[:2])) < max_offset_m:
             refs.append(hip[:2])
-    h = _heading(model, p)
+    h = pelvis_heading(model, p)
     if not refs or not np.any(h):
         return float("nan"), float("nan")
     reach = np.asarray(reach_m, dtype=float)

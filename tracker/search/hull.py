@@ -30,7 +30,7 @@ import numpy as np
 
 from capture.camera import Camera
 
-__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou"]
+__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou", "project_with_depth"]
 
 # the 8 corners of the unit cube, (8, 3)
 _CORNERS = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
@@ -121,7 +121,17 @@ class VoxelHull:
         return float(hi[2] - lo[2])
 
     def contains(self, points: np.ndarray) -> np.ndarray:
-        """Whether world points (m, 3) lie in a voxel of the hull, shape (m,) bool."""
+        """Whether world points lie in a voxel of the hull.
+
+        Parameters
+        ----------
+        points : ndarray, shape (m, 3)
+            World metres.
+
+        Returns
+        -------
+        ndarray of bool, shape (m,)
+        """
         P = np.asarray(points, dtype=float).reshape(-1, 3)
         if self.empty:
             return np.zeros(len(P), bool)
@@ -136,8 +146,14 @@ class VoxelHull:
         return inside & (keys[pos] == qk)
 
     def largest_component(self) -> "VoxelHull":
-        """The hull restricted to its largest 26-connected piece by volume (drops phantom blobs
-        that segmentation noise leaves where the views happen to agree)."""
+        """The hull restricted to its largest 26-connected piece by volume.
+
+        Drops phantom blobs that segmentation noise leaves where the views happen to agree.
+
+        Returns
+        -------
+        VoxelHull
+        """
         if self.empty:
             return self
         from scipy import ndimage
@@ -157,8 +173,17 @@ class VoxelHull:
         return VoxelHull(self.centres[sel], self.sizes[sel], self.full[sel], self.bounds, self.min_voxel_m)
 
     def points(self, *, spacing_m: float | None = None) -> np.ndarray:
-        """A point cloud filling the hull: each cube split into cells of ``spacing_m`` (default the
-        finest voxel size), their centres, shape (m, 3)."""
+        """A point cloud filling the hull: each cube split into cells of ``spacing_m``, their centres.
+
+        Parameters
+        ----------
+        spacing_m : float, optional
+            Cell size, metres (default the finest voxel size).
+
+        Returns
+        -------
+        ndarray, shape (m, 3)
+        """
         s = self.min_voxel_m if spacing_m is None else float(spacing_m)
         if s <= 0:
             raise ValueError(f"spacing_m must be > 0, got {spacing_m}")
@@ -181,8 +206,23 @@ def common_view_bounds(cameras: Sequence[Camera], *, z_range=(0.0, 2.5), step_m:
 
     Samples a grid over the cameras' horizontal footprint (their centres' box grown by half its
     size) and keeps points in front of and inside every image.  The box depends on the
-    calibration alone and is cached per camera set (~25 ms for six cameras, paid once, not on
-    every hull of a recovery).
+    calibration alone and is cached per camera set (paid once, not on every hull of a recovery;
+    its cost: docs/tuning.md, "Search").
+
+    Parameters
+    ----------
+    cameras : sequence of Camera
+    z_range : (float, float)
+        Heights of the box, metres.
+    step_m : float
+        Spacing of the sampled floor grid, metres.
+    margin_m : float
+        Growth of the box around the points kept, metres.
+
+    Returns
+    -------
+    ndarray, shape (2, 3)
+        ``[lower, upper]`` corners, world metres.
     """
     key = (tuple((c.matrix.tobytes(), c.distortion.tobytes(), c.rotation.tobytes(), c.translation.tobytes(), c.size)
                  for c in cameras), tuple(float(z) for z in z_range), float(step_m), float(margin_m))
@@ -203,7 +243,7 @@ def _common_view_bounds(cameras: Sequence[Camera], z_range, step_m: float, margi
     P = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3)
     seen = np.ones(len(P), bool)
     for cam in cameras:
-        uv, z = _project(cam, P)
+        uv, z = project_with_depth(cam, P)
         seen &= (z > 1e-3) & cam.in_image(np.nan_to_num(uv, nan=-1.0))
     if not seen.any():
         raise ValueError("the cameras share no common view between z = %.2f and %.2f m" % tuple(z_range))
@@ -228,7 +268,7 @@ def _check_inputs(cameras, silhouettes) -> list[np.ndarray]:
     return masks
 
 
-def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def project_with_depth(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (n, 2) and depths (n,) of world points X (n, 3); one matrix product without distortion."""
     if np.any(cam.distortion != 0):
         return cam.project(X), cam.depth(X)
@@ -255,7 +295,7 @@ def _classify(lower: np.ndarray, size: float, cameras, integrals, tolerance: int
         m = len(active)
         if np.any(cam.distortion != 0):
             corners = (lower[active][:, None, :] + size * _CORNERS[None]).reshape(-1, 3)
-            uv, z = _project(cam, corners)
+            uv, z = project_with_depth(cam, corners)
             u, v, z = uv[:, 0].reshape(m, 8), uv[:, 1].reshape(m, 8), z.reshape(m, 8)
         else:  # homogeneous image points are affine in the corner: project once, add 8 offsets
             P = cam.projection_matrix
@@ -300,7 +340,7 @@ def _centres_inside(centres: np.ndarray, cameras, masks, tolerance: int = 0) -> 
         idx = np.flatnonzero(misses <= tolerance)
         if idx.size == 0:
             break
-        uv, z = _project(cam, centres[idx])
+        uv, z = project_with_depth(cam, centres[idx])
         uv = np.rint(np.nan_to_num(uv, nan=-1.0, posinf=-1.0, neginf=-1.0)).astype(np.int64)
         inside = (z > 1e-6) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
         hit = np.zeros(idx.size, bool)
@@ -336,6 +376,10 @@ def visual_hull(
     tolerance : int
         Views a point may fall outside of and still belong to the hull (0: the strict visual
         hull; 1 keeps a limb that one segmentation missed, at the price of a fatter hull).
+
+    Returns
+    -------
+    VoxelHull
     """
     masks = _check_inputs(cameras, silhouettes)
     if not (min_voxel_m > 0 and np.isfinite(min_voxel_m)):
@@ -381,12 +425,23 @@ def visual_hull(
 
 
 def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) -> np.ndarray:
-    """Rasterise the hull into ``camera``: (h, w) uint8 mask, 255 where a pixel's ray meets a voxel.
+    """Rasterise the hull into a camera: where a pixel's ray meets a voxel.
 
-    Each voxel's footprint box is enumerated (ragged, vectorised) and every pixel centre's ray
-    is tested against the cube (slab test), so the result is exact up to pixel sampling.  Voxels
-    go largest first in chunks of about ``chunk_pairs`` (pixel, voxel) pairs, and pixels already
-    set are not tested again (a ray crosses many voxels).
+    Each voxel's footprint box is enumerated (ragged, vectorised) and every pixel centre's ray is
+    tested against the cube (slab test), so the result is exact up to pixel sampling.  Voxels go
+    largest first in chunks, and pixels already set are not tested again.
+
+    Parameters
+    ----------
+    hull : VoxelHull
+    camera : Camera
+    chunk_pairs : int
+        About this many (pixel, voxel) pairs per chunk (memory bound).
+
+    Returns
+    -------
+    ndarray, shape (h, w), uint8
+        255 on the hull, 0 elsewhere.
     """
     h, w = camera.height, camera.width
     out = np.zeros((h, w), np.uint8)
@@ -396,7 +451,7 @@ def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) 
     lo = hull.centres[order] - 0.5 * hull.sizes[order, None]
     hi = hull.centres[order] + 0.5 * hull.sizes[order, None]
     corners = (lo[:, None, :] + hull.sizes[order, None, None] * _CORNERS[None]).reshape(-1, 3)
-    uv, z = _project(camera, corners)
+    uv, z = project_with_depth(camera, corners)
     front = (z > 1e-6).reshape(-1, 8).all(1)
     uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0).reshape(-1, 8, 2)
     c0 = np.clip(np.floor(uv[..., 0].min(1)), 0, w).astype(np.intp)
@@ -445,7 +500,17 @@ def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) 
 
 
 def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two masks (non-zero = set); 1.0 when both are empty."""
+    """Intersection over union of two masks (non-zero = set).
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (h, w)
+
+    Returns
+    -------
+    float
+        1.0 when both are empty.
+    """
     a, b = np.asarray(a) > 0, np.asarray(b) > 0
     union = np.count_nonzero(a | b)
     return 1.0 if union == 0 else np.count_nonzero(a & b) / union

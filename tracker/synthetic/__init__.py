@@ -9,7 +9,8 @@ _EXPORTS = {
     "tracker.synthetic.scene": ('ring_cameras', 'fit_ring_cameras', 'make_room_texture', 'render_background', 'pixel_rays'),
     "tracker.synthetic.bvh": ('Bvh', 'BvhError', 'load_bvh', 'parse_bvh', 'bvh_forward'),
     "tracker.synthetic.retarget": ('Retargeted', 'retarget_bvh', 'JOINT_MAP', 'BVH_TO_WORLD'),
-    "tracker.synthetic.synth": ('make_synthetic_session', 'bundled_motion', 'render_frame', 'make_palette'),
+    "tracker.synthetic.synth": ('bundled_motion', 'render_frame', 'make_palette', 'synthetic_studio',
+                                'SyntheticStudio', 'ground_truth_record', 'add_noise'),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

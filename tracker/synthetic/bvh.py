@@ -22,14 +22,12 @@ Format (Biovision hierarchy)::
     Frame Time: 0.008333
     <N lines, one value per channel in hierarchy order>
 
-Conventions used here (those of the common exporters and of CMU's files):
-rotations are in degrees and compose in the order listed, each about the
-joint's *local* (parent-relative) axis, so ``Zrotation Yrotation
-Xrotation`` means ``R = Rz · Ry · Rx``; position channels add to the
-joint's OFFSET.  A joint's local transform is ``Trans(offset + position) ·
-R``, and ``joint2world = parent2world · local``.  End sites become joints
-named ``<parent>_End`` with no channels.  Units are whatever the file uses
-(CMU files here: metres, Y up).
+Conventions used here (those of the common exporters and of CMU's files): rotations are in
+degrees and compose in the order listed, each about the joint's *local* (parent-relative) axis,
+so ``Zrotation Yrotation Xrotation`` means ``R = Rz · Ry · Rx``; position channels add to the
+joint's OFFSET.  A joint's local transform is ``Trans(offset + position) · R``, and
+``joint2world = parent2world · local``.  End sites become joints named ``<parent>_End`` with no
+channels.  Units are whatever the file uses (CMU files here: metres, Y up).
 """
 
 from __future__ import annotations
@@ -94,17 +92,33 @@ class Bvh:
         return 1.0 / self.frame_time_s
 
     def index(self, name: str) -> int:
+        """Index of a joint by name; KeyError naming the file when absent."""
         try:
             return self.names.index(name)
         except ValueError:
             raise KeyError(f"{self.source}: no joint {name!r}") from None
 
     def is_end_site(self) -> np.ndarray:
+        """Whether each joint is an end site (no channels), shape (n_joints,) bool."""
         return np.array([len(c) == 0 for c in self.channels])
 
 
 def load_bvh(path) -> Bvh:
-    """Read and parse a BVH file."""
+    """Read and parse a BVH file.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Bvh
+
+    Raises
+    ------
+    BvhError
+        Unreadable or malformed (the file and line named).
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
@@ -114,7 +128,18 @@ def load_bvh(path) -> Bvh:
 
 
 def parse_bvh(text: str, *, source: str = "<string>") -> Bvh:
-    """Parse BVH text (see the module docstring); errors name ``source`` and the line."""
+    """Parse BVH text (see the module docstring).
+
+    Parameters
+    ----------
+    text : str
+    source : str
+        Named in errors, with the line.
+
+    Returns
+    -------
+    Bvh
+    """
     lines = text.splitlines()
     names: list[str] = []
     parent: list[int] = []

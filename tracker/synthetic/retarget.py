@@ -2,24 +2,19 @@
 
 Steps (``retarget_bvh``):
 
-1. **Axes.** BVH world (Y up) -> contourcap world (Z up) by the proper
-   rotation ``(x, y, z)_world = (z, x, y)_bvh``; a subject facing +Z in the
-   BVH faces +X in the world, the model's reference heading.  No heading is
-   imposed: the root rotation follows the motion.
-2. **Correspondences.** Each model joint centre (``model.joint_names``) is
-   the mean of one or more BVH joints, first match in ``JOINT_MAP``
-   (CMU names and the common ``LeftUpLeg``/``LeftArm`` style).  For CMU:
-   pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm
-   above the hip joints), spine = Chest, neck = Neck, head = midpoint of
-   Head and its end site (the head's centre), shoulder = LeftShoulder
-   (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist,
-   hip, knee, ankle by name.
-3. **Size.** Subject height by a least-squares scale fit of the model's
-   segment lengths (at height 1) to the BVH's in its rest pose:
-   ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper arm, forearm
-   (left and right), shoulder width and pelvis-to-neck.  With
-   ``fit_segments=True`` the limb segments (thigh, shank, upper arm,
-   forearm) also get the BVH's own lengths (``segment_lengths``).
+1. **Axes.** BVH world (Y up) -> contourcap world (Z up) by the proper rotation
+   ``(x, y, z)_world = (z, x, y)_bvh``; a subject facing +Z in the BVH faces +X in the world, the
+   model's reference heading.  No heading is imposed: the root rotation follows the motion.
+2. **Correspondences.** Each model joint centre (``model.joint_names``) is the mean of one or
+   more BVH joints, first match in ``JOINT_MAP`` (CMU names and the common ``LeftUpLeg``/``LeftArm``
+   style).  For CMU: pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm above
+   the hip joints), spine = Chest, neck = Neck, head = midpoint of Head and its end site,
+   shoulder = LeftShoulder (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist, hip,
+   knee, ankle by name.
+3. **Size.** Subject height by a least-squares scale fit of the model's segment lengths (at
+   height 1) to the BVH's in its rest pose: ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper
+   arm, forearm (left and right), shoulder width and pelvis-to-neck.  With ``fit_segments=True``
+   the limb segments also get the BVH's own lengths (``segment_lengths``).
 4. **Time.** Joint targets are linearly interpolated at ``t_k = start_s +
    k / fps`` from the BVH's frames.
 5. **Inverse kinematics.** Per frame, ``scipy.optimize.least_squares``
@@ -134,7 +129,20 @@ def _resolve_map(bvh: Bvh, joint_names) -> list[list[int]]:
 
 
 def bvh_joint_targets(bvh: Bvh, joint_names, frames=None) -> np.ndarray:
-    """Model-joint targets from a BVH in the world frame (Z up, file units), shape (n_frames, n_joints, 3)."""
+    """Model-joint targets from a BVH in the world frame (Z up, file units).
+
+    Parameters
+    ----------
+    bvh : Bvh
+    joint_names : sequence of str
+        Model joint names (``JOINT_MAP``).
+    frames : sequence of int, optional
+        BVH frames (default all).
+
+    Returns
+    -------
+    ndarray, shape (n_frames, n_joints, 3)
+    """
     P, _ = bvh_forward(bvh, frames)
     idx = _resolve_map(bvh, joint_names)
     T = np.stack([P[:, i].mean(axis=1) for i in idx], axis=1)
@@ -142,7 +150,21 @@ def bvh_joint_targets(bvh: Bvh, joint_names, frames=None) -> np.ndarray:
 
 
 def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool = False) -> tuple[float, dict]:
-    """Subject height (and optionally limb lengths) from the BVH's rest pose; see the module docstring."""
+    """Subject height (and optionally limb lengths) from the BVH's rest pose; see the module docstring.
+
+    Parameters
+    ----------
+    bvh : Bvh
+    model_name : str
+    fit_segments : bool
+        Also the limb segments' own lengths.
+
+    Returns
+    -------
+    height_m : float
+    segment_lengths : dict str -> float
+        Metres; empty without ``fit_segments``.
+    """
     unit = load_model(model_name, height_m=1.0)
     rest = Bvh(bvh.names, bvh.parent, bvh.offset, bvh.channels, bvh.channel_start,
                np.zeros((1, bvh.motion.shape[1])), bvh.frame_time_s, bvh.source)  # fmt: skip
@@ -233,6 +255,10 @@ def retarget_bvh(
     damping, smoothing : float
         μ (metres per radian of joint angle) and μ_t (per unit parameter change
         from the previous frame) of the IK regularisers.
+
+    Returns
+    -------
+    Retargeted
     """
     if not (fps > 0 and np.isfinite(fps)):
         raise ValueError(f"retarget_bvh: fps must be positive, got {fps}")

@@ -38,12 +38,30 @@ def ring_cameras(
 ) -> list[Camera]:
     """``n`` cameras evenly spaced on a horizontal circle, all looking at ``target``.
 
-    Camera ``i`` (named ``cam{i}``) sits at azimuth ``start_deg + 360 i / n``
-    degrees (0 = on the +X axis, so camera 0 sees the front of a subject at
-    Φ = 0), ``radius_m`` from the world Z axis and ``height_m`` above the
-    floor.  ``fov_deg`` is the horizontal field of view: 60° at 4 m with a 4:3
-    image sees about ±2.3 m horizontally and ±1.7 m vertically around the
-    target, i.e. a standing 1.75 m person with a metre of margin for motion.
+    Camera ``i`` (named ``cam{i}``) sits at azimuth ``start_deg + 360 i / n`` degrees (0 = on the
+    +X axis, so camera 0 sees the front of a subject at Φ = 0).  60° at 4 m with a 4:3 image sees
+    about ±2.3 m horizontally and ±1.7 m vertically around the target: a standing person with a
+    metre of margin for motion.
+
+    Parameters
+    ----------
+    n : int
+    size : (int, int)
+        (w, h), pixels.
+    radius_m, height_m : float
+        Distance from the vertical through ``target`` and height above the floor, metres.
+    target : (float, float, float)
+        World point every camera looks at, metres.
+    fov_deg : float
+        Horizontal field of view, degrees.
+    distortion : sequence of float
+        OpenCV distortion coefficients.
+    start_deg : float
+        Azimuth of camera 0, degrees.
+
+    Returns
+    -------
+    list of Camera
     """
     if n < 1:
         raise ValueError(f"ring_cameras: n must be >= 1, got {n}")
@@ -86,6 +104,10 @@ def fit_ring_cameras(
     The target is the centre of the points' bounding box; the horizontal
     field of view is the smallest (1° steps in ``fov_range_deg``) that fits;
     the widest is returned if none does.
+
+    Returns
+    -------
+    list of Camera
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     if pts.size == 0 or not np.all(np.isfinite(pts)):
@@ -154,7 +176,22 @@ def make_room_texture(
     wall_height_m: float = 3.0,
     resolution_px_per_m: int = 64,
 ) -> RoomTexture:
-    """A seeded floor and wall texture (deterministic for a given seed)."""
+    """A seeded floor and wall texture (deterministic for a given seed).
+
+    Parameters
+    ----------
+    seed : int
+    extent_m : float
+        Half-size of the square floor, metres.
+    wall_radius_m, wall_height_m : float
+        The cylindrical wall, metres.
+    resolution_px_per_m : int
+        Texture pixels per metre.
+
+    Returns
+    -------
+    RoomTexture
+    """
     rng = np.random.default_rng(seed)
     n = int(2 * extent_m * resolution_px_per_m)
     base_floor = rng.uniform(90, 160, 3)
@@ -178,10 +215,17 @@ def make_room_texture(
 
 
 def pixel_rays(camera: Camera) -> np.ndarray:
-    """Unit world directions of the rays through every pixel centre, shape (h, w, 3).
+    """Unit world directions of the rays through every pixel centre.
 
-    Distortion is inverted with ``cv2.undistortPoints`` (iterative), so the
-    ray through pixel (u, v) projects back to (u, v).
+    Distortion is inverted (``Camera.rays``), so the ray through pixel (u, v) projects back to it.
+
+    Parameters
+    ----------
+    camera : Camera
+
+    Returns
+    -------
+    ndarray, shape (h, w, 3)
     """
     w, h = camera.size
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
@@ -189,11 +233,24 @@ def pixel_rays(camera: Camera) -> np.ndarray:
 
 
 def render_background(camera: Camera, texture: RoomTexture, *, with_floor_mask: bool = False):
-    """The empty room seen by ``camera``, BGR uint8, shape (h, w, 3).
+    """The empty room seen by ``camera``.
 
-    Every pixel's ray hits the floor (z = 0) or the cylindrical wall; rays
-    that hit neither (above the wall) see a plain ceiling grey.  With
-    ``with_floor_mask`` also returns a (h, w) bool mask of floor pixels.
+    Every pixel's ray hits the floor (z = 0) or the cylindrical wall; rays that hit neither (above
+    the wall) see a plain ceiling grey.
+
+    Parameters
+    ----------
+    camera : Camera
+    texture : RoomTexture
+    with_floor_mask : bool
+        Also return where the floor is seen.
+
+    Returns
+    -------
+    image : ndarray, shape (h, w, 3), uint8
+        BGR.
+    floor : ndarray of bool, shape (h, w)
+        Only with ``with_floor_mask``.
     """
     rays = pixel_rays(camera)
     c = camera.center

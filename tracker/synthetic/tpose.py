@@ -3,14 +3,12 @@
 A subject's segment lengths are drawn ±``spread`` around the model's (``subject_model``); the
 subject stands in a T-pose at a random place and heading, holds it, lowers the arms with straight
 legs (the silhouettes still cannot tell front from back), then blends into a bundled CMU clip
-turned to that heading (``tpose_start_motion``).  ``make_tpose_session`` renders it with
-``tracker.synthetic.synth`` (the session's ``[subject]`` holds the height only, so the tracker's
-model keeps its own proportions) and, with ``sided``, with a head whose back is hair and a shirt
-whose back differs from its front (``sided_palette``).
+turned to that heading (``tpose_start_motion``).  ``tpose_subject`` gives the motion and the colours
+for ``service.synthetic_session.make_synthetic_session`` (the session's ``[subject]`` then holds the
+height only, so the tracker's model keeps its own proportions), with a head whose back is hair
+and a shirt whose back differs from its front (``sided_palette``).
 
-A tracked frame is *mirrored* when its joints are clearly closer to the left/right-swapped truth
-than to the truth (``mirror_errors``, ``mirrored_frames``): the body turned round with left and
-right exchanged, the pose whose silhouettes equal the truth's in a T-pose.
+``mirrored_frames`` counts the tracked frames turned round (``tracker.synthetic.evaluation``).
 """
 
 from __future__ import annotations
@@ -27,10 +25,9 @@ from tracker.imaging.render import body_points
 from tracker.synthetic.bvh import load_bvh
 from tracker.synthetic.retarget import Retargeted, retarget_bvh
 from tracker.synthetic.scene import make_room_texture
-from tracker.synthetic.synth import Palette, bundled_motion, make_palette, make_synthetic_session
+from tracker.synthetic.synth import Palette, bundled_motion, make_palette
 
-__all__ = ["subject_model", "tpose_start_motion", "sided_palette", "make_tpose_session", "mirror_errors",
-           "mirrored_frames", "swap_left_right"]
+__all__ = ["subject_model", "tpose_start_motion", "sided_palette", "tpose_subject", "mirrored_frames", "mean_error_m"]
 
 
 def subject_model(rng: np.random.Generator, *, name: str = "knossow40", height_m: float = 1.75,
@@ -131,68 +128,53 @@ def sided_palette(model: BodyModel, rng: np.random.Generator) -> Palette:
     return Palette(base.colours, base.light, back)
 
 
-def make_tpose_session(out_dir, *, seed: int, cameras: int = 6, size: tuple[int, int] = (320, 240),
-                       spread: float = 0.15, sided: bool = True, shoes: str = "dark", noise: float = 2.0,
-                       codec: str = "ffv1", n_background: int = 10, **motion) -> Path:
-    """Render a T-pose-start session (``tpose_start_motion``, keyword arguments ``motion``) of a
-    ``subject_model`` drawn from ``seed``; ``sided``: with ``sided_palette``; ``shoes``:
-    ``"dark"`` (``make_palette``'s) or ``"shadow"`` (the floor's colour at half its brightness:
-    what a segmentation takes for the body's shadow, so the feet are missing from the
-    silhouettes).  Returns ``out_dir`` (its ``ground_truth.jsonl`` holds the subject's joints)."""
+def tpose_subject(seed: int, *, spread: float = 0.15, sided: bool = True, shoes: str = "dark",
+                  **motion) -> tuple[Retargeted, Palette]:
+    """The motion (``tpose_start_motion``, keyword arguments ``motion``) and colours of a
+    ``subject_model`` drawn from ``seed``, for ``service.synthetic_session.make_synthetic_session``
+    (``retargeted=``, ``palette=``; its ground truth then holds the subject's joints).
+
+    ``sided``: ``sided_palette`` (else ``make_palette``); ``shoes``: ``"dark"`` (the palette's) or
+    ``"shadow"`` (the floor's colour at half its brightness for a room of the same ``seed``: what
+    a segmentation takes for the body's shadow, so the feet are missing from the silhouettes).
+    """
     if shoes not in ("dark", "shadow"):
         raise ValueError(f"shoes: expected 'dark' or 'shadow', got {shoes!r}")
     rng = np.random.default_rng(seed)
     subject = subject_model(rng, spread=spread)
     moving = tpose_start_motion(subject, rng, **motion)
-    palette = sided_palette(subject, np.random.default_rng(seed + 1)) if sided else \
-        make_palette(subject, np.random.default_rng(seed + 1))
+    palette = (sided_palette if sided else make_palette)(subject, np.random.default_rng(seed + 1))
     if shoes == "shadow":
         floor = make_room_texture(seed, extent_m=1.0, wall_radius_m=1.5).floor.reshape(-1, 3).mean(axis=0)
         feet = [i for i, n in enumerate(subject.part_names) if n.endswith("foot")]
-        colours, back = palette.colours.copy(), None if palette.back is None else palette.back.copy()
+        colours = palette.colours.copy()
+        back = None if palette.back is None else palette.back.copy()
         for arr in (colours, back):
             if arr is not None:
                 arr[feet] = 0.5 * floor
         palette = Palette(colours, palette.light, back)
-    return make_synthetic_session(f"tpose_{seed}", out_dir, cameras=cameras, size=size, noise=noise, seed=seed,
-                                  codec=codec, n_background=n_background, retargeted=moving, palette=palette,
-                                  name=f"tpose_{seed}")
+    return moving, palette
 
 
 # ----------------------------------------------------------------------------- counting
-def swap_left_right(joints: Mapping[str, Sequence[float]]) -> dict:
-    """The joints with ``left_*`` and ``right_*`` names exchanged."""
-    out = {}
-    for name, xyz in joints.items():
-        other = ("right_" + name[5:]) if name.startswith("left_") else ("left_" + name[6:]) \
-            if name.startswith("right_") else name
-        out[other] = xyz
-    return out
+def mirrored_frames(records: Sequence[Mapping], truth: Sequence[Mapping]) -> list[int]:
+    """Frame ids of the pose ``records`` (with ``joints``) that are mirrored against the ground-truth
+    records ``truth`` (indexed by frame id): ``tracker.synthetic.evaluation.mirrored_frames`` (the limbs
+    clearly nearer the left/right-swapped or the front/back-reflected truth)."""
+    from tracker.synthetic.evaluation import frame_errors
+    from tracker.synthetic.evaluation import mirrored_frames as mirrored
+    from tracker.synthetic.people import JOINT_NAMES
+
+    posed = [r for r in records if "joints" in r]
+    if not posed:
+        return []
+    pred = np.array([[r["joints"][n] for n in JOINT_NAMES] for r in posed], dtype=float)
+    true = np.array([[truth[r["frame"]]["joints"][n] for n in JOINT_NAMES] for r in posed], dtype=float)
+    flags = mirrored(frame_errors(pred, true))
+    return [int(r["frame"]) for r, f in zip(posed, flags) if f]
 
 
-def mirror_errors(joints: Mapping[str, Sequence[float]], truth: Mapping[str, Sequence[float]]) -> tuple[float, float]:
-    """Mean joint error (metres) of ``joints`` against ``truth`` and against the left/right-swapped
-    truth, over the joint names both hold."""
-    swapped = swap_left_right(truth)
-    names = [n for n in truth if n in joints]
-    if not names:
-        raise ValueError("mirror_errors: no joint name in common")
-    a = np.array([joints[n] for n in names], dtype=float)
-    e = float(np.mean(np.linalg.norm(a - np.array([truth[n] for n in names]), axis=1)))
-    es = float(np.mean(np.linalg.norm(a - np.array([swapped[n] for n in names]), axis=1)))
-    return e, es
-
-
-def mirrored_frames(records: Sequence[Mapping], truth: Sequence[Mapping], *, margin_m: float = 0.03,
-                    ratio: float = 0.7) -> list[int]:
-    """Frame ids of the ``records`` (pose records with ``joints``) that are mirrored: the error to
-    the swapped truth below ``ratio`` × the error to the truth and ``margin_m`` less than it.
-    ``truth``: ground-truth records indexed by frame id."""
-    out = []
-    for r in records:
-        if "joints" not in r:
-            continue
-        e, es = mirror_errors(r["joints"], truth[r["frame"]]["joints"])
-        if es < ratio * e and es < e - margin_m:
-            out.append(int(r["frame"]))
-    return out
+def mean_error_m(record: Mapping, truth: Mapping) -> float:
+    """Mean joint distance (metres) of a pose record's ``joints`` to a ground-truth record's."""
+    names = [n for n in truth["joints"] if n in record["joints"]]
+    return float(np.mean([np.linalg.norm(np.subtract(record["joints"][n], truth["joints"][n])) for n in names]))

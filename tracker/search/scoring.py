@@ -1,0 +1,265 @@
+"""The views a pose search works on, and how well a pose explains them (silhouette IoU).
+
+``prepare_inputs`` validates a frame set once (``SearchInputs``); ``ScoreViews`` down-scales its
+silhouettes and cameras and scores a pose by the mean IoU of the model's silhouette with the
+observed ones: a symmetric score (a limb missing from the model costs as much as a limb the images
+lack), which the model -> image chamfer cost is not.  ``chamfer_from_silhouette`` and
+``rendered_views`` build chamfer samplers when no segmentation gives them (a bare silhouette; a
+perfect segmentation of a rendered pose, for tests and benchmarks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from capture.camera import Camera
+from segmentation.distance import ChamferImages, chamfer_images
+from segmentation.edges import silhouette_boundary
+from tracker.body.kinematics import forward
+from tracker.body.model import BodyModel
+from tracker.fitting.sampler import ChamferSampler, ChamferViews, in_camera_order
+from tracker.imaging.render import cone_points, internal_edges, render_label_images
+
+__all__ = ["ScoreViews", "SearchInputs", "prepare_inputs", "chamfer_from_silhouette", "rendered_views"]
+
+
+class ScoreViews:
+    """Silhouettes and cameras down-scaled by ``scale`` for fast overlap scoring of poses.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera, length n_cams
+    silhouettes : sequence of ndarray, each shape (h, w)
+        One mask per camera, in camera order; non-zero = body.
+    scale : float
+        Image scale of the scoring views (0.5: half width and height).
+
+    Attributes
+    ----------
+    cameras : list of Camera
+        The down-scaled cameras.
+    masks : list of ndarray of bool, each shape (h', w')
+        The down-scaled silhouettes.
+    n_scored : int
+        Poses scored so far (``ious`` calls).
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray], *,
+                 scale: float = 0.5) -> None:
+        self.model = model
+        self.cameras, self.masks = [], []
+        for cam, sil in zip(cameras, silhouettes):
+            w, h = max(1, int(round(cam.width * scale))), max(1, int(round(cam.height * scale)))
+            sx, sy = w / cam.width, h / cam.height
+            # pixel centres at integers: u' = sx (u + 0.5) - 0.5
+            S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+            self.cameras.append(Camera(cam.name, S @ cam.matrix, cam.distortion, cam.rotation, cam.translation, (w, h)))
+            small = cv2.resize((np.asarray(sil) > 0).astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+            self.masks.append(small >= 0.5)
+        self._local = cone_points(model, n_theta=12, n_z=2)  # (n_parts, 24, 3) part frames
+        self.n_scored = 0
+
+    def render(self, params: np.ndarray, parts: np.ndarray | None = None,
+               base: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
+        """The model's silhouette in each scoring view: the union of the parts' projected convex hulls.
+
+        A coarse, fast stand-in for ``tracker.imaging.render``.
+
+        Parameters
+        ----------
+        params : ndarray, shape (n_params,)
+        parts : ndarray of int, optional
+            Indices of the parts to draw (default all).
+        base : sequence of ndarray, each shape (h', w'), optional
+            Per-view masks to draw them onto (e.g. the other parts, rendered once while a search
+            varies one chain).
+
+        Returns
+        -------
+        list of ndarray of bool, each shape (h', w')
+        """
+        pose = forward(self.model, params)
+        sel = np.arange(self.model.n_parts) if parts is None else np.asarray(parts, dtype=int)
+        pts = np.einsum("pij,pmj->pmi", pose.rotation[sel], self._local[sel]) + pose.translation[sel, None, :]
+        out = []
+        for k, cam in enumerate(self.cameras):
+            img = np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
+            ok = cam.depth(pts) > 0.05
+            uv = np.nan_to_num(np.clip(cam.project(pts), -1e5, 1e5)) * 16.0  # 4 fractional bits
+            for p in range(len(pts)):
+                if ok[p].sum() >= 3:
+                    cv2.fillConvexPoly(img, cv2.convexHull(uv[p][ok[p]].astype(np.int32)), 1, shift=4)
+            out.append(img.astype(bool))
+        return out
+
+    def ious(self, params: np.ndarray, parts: np.ndarray | None = None,
+             base: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """Per-camera IoU of the model's silhouette with the observed one.
+
+        Parameters
+        ----------
+        params, parts, base
+            As ``render``; the IoU is of ``base`` and ``parts`` together.
+
+        Returns
+        -------
+        ndarray, shape (n_cams,)
+            IoU in [0, 1] (1 where both are empty).
+        """
+        self.n_scored += 1
+        out = []
+        for mask, r in zip(self.masks, self.render(params, parts, base)):
+            union = np.count_nonzero(r | mask)
+            out.append(np.count_nonzero(r & mask) / union if union else 1.0)
+        return np.array(out)
+
+    def expected_iou(self, *, loss_per_boundary: float = 0.28) -> float:
+        """The mean IoU a correct pose reaches on these views.
+
+        The scoring loses a share of the silhouettes' boundary pixels (polygonal parts, down-scaled
+        masks), so 1 - IoU is about ``loss_per_boundary`` times the fraction of mask pixels on the
+        boundary (measured values: docs/tuning.md, "Search").
+
+        Parameters
+        ----------
+        loss_per_boundary : float
+            Share of the boundary pixels the scoring loses.
+
+        Returns
+        -------
+        float
+            Expected mean IoU in [0, 1].
+        """
+        kernel = np.ones((3, 3), np.uint8)
+        fractions = [1.0 - np.count_nonzero(cv2.erode(m.astype(np.uint8), kernel)) / max(np.count_nonzero(m), 1)
+                     for m in self.masks]
+        return float(1.0 - loss_per_boundary * np.mean(fractions))
+
+    def score(self, params: np.ndarray, parts: np.ndarray | None = None,
+              base: Sequence[np.ndarray] | None = None) -> float:
+        """Mean IoU over the cameras (higher is better).
+
+        Parameters
+        ----------
+        params, parts, base
+            As ``render``.
+
+        Returns
+        -------
+        float
+        """
+        return float(self.ious(params, parts, base).mean())
+
+
+@dataclass(frozen=True, eq=False)
+class SearchInputs:
+    """One frame set, validated for a search (``prepare_inputs``).
+
+    Attributes
+    ----------
+    cameras : list of Camera, length n_cams
+    silhouettes : list of ndarray, each shape (h, w)
+        One mask per camera, in camera order (as ``visual_hull`` and ``ScoreViews`` take them).
+    chamfer : dict str -> ChamferSampler
+        Camera name -> sampler, one per camera (empty when built without chamfer images).
+    """
+
+    cameras: list
+    silhouettes: list
+    chamfer: dict
+
+
+def chamfer_from_silhouette(silhouette: np.ndarray, *, max_distance_px: float = 48.0) -> ChamferImages:
+    """Chamfer images of a bare silhouette, its outline doubling as the edge map.
+
+    Parameters
+    ----------
+    silhouette : ndarray, shape (h, w)
+        Non-zero = body.
+    max_distance_px : float
+        Truncation distance of the distance images, pixels.
+
+    Returns
+    -------
+    segmentation.distance.ChamferImages
+    """
+    sil = (np.asarray(silhouette) > 0).astype(np.uint8) * 255
+    return chamfer_images(sil, silhouette_boundary(sil), max_distance_px=max_distance_px, resolution_px=0.25)
+
+
+def rendered_views(model: BodyModel, params: np.ndarray,
+                   cameras: Sequence[Camera]) -> tuple[dict[str, np.ndarray], dict[str, ChamferImages]]:
+    """What a perfect segmentation of the model at ``params`` gives (tests, benchmarks).
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+    cameras : sequence of Camera
+
+    Returns
+    -------
+    silhouettes : dict str -> ndarray, shape (h, w), uint8
+        Camera name -> rendered silhouette (255 = body).
+    chamfer : dict str -> ChamferImages
+        Camera name -> chamfer images of the silhouette and the parts' internal edges
+        (``tracker.imaging.render.internal_edges``).
+    """
+    labels = render_label_images(model, forward(model, params), cameras)
+    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cameras, labels)}
+    chamfer = {c.name: chamfer_images(sils[c.name], internal_edges(lab), max_distance_px=48.0, resolution_px=0.25)
+               for c, lab in zip(cameras, labels)}
+    return sils, chamfer
+
+
+def prepare_inputs(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+                   chamfer: ChamferViews | None, *, with_chamfer: bool = True) -> SearchInputs:
+    """Validate the views of one frame set once, for every step of a search.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera
+        At least one.
+    silhouettes : mapping str -> ndarray, shape (h, w)
+        Camera name -> mask of that camera's image size, non-zero = body.
+    chamfer : mapping str -> ChamferSampler, or None
+        Camera name -> sampler; None builds them from the silhouettes (``chamfer_from_silhouette``).
+    with_chamfer : bool
+        False: leave ``SearchInputs.chamfer`` empty (a search that only scores silhouettes).
+
+    Returns
+    -------
+    SearchInputs
+
+    Raises
+    ------
+    ValueError
+        No camera, or a camera without a mask of its size or without a sampler (named).
+    TypeError
+        ``silhouettes`` or ``chamfer`` is not a mapping.
+    """
+    cameras = list(cameras)
+    if not cameras:
+        raise ValueError("cameras: need at least one camera")
+    if not isinstance(silhouettes, Mapping):
+        raise TypeError("silhouettes: expected a dict camera name -> (h, w) mask")
+    sils = []
+    for cam in cameras:
+        if cam.name not in silhouettes:
+            raise ValueError(f"silhouettes: no mask for camera {cam.name!r}")
+        s = np.asarray(silhouettes[cam.name])
+        if s.shape != (cam.height, cam.width):
+            raise ValueError(f"silhouettes[{cam.name!r}]: shape {s.shape} != (h, w) = {(cam.height, cam.width)}")
+        sils.append(s)
+    chs: dict[str, ChamferSampler] = {}
+    if with_chamfer and chamfer is None:
+        chs = {c.name: chamfer_from_silhouette(s) for c, s in zip(cameras, sils)}
+    elif with_chamfer:
+        chs = dict(zip((c.name for c in cameras), in_camera_order(chamfer, cameras)))
+    return SearchInputs(cameras, sils, chs)
