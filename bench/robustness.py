@@ -137,6 +137,10 @@ def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, ever
     return float(1e3 * rt.residual_m.mean())
 
 
+#: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``)
+TRACK_OPTIONS: dict = {}
+
+
 def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
              ik_floor: bool = True, budget_s: float = 0.0) -> dict:
     """Render, track and score one clip; returns its per-clip record.
@@ -150,7 +154,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
         records, pipe_ms, cpu_s = [], [], 0.0
-        it = track_session(session, backgrounds=backgrounds)
+        it = track_session(session, backgrounds=backgrounds, **TRACK_OPTIONS)
         while not (budget_s and cpu_s > budget_s):
             t0, c0 = time.perf_counter(), time.process_time()
             rec = next(it, None)
@@ -229,12 +233,16 @@ def main(argv=None) -> int:
                     help="CPU seconds of tracking per clip after which its remaining frames count as not ok "
                          "without a pose (0: no limit)")
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
+    ap.add_argument("--no-front-back", action="store_true",
+                    help="track without the front/back guard (tracker.fitting.hypotheses), for comparison")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
                     help="combine the --out files of several runs (nothing is run)")
     args = ap.parse_args(argv)
     if args.merge:
         return _emit(merge(args.merge), args)
+    if args.no_front_back:
+        TRACK_OPTIONS["front_back"] = None
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
