@@ -10,7 +10,7 @@ import pytest
 
 from tracker.body.kinematics import forward
 from tracker.body.model import load_model
-from tracker.search.appearance import (AppearanceModel, colour_features, feet_occupancy, head_cue, mirror_samples,
+from tracker.search.appearance import (AppearanceModel, colour_features, feet_forward, head_cue, mirror_samples,
                                        surface_colours)
 from tracker.search.scoring import chamfer_from_silhouette
 from tracker.search.mirror import mirror_params
@@ -47,8 +47,11 @@ def _frame(seed: int, *, sided: bool = True, cameras: int = 4):
 def test_colour_and_feet_prefer_the_true_hypothesis(seed):
     model, truth, cams, images, chamfer = _frame(seed)
     turned = mirror_params(model, truth)
-    # the feet point forward: the truth's toes are in every silhouette, the mirror's behind the heels
-    assert feet_occupancy(model, truth, cams, chamfer) > feet_occupancy(model, turned, cams, chamfer) + 0.4
+    # the feet point forward: ahead of the truth's hips every silhouette holds a foot, behind them not
+    ahead, behind = feet_forward(model, truth, cams, chamfer)
+    assert ahead > 0.9 and ahead - behind > 0.2
+    ahead_m, behind_m = feet_forward(model, turned, cams, chamfer)
+    assert behind_m - ahead_m > 0.2
     s, sm = (surface_colours(model, p, cams, images, chamfer) for p in (truth, turned))
     assert s.count.sum() > 200 and sm.count.sum() > 200
     # a face is skin, the back of a head is hair

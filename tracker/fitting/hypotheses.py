@@ -104,7 +104,13 @@ class FrontBackGuard:
     ----------
     model : BodyModel
     options : FrontBackOptions
-    fps : frame rate used for the walking speed (frames without timestamps)
+
+    Attributes
+    ----------
+    state : ``"ambiguous"`` or ``"resolved"``
+    evidence : the evidence sum (ambiguous: positive for the pose; resolved: the leaky sum against it)
+    appearance : the learned ``AppearanceModel``
+    n_resolved, n_swapped, n_reopened : questions settled, settled for the mirror, re-opened
     """
 
     def __init__(self, model: BodyModel, options: FrontBackOptions = FrontBackOptions()) -> None:
@@ -150,18 +156,6 @@ class FrontBackGuard:
         the negative)."""
         ahead, behind = feet_forward(self.model, params, cams, chs)
         return self.options.feet_weight * float(ahead - behind) if np.isfinite(ahead) and np.isfinite(behind) else 0.0
-
-    def _colour_cues(self, params, cams, chs, images) -> tuple[float, float, object]:
-        """(head cue, learned-colour cue, samples) of the pose's labelling (positive: the pose)."""
-        o = self.options
-        if images is None:
-            return 0.0, 0.0, None
-        s = surface_colours(self.model, params, cams, images, chs)
-        head = o.head_weight * float(np.clip(head_cue(self.model, s) / o.head_scale, -1.0, 1.0))
-        colour = 0.0
-        if self.appearance.learned:
-            colour = o.colour_weight * float(np.clip(self.appearance.evidence(s) / o.colour_scale, -1.0, 1.0))
-        return head, colour, s
 
     # ------------------------------------------------------------------ step
     def update(self, *, t_s: float, cams: Sequence, chs: Sequence, images: Sequence | None, res, terms, ok: bool,

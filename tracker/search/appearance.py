@@ -12,9 +12,9 @@ right exchanged) cast nearly the same silhouettes in a T-pose.  Two things tell 
   the same front and back or left and right.  Before anything is learned, ``head_cue`` compares
   the head's two halves with the subject's skin (the hands and forearms, else a generic skin
   colour): a face is skin, the back of a head is mostly hair (BMVC'04 colour blobs with a skin prior).
-* **Feet** (``feet_occupancy``): the feet reach forward of the ankles; points along a
-  hypothesis's feet ahead of the ankles lie inside every silhouette when the hypothesis faces the
-  right way, and behind the heels (outside some views) when it is turned round.
+* **Feet** (``feet_forward``): the feet reach forward; on the floor ahead of a standing pose's hips
+  (the way its pelvis faces) every silhouette holds a foot, behind them the heels end and some
+  views see floor.
 
 Colours are features ``(r, b, L)``: red and blue chromaticity with a darkness floor
 (``B + G + R + 30`` in the denominator keeps dark colours stable) and the brightness on a 0–1 scale.
@@ -34,7 +34,7 @@ from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
 
 __all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "mirror_samples", "AppearanceModel", "head_cue",
-           "feet_occupancy", "feet_forward", "colour_features", "SKIN_BGR"]
+           "feet_forward", "colour_features", "SKIN_BGR"]
 
 FRONT, BACK = 0, 1
 #: A generic skin colour (BGR, 0–255) for the head cue when the hands and forearms show none.
@@ -253,47 +253,6 @@ def head_cue(model: BodyModel, samples: ColourSamples, *, min_count: float = 3.0
     return dist(samples.mean[h, BACK]) - dist(samples.mean[h, FRONT])
 
 
-@lru_cache(maxsize=8)
-def _toe_points(model: BodyModel) -> tuple[np.ndarray, np.ndarray]:
-    feet = np.array([i for i, n in enumerate(model.part_names) if n.endswith("foot")], dtype=int)
-    z2 = model.cones[feet, 4]
-    fractions = np.array([0.55, 0.7, 0.85])
-    pts = np.zeros((len(feet), len(fractions), 3))
-    pts[..., 2] = z2[:, None] * fractions[None, :]  # along the foot's axis, ahead of the ankle
-    feet.setflags(write=False)
-    pts.setflags(write=False)
-    return feet, pts
-
-
-def feet_occupancy(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], chamfer: Sequence, *,
-                   inside_px: float = 1.5) -> float:
-    """Mean over the toe points of the model's feet at ``params`` (points along each foot's axis
-    at half to nearly all of its length, ahead of the ankle) of the fraction of cameras whose silhouette
-    holds them (silhouette distance ≤ ``inside_px``, from the ``ChamferImages``).  1: the feet
-    lie where the images show feet; NaN when the model has no feet or no camera sees them."""
-    feet, local = _toe_points(model)
-    if feet.size == 0:
-        return float("nan")
-    pose = forward(model, np.asarray(params, dtype=float))
-    world = (np.einsum("fij,fmj->fmi", pose.rotation[feet], local) + pose.translation[feet][:, None, :]).reshape(-1, 3)
-    inside, seen = np.zeros(len(world)), np.zeros(len(world))
-    for cam, ch in zip(cameras, chamfer):
-        if ch is None:
-            continue
-        ok = cam.depth(world) > 0.05
-        uv = cam.project(world)
-        ok &= np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) \
-            & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
-        if not ok.any():
-            continue
-        d = ch.sample(uv[ok]).d_sil
-        inside[ok] += d <= inside_px
-        seen[ok] += 1
-    if not seen.any():
-        return float("nan")
-    return float(np.mean(inside[seen > 0] / seen[seen > 0]))
-
-
 def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], chamfer: Sequence, *,
                  reach_m=(0.08, 0.11, 0.14), height_m: float = 0.035, max_ankle_m: float = 0.15,
                  max_offset_m: float = 0.15, inside_px: float = 1.5) -> tuple[float, float]:
@@ -302,10 +261,10 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     For each leg whose ankle is near the floor (``max_ankle_m``) and within ``max_offset_m`` of
     the vertical through its hip, points ``reach_m`` ahead of the hip joint along the pelvis
     heading and as far behind it, ``height_m`` above the floor, are tested against the
-    silhouettes (``feet_occupancy``'s test).  Returns the mean fractions ``(ahead, behind)`` (NaN,
-    NaN when no leg stands or no camera sees the points).  Unlike ``feet_occupancy`` it does not
-    follow the model's feet: a turned-round fit can slide and twist its legs until its feet lie in
-    the silhouettes, not its hips.
+    silhouettes (inside: silhouette distance at most ``inside_px`` in a camera).  Returns the mean
+    fractions of cameras holding them ``(ahead, behind)`` (NaN, NaN when no leg stands or no camera
+    sees the points).  It does not follow the model's feet: a
+    turned-round fit can slide and twist its legs until its feet lie in the silhouettes, not its hips.
     """
     from tracker.body.kinematics import joint_centre_array
     from tracker.search.mirror import pelvis_heading
@@ -340,10 +299,3 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
                 seen[ok] += 1
         out.append(float(np.mean(inside[seen > 0] / seen[seen > 0])) if seen.any() else float("nan"))
     return out[0], out[1]
-
-
-def images_for(cameras: Sequence[Camera], images: Mapping[str, np.ndarray] | None):
-    """The images of ``cameras`` in order, or None when any is missing."""
-    if images is None or any(c.name not in images for c in cameras):
-        return None
-    return [images[c.name] for c in cameras]
