@@ -50,19 +50,22 @@ AMBIGUOUS, RESOLVED = "ambiguous", "resolved"
 class FrontBackOptions:
     """Weights (per frame, in units of the evidence sum) and thresholds of ``FrontBackGuard``.
 
-    margin : |D| at which the ambiguity is resolved; min_frames : frames before it may be;
-    fit_weight, fit_clip : per unit of hypothesis-cost difference, clipped to ±fit_clip;
-    feet_weight : per unit of feet-occupancy difference (range ±1);
-    head_weight, head_scale : ``head_weight`` × clip(head cue / ``head_scale``, ±1);
-    colour_weight, colour_scale : likewise for the learned colour model's evidence;
-    walk_weight, walk_speed_mps, walk_window : the pelvis speed over ``walk_window`` frames above
-    ``walk_speed_mps``: ``walk_weight`` × cos(velocity, heading);
+    Attributes
+    ----------
+    margin, min_frames : |evidence| that settles the question, and the frames it takes at least
+    fit_weight, fit_clip : per unit of ``hypothesis_cost`` difference, clipped to ±``fit_clip``
+    feet_weight : per unit of (occupancy ahead − behind) of ``feet_forward`` (range ±1)
+    head_weight, head_scale : ``head_weight`` × clip(``head_cue`` / ``head_scale``, ±1)
+    colour_weight, colour_scale : likewise for the learned colour model's ``evidence``
+    walk_weight, walk_speed_mps, walk_window : ``walk_weight`` × cos(velocity, heading) when the
+        pelvis moved faster than ``walk_speed_mps`` over the last ``walk_window`` frames
     decay, reopen, suspect : the resolved state's leaky sum ``S ← min(0, decay S + cues)`` re-opens
-    the question at ``-reopen``; frames with ``S`` at or below ``-suspect`` are not ok ("front/back suspect");
+        the question at ``-reopen``; frames with ``S`` at or below ``-suspect`` are not ok
     check_every, check_iterations : frames between the resolved state's full comparisons (the
-    mirror fitted with up to ``check_iterations`` LM steps — the mirror of a contorted pose is
-    itself contorted —, every cue); colour_every : frames between its colour-only checks in between (the learned model
-    against the mirrored labelling); learn_every : colour samplings between colour-model updates.
+        mirror fitted with up to ``check_iterations`` LM steps: the mirror of a contorted pose is
+        itself contorted), and the LM steps
+    colour_every, learn_every : frames between the resolved state's colour checks (the learned
+        colours against their mirrored labelling), and colour checks between colour-model updates
     """
 
     margin: float = 2.0
@@ -80,9 +83,9 @@ class FrontBackOptions:
     decay: float = 0.9
     reopen: float = 2.5
     suspect: float = 1.0
-    check_every: int = 10
-    check_iterations: int = 36
-    colour_every: int = 2
+    check_every: int = 30
+    check_iterations: int = 24
+    colour_every: int = 4
     learn_every: int = 3
 
 
@@ -150,11 +153,11 @@ class FrontBackGuard:
             return 0.0
         return float(o.walk_weight * (pelvis_heading(self.model, params) @ (v / speed)))
 
-    def _feet(self, params, cams, chs) -> float:
+    def _feet(self, params, cams, chs, pose=None) -> float:
         """``feet_weight`` × (occupancy ahead of the ankles − behind them), 0 when unclear
         (``tracker.search.appearance.feet_forward``; the mirror faces the other way: its cue is about
         the negative)."""
-        ahead, behind = feet_forward(self.model, params, cams, chs)
+        ahead, behind = feet_forward(self.model, params, cams, chs, pose=pose)
         return self.options.feet_weight * float(ahead - behind) if np.isfinite(ahead) and np.isfinite(behind) else 0.0
 
     # ------------------------------------------------------------------ step
@@ -236,7 +239,7 @@ class FrontBackGuard:
             cues, s = self._compare(t_s, cams, chs, images, p, terms, np.asarray(res_m.params, float), terms_m, iou)
         else:
             self._walk(p, t_s)
-            cues["feet"] = self._feet(p, cams, chs)
+            cues["feet"] = self._feet(p, cams, chs, getattr(terms, "pose", None))
             if images is not None and self.appearance.learned and self._since_colour >= o.colour_every:
                 self._since_colour = 0
                 s = surface_colours(model, p, cams, images, chs)

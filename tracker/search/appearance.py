@@ -81,21 +81,17 @@ class ColourSamples:
     bgr: np.ndarray
 
 
-def _part_labels(model: BodyModel, world: np.ndarray, camera: Camera, scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _part_labels(uv: np.ndarray, depth: np.ndarray, camera: Camera, scale: float) -> np.ndarray:
     """Coarse label image (h', w') int16 (-1 = none) of the parts' projected convex hulls drawn far
-    to near, and the parts' depth order; ``world``: (n_parts, m, 3) surface points."""
+    to near; ``uv`` (n_parts, m, 2) pixels and ``depth`` (n_parts, m) of their surface points."""
     w, h = max(1, int(round(camera.width * scale))), max(1, int(round(camera.height * scale)))
     img = np.full((h, w), -1, np.int16)
-    depth = camera.depth(world)
-    uv = camera.project(world) * scale
-    order = np.argsort(-depth.mean(axis=1))
-    for p in order:
-        ok = depth[p] > 0.05
-        if ok.sum() < 3:
-            continue
-        pts = np.nan_to_num(np.clip(uv[p][ok], -1e5, 1e5)) * 16.0
-        cv2.fillConvexPoly(img, cv2.convexHull(pts.astype(np.int32)), int(p), shift=4)
-    return img, depth
+    fixed = (np.nan_to_num(np.clip(uv * scale, -1e5, 1e5)) * 16.0).astype(np.int32)  # 4 fractional bits
+    front = depth > 0.05
+    for p in np.argsort(-depth.mean(axis=1)):
+        if np.count_nonzero(front[p]) >= 3:
+            cv2.fillConvexPoly(img, cv2.convexHull(fixed[p][front[p]]), int(p), shift=4)
+    return img
 
 
 def surface_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], images: Sequence[np.ndarray],
@@ -121,10 +117,10 @@ def surface_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Came
         img = np.asarray(img)
         if img.ndim != 3 or img.shape[:2] != (cam.height, cam.width):
             raise ValueError(f"images[{cam.name!r}]: expected ({cam.height}, {cam.width}, 3), got {img.shape}")
-        labels, depth = _part_labels(model, world, cam, label_scale)
+        uv, depth = cam.project(world), cam.depth(world)
+        labels = _part_labels(uv, depth, cam, label_scale)
         to_cam = cam.center - world
         facing = np.einsum("pmi,pmi->pm", nworld, to_cam) / np.linalg.norm(to_cam, axis=-1)
-        uv = cam.project(world)
         ok = (facing > min_facing) & (depth > 0.05) & used[:, None] & np.all(np.isfinite(uv), axis=-1)
         ui, vi = np.rint(uv[..., 0]), np.rint(uv[..., 1])
         ok &= (ui >= 0) & (ui < cam.width) & (vi >= 0) & (vi < cam.height)
@@ -141,10 +137,13 @@ def surface_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Came
         if not ok.any():
             continue
         colours = img[vi[ok].astype(int), ui[ok].astype(int)].astype(float)
-        idx = (part[ok], side[ok])
-        np.add.at(sums, idx, colour_features(colours))
-        np.add.at(bgr_sums, idx, colours)
-        np.add.at(count, idx, 1.0)
+        bins = 2 * part[ok] + side[ok]
+        feats = colour_features(colours)
+        n_bins = 2 * model.n_parts
+        for c in range(3):
+            sums[..., c] += np.bincount(bins, feats[:, c], minlength=n_bins).reshape(-1, 2)
+            bgr_sums[..., c] += np.bincount(bins, colours[:, c], minlength=n_bins).reshape(-1, 2)
+        count += np.bincount(bins, minlength=n_bins).reshape(-1, 2)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(count[..., None] > 0, sums / np.maximum(count, 1.0)[..., None], 0.0)
         bgr = np.where(count[..., None] > 0, bgr_sums / np.maximum(count, 1.0)[..., None], 0.0)
@@ -255,7 +254,7 @@ def head_cue(model: BodyModel, samples: ColourSamples, *, min_count: float = 3.0
 
 def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], chamfer: Sequence, *,
                  reach_m=(0.08, 0.11, 0.14), height_m: float = 0.035, max_ankle_m: float = 0.15,
-                 max_offset_m: float = 0.15, inside_px: float = 1.5) -> tuple[float, float]:
+                 max_offset_m: float = 0.15, inside_px: float = 1.5, pose=None) -> tuple[float, float]:
     """Whether the feet reach forward the way the pelvis faces, for a standing pose.
 
     For each leg whose ankle is near the floor (``max_ankle_m``) and within ``max_offset_m`` of
@@ -263,14 +262,15 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     heading and as far behind it, ``height_m`` above the floor, are tested against the
     silhouettes (inside: silhouette distance at most ``inside_px`` in a camera).  Returns the mean
     fractions of cameras holding them ``(ahead, behind)`` (NaN, NaN when no leg stands or no camera
-    sees the points).  It does not follow the model's feet: a
-    turned-round fit can slide and twist its legs until its feet lie in the silhouettes, not its hips.
+    sees the points).  ``pose``: ``forward(model, params)`` when the caller has it.  It does not
+    follow the model's feet: a turned-round fit can slide and twist its legs until its feet lie in
+    the silhouettes, not its hips.
     """
     from tracker.body.kinematics import joint_centre_array
     from tracker.search.mirror import pelvis_heading
 
     p = np.asarray(params, dtype=float)
-    jc = joint_centre_array(model, forward(model, p))
+    jc = joint_centre_array(model, forward(model, p) if pose is None else pose)
     names = list(model.joint_names)
     refs = []
     for side in ("left", "right"):
@@ -282,20 +282,25 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     h = pelvis_heading(model, p)
     if not refs or not np.any(h):
         return float("nan"), float("nan")
-    reach = np.asarray(reach_m, dtype=float)
+    reach = np.concatenate([np.asarray(reach_m, dtype=float), -np.asarray(reach_m, dtype=float)])  # ahead, behind
+    refs = np.asarray(refs)
+    pts = np.empty((len(refs), reach.size, 3))
+    pts[..., :2] = refs[:, None, :] + reach[None, :, None] * h
+    pts[..., 2] = height_m
+    pts = pts.reshape(-1, 3)
+    inside, seen = np.zeros(len(pts)), np.zeros(len(pts))
+    for cam, ch in zip(cameras, chamfer):
+        if ch is None:
+            continue
+        uv = cam.project(pts)
+        ok = (cam.depth(pts) > 0.05) & np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) \
+            & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+        if ok.any():
+            inside[ok] += ch.sample(uv[ok]).d_sil <= inside_px
+            seen[ok] += 1
+    ahead = (np.arange(len(pts)) % reach.size) < reach.size // 2
     out = []
-    for sign in (1.0, -1.0):
-        pts = np.concatenate([np.column_stack([r[0] + sign * reach * h[0], r[1] + sign * reach * h[1],
-                                               np.full(reach.size, height_m)]) for r in refs])
-        inside, seen = np.zeros(len(pts)), np.zeros(len(pts))
-        for cam, ch in zip(cameras, chamfer):
-            if ch is None:
-                continue
-            uv = cam.project(pts)
-            ok = (cam.depth(pts) > 0.05) & np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) \
-                & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
-            if ok.any():
-                inside[ok] += ch.sample(uv[ok]).d_sil <= inside_px
-                seen[ok] += 1
-        out.append(float(np.mean(inside[seen > 0] / seen[seen > 0])) if seen.any() else float("nan"))
+    for sel in (ahead, ~ahead):
+        v = seen[sel] > 0
+        out.append(float(np.mean(inside[sel][v] / seen[sel][v])) if v.any() else float("nan"))
     return out[0], out[1]
