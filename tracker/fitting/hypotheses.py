@@ -59,13 +59,15 @@ class FrontBackOptions:
     colour_weight, colour_scale : likewise for the learned colour model's ``evidence``
     walk_weight, walk_speed_mps, walk_window : ``walk_weight`` × cos(velocity, heading) when the
         pelvis moved faster than ``walk_speed_mps`` over the last ``walk_window`` frames
-    decay, reopen, suspect : the resolved state's leaky sum ``S ← min(0, decay S + cues)`` re-opens
-        the question at ``-reopen``; frames with ``S`` at or below ``-suspect`` are not ok
+    decay, reopen, suspect : the resolved state's leaky sum ``S ← min(0, decay S + cues)`` (on
+        frames with cues) re-opens the question at ``-reopen``; frames with ``S`` at or below
+        ``-suspect`` are not ok
     check_every, check_iterations : frames between the resolved state's full comparisons (the
         mirror fitted with up to ``check_iterations`` LM steps: the mirror of a contorted pose is
         itself contorted), and the LM steps
     colour_every, learn_every : frames between the resolved state's colour checks (the learned
         colours against their mirrored labelling), and colour checks between colour-model updates
+    feet_every : frames between the resolved state's feet checks
     """
 
     margin: float = 2.0
@@ -83,10 +85,11 @@ class FrontBackOptions:
     decay: float = 0.9
     reopen: float = 2.5
     suspect: float = 1.0
-    check_every: int = 30
+    check_every: int = 60
     check_iterations: int = 24
     colour_every: int = 4
     learn_every: int = 3
+    feet_every: int = 1
 
 
 @dataclass
@@ -133,6 +136,7 @@ class FrontBackGuard:
         self._since_learn = 0
         self._since_colour = 0
         self._since_check = 0
+        self._since_feet = 0
         self.n_resolved = getattr(self, "n_resolved", 0)
         self.n_swapped = getattr(self, "n_swapped", 0)
         self.n_reopened = getattr(self, "n_reopened", 0)
@@ -239,7 +243,10 @@ class FrontBackGuard:
             cues, s = self._compare(t_s, cams, chs, images, p, terms, np.asarray(res_m.params, float), terms_m, iou)
         else:
             self._walk(p, t_s)
-            cues["feet"] = self._feet(p, cams, chs, getattr(terms, "pose", None))
+            self._since_feet += 1
+            if self._since_feet >= o.feet_every:
+                self._since_feet = 0
+                cues["feet"] = self._feet(p, cams, chs, getattr(terms, "pose", None))
             if images is not None and self.appearance.learned and self._since_colour >= o.colour_every:
                 self._since_colour = 0
                 s = surface_colours(model, p, cams, images, chs)
@@ -251,7 +258,8 @@ class FrontBackGuard:
                 self._since_learn = 0
                 self.appearance.update(s)
         # only evidence against the pose accumulates: a resolved pose needs no more support
-        self.evidence = min(0.0, o.decay * self.evidence + float(sum(cues.values())))
+        if cues:  # decays per evaluation, not per frame
+            self.evidence = min(0.0, o.decay * self.evidence + float(sum(cues.values())))
         cues["sum"] = self.evidence
         if self.evidence <= -o.reopen:
             self.n_reopened += 1
