@@ -4,9 +4,10 @@ Prints median milliseconds per stage (background test, clean-up, edges, distance
 quantisation, total = ``segment_frame``) at 800x600 and 644x486, full image and with an ROI
 covering 30 % of the image; full vs diagonal covariance; precise vs 5x5 distance transform;
 OpenCV's MOG2 as a baseline (time and IoU on the synthetic set); and, when ../shared/data is
-there, the real uu_studio held-out background false-positive rate.
+there, the real uu_studio held-out background false-positive rate; and segmentation inside the
+predicted pose's rectangle per camera (``tracker.imaging.roi``) on a rendered hop session.
 
-    python bench/segmentation.py [--json] [--repeats N]
+    python bench/segmentation.py [--json] [--repeats N] [--roi-frames 20] [--only-pose-roi]
 """
 
 from __future__ import annotations
@@ -238,6 +239,63 @@ def bench_distance_accuracy() -> dict:
     return {"mask5_max_abs_err_px": float(np.abs(precise - mask5).max())}
 
 
+def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: Path | None) -> dict:
+    """Segmentation where the body can be: per camera, the rectangle of ``tracker.imaging.roi.pose_rois``
+    around the predicted pose (constant velocity from the two previous true poses, as the tracker
+    predicts from its fits) against the full frame (``auto_roi`` off) and the default automatic
+    ROI, on a rendered hop session (``tracker.synthetic.synth``, true silhouettes kept).  Times are medians
+    over cameras and frames of ``segment_frame``; IoU against the true silhouette and against the
+    full-frame segmentation (1.0: the ROI lost nothing)."""
+    import tempfile
+
+    from capture.replay import iter_frame_sets
+    from capture.session import load_session
+    from service.offline import background_models, session_model
+    from tracker.imaging.roi import pose_rois
+    from tracker.synthetic.synth import bundled_motion
+
+    from service.synthetic_session import make_synthetic_session
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = session_dir or Path(tmp) / "hop"
+        if not (root / "session.toml").is_file():
+            make_synthetic_session(bundled_motion("scaled_131_03"), root, cameras=cameras, size=tuple(size),
+                                   frames=frames, seed=0, masks=True)
+        session = load_session(root)
+        truth = [json.loads(line)["params"] for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+        model = session_model(session, "knossow40")
+        cams = list(session.calibration)
+        names = [c.name for c in cams]
+        bgs, _ = background_models(session, names)
+        full_p, auto_p = SegmentationParams(auto_roi=False), SegmentationParams()
+        rows = []
+        for fid, group in iter_frame_sets(session, frames=range(2, frames)):
+            pred = model.clamp(2.0 * np.asarray(truth[fid - 1]) - np.asarray(truth[fid - 2]))
+            rois = pose_rois(model, pred, cams)
+            for cam, roi in zip(cams, rois):
+                img, bg = group[cam.name].image, bgs[cam.name]
+                mask_path = root / "masks" / cam.name / f"{fid:06d}.png"
+                true = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) if mask_path.is_file() else None
+                t_full, seg_full = _ms(lambda: segment_frame(bg, img, params=full_p), repeats)
+                t_auto, _ = _ms(lambda: segment_frame(bg, img, params=auto_p), repeats)
+                t_roi, seg_roi = _ms(lambda: segment_frame(bg, img, roi=roi, params=full_p), repeats)
+                w, h = bg.size
+                x0, y0, x1, y1 = roi or (0, 0, w, h)
+                rows.append({"full_ms": t_full, "auto_ms": t_auto, "roi_ms": t_roi,
+                             "roi_fraction": (x1 - x0) * (y1 - y0) / (w * h),
+                             "iou_roi_vs_full": _iou(seg_roi.silhouette, seg_full.silhouette),
+                             "iou_full_vs_true": _iou(seg_full.silhouette, true) if true is not None else None,
+                             "iou_roi_vs_true": _iou(seg_roi.silhouette, true) if true is not None else None})
+    med = {k: float(np.median([r[k] for r in rows])) for k in ("full_ms", "auto_ms", "roi_ms", "roi_fraction")}
+    out = {"frames": frames - 2, "cameras": len(cams), "size": list(size), "camera_frames": len(rows), **med,
+           "roi_over_full": med["roi_ms"] / med["full_ms"], "roi_over_auto": med["roi_ms"] / med["auto_ms"],
+           "iou_roi_vs_full_min": min(r["iou_roi_vs_full"] for r in rows)}
+    if rows[0]["iou_full_vs_true"] is not None:
+        out["iou_full_vs_true_mean"] = float(np.mean([r["iou_full_vs_true"] for r in rows]))
+        out["iou_roi_vs_true_mean"] = float(np.mean([r["iou_roi_vs_true"] for r in rows]))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true", help="print one JSON object")
@@ -245,7 +303,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--cpu", action="store_true", help="time with process CPU time instead of wall time")
     ap.add_argument("--seeds", type=int, default=10, help="random scenes for the IoU comparison")
+    ap.add_argument("--roi-frames", type=int, default=20, help="hop frames for the predicted-pose ROI (0: skip)")
+    ap.add_argument("--roi-size", default="800x600")
+    ap.add_argument("--roi-session", type=Path, default=None, help="reuse (or write) the hop session here")
+    ap.add_argument("--only-pose-roi", action="store_true", help="run only the predicted-pose ROI part")
     args = ap.parse_args(argv)
+    roi_size = [int(v) for v in args.roi_size.lower().split("x")]
     global CLOCK
     CLOCK = time.process_time if args.cpu else time.perf_counter
     cv2.setNumThreads(1)
@@ -255,11 +318,18 @@ def main(argv=None) -> int:
         "clock": "process_time" if args.cpu else "perf_counter",
         "loadavg_at_start": list(os.getloadavg()),
         "opencv": cv2.__version__,
+    }
+    if args.roi_frames > 2:
+        result["pose_roi"] = bench_pose_roi(args.roi_frames, 6, roi_size, args.repeats, args.roi_session)
+    if args.only_pose_roi:
+        print(json.dumps(result, indent=1) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items()))
+        return 0
+    result.update({
         "iou_over_scenes": bench_iou_over_scenes(args.seeds),
         "sizes": [bench_size(s, args.repeats, args.seed) for s in ((800, 600), (644, 486))],
         "real_uu_studio": bench_real(args.repeats),
         "distance_accuracy": bench_distance_accuracy(),
-    }
+    })
     if args.json:
         print(json.dumps(result, indent=1))
     else:
@@ -276,6 +346,8 @@ def main(argv=None) -> int:
         print("IoU over random scenes:", json.dumps(result["iou_over_scenes"], indent=1))
         print("real uu_studio:", json.dumps(result["real_uu_studio"], indent=1))
         print("distance accuracy:", result["distance_accuracy"])
+        if "pose_roi" in result:
+            print("predicted-pose ROI:", json.dumps(result["pose_roi"], indent=1))
     return 0
 
 

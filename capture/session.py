@@ -25,6 +25,7 @@ Layout (the DESIGN.md contract)::
                                   # or: images = "cam0/%06d.png" (printf pattern, number = frame id)
     background = "background/cam0.avi"   # optional
     timestamps = "cam0.csv"              # optional
+    ignore = [[x, y, w, h]]              # optional: pixel boxes that are never body (segmentation.clutter)
 
 Frame numbering: row ``i`` of a camera's CSV describes the ``i``-th frame
 stored in its video; for an image sequence the file number *is* the frame id.
@@ -65,7 +66,7 @@ __all__ = [
 
 SESSION_FILE = "session.toml"
 CALIBRATION_FILE = "calibration.toml"
-_CAMERA_KEYS = {"name", "video", "images", "background", "timestamps"}
+_CAMERA_KEYS = {"name", "video", "images", "background", "timestamps", "ignore"}
 _PATTERN = re.compile(r"%(0?)(\d*)d")
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -90,8 +91,8 @@ class FrameSegmentation:
 
     Attributes
     ----------
-    silhouette, edges : ndarray, shape (h, w), uint8
-        0 / 255, full image (zero outside the ROI).
+    silhouette_roi, edges_roi : ndarray, shape (y1 - y0, x1 - x0), uint8
+        0 / 255, the processed box.
     chamfer : ChamferImages
         The quantised distance images (cropped, with offset).
     foreground_fraction : float
@@ -99,17 +100,38 @@ class FrameSegmentation:
     roi : (int, int, int, int)
         ``(x0, y0, x1, y1)`` processed at full resolution ((0, 0, 0, 0): the automatic ROI's first
         pass found nothing).
+    image_size : (int, int)
+        ``(w, h)`` of the frame.
+    silhouette, edges : ndarray, shape (h, w), uint8
+        0 / 255, full image (zero outside the ROI), built on first use (the live path needs the
+        chamfer images only).
     """
 
-    silhouette: np.ndarray
-    edges: np.ndarray
+    silhouette_roi: np.ndarray
+    edges_roi: np.ndarray
     chamfer: ChamferImages
     foreground_fraction: float
     roi: tuple[int, int, int, int]
+    image_size: tuple[int, int]
+
+    def _full(self, part: np.ndarray) -> np.ndarray:
+        w, h = self.image_size
+        out = np.zeros((h, w), np.uint8)
+        x0, y0, x1, y1 = self.roi
+        out[y0:y1, x0:x1] = part
+        return out
+
+    @cached_property
+    def silhouette(self) -> np.ndarray:
+        return self._full(self.silhouette_roi)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        return self._full(self.edges_roi)
 
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
-                  params: SegmentationParams | None = None) -> FrameSegmentation:
+                  params: SegmentationParams | None = None, cut=None) -> FrameSegmentation:
     """Segment one frame against a background model: silhouette, edges and chamfer images.
 
     Does not adapt the model (call ``model.update`` for that).
@@ -121,6 +143,9 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     roi : (int, int, int, int), optional
         ``(x0, y0, x1, y1)``: only that box is processed (default: the automatic ROI of ``params``).
     params : SegmentationParams, optional
+    cut : callable (silhouette_roi, box) -> silhouette_roi, optional
+        Edits the silhouette of the box before the edges and chamfer images are made
+        (``segmentation.clutter``).
 
     Returns
     -------
@@ -139,6 +164,8 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     sil_roi = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
                                max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
                                close_px=params.close_px, max_components=params.max_components)
+    if cut is not None:
+        sil_roi = cut(sil_roi, box)
     edges_roi = silhouette_edges(image_bgr[y0:y1, x0:x1], sil_roi, low=params.canny_low,
                                  high=params.canny_high, dilate_px=params.edge_dilate_px,
                                  blur_sigma=params.blur_sigma)
@@ -146,12 +173,8 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
                              resolution_px=params.resolution_px, precise=params.precise,
                              precise_edges=params.precise_edges,
                              offset_xy=(x0, y0), image_size=(w, h))
-    silhouette = np.zeros((h, w), np.uint8)
-    edges = np.zeros((h, w), np.uint8)
-    silhouette[y0:y1, x0:x1] = sil_roi
-    edges[y0:y1, x0:x1] = edges_roi
-    fraction = float(np.count_nonzero(sil_roi)) / float(w * h)
-    return FrameSegmentation(silhouette, edges, chamfer, fraction, box)
+    fraction = float(cv2.countNonZero(sil_roi)) / float(w * h)
+    return FrameSegmentation(sil_roi, edges_roi, chamfer, fraction, box, (w, h))
 
 
 def _auto_roi(model: BackgroundModel, image_bgr: np.ndarray, params: SegmentationParams):
@@ -173,4 +196,4 @@ def _empty(params: SegmentationParams, size: tuple[int, int]) -> FrameSegmentati
     nothing = np.zeros((1, 1), np.uint8)
     chamfer = chamfer_images(nothing, nothing, max_distance_px=params.max_distance_px,
                              resolution_px=params.resolution_px, image_size=(w, h))
-    return FrameSegmentation(np.zeros((h, w), np.uint8), np.zeros((h, w), np.uint8), chamfer, 0.0, (0, 0, 0, 0))
+    return FrameSegmentation(np.zeros((0, 0), np.uint8), np.zeros((0, 0), np.uint8), chamfer, 0.0, (0, 0, 0, 0), (w, h))

@@ -22,6 +22,7 @@ from segmentation.pipeline import SegmentationParams, segment_frame
 from service.backgrounds import background_models
 from tracker.body.model import BodyModel, load_model
 from tracker.fitting.hypotheses import FrontBackOptions
+from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
 __all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
@@ -48,7 +49,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
                   clock: Callable[[], float] = time.perf_counter, method: str = "contours",
-                  blob_options=None, colour: bool = True,
+                  blob_options=None, scene: SceneOptions | None = None,
+                  ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions()) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
@@ -57,21 +59,21 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     session : Session
     model : str or BodyModel
         Body model (a name is sized by the session's subject).
-    sliding, solver, options
-        Tracker settings (``tracker.fitting.tracking.Tracker``).
+    sliding, solver, options, segmentation
+        Contour tracker settings (``tracker.fitting.tracking.Tracker``, ``SegmentationParams``).
     frames, cameras : range or None, sequence of str or None
         Frame ids, camera names (None: all).
     initial_params : ndarray, shape (n_params,), optional
         Start pose; else automatic initialisation on the first frame.
-    segmentation : SegmentationParams, optional
     backgrounds : dict, optional
         Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
-    clock : callable () -> float
-        Seconds, for the tracker's timings.
+    clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}
-        ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``; ``sliding``,
-        ``solver``, ``options`` and ``segmentation`` are the contour tracker's).
-    blob_options : BlobOptions, optional
+        ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``).
+    scene : SceneOptions, optional
+        Contours only: decide which foreground is body (``tracker.fitting.scene``).
+    ignore : dict, optional
+        Camera name -> (h, w) bool mask of pixels that are never body (with ``scene``).
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
 
@@ -92,6 +94,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
+    if scene is not None:
+        st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
+                          segmentation=segmentation)
+        for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+            ts = next(iter(group.values())).timestamp_ns
+            yield st.step(fid, ts, {n: f.image for n, f in group.items()})
+        return
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns

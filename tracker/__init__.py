@@ -23,6 +23,7 @@ _EXPORTS = {
     "tracker.fitting.cost": ("ChamferCost", "CostTerms"),
     "tracker.fitting.solver": ("SolverResult", "levenberg_marquardt", "least_squares_fd"),
     "tracker.fitting.tracking": ("Tracker", "TrackerOptions"),
+    "tracker.imaging.roi": ("pose_rois",),
     "tracker.search.hull": ("VoxelHull", "visual_hull"),
     "tracker.search.refine": ("InitResult",),
     "tracker.search.initialise": ("SearchOptions", "initialise"),

@@ -13,7 +13,9 @@ import numpy as np
 from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
 from tracker.body.model import ModelError, available_models
+from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from service.offline import background_models, session_model, summarise, track_session
+from tracker.fitting.scene import SceneOptions
 
 HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
 
@@ -30,6 +32,11 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
                         help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
                              "EM blobs and inverse kinematics (Caillette & Howard)")
+    parser.add_argument("--ignore-region", action="append", default=[], metavar="CAM:x,y,w,h",
+                        help="pixels of camera CAM that are never body (repeatable; adds to session.toml's "
+                             "[[camera]] ignore lists)")
+    parser.add_argument("--no-scene", action="store_true",
+                        help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -59,10 +66,16 @@ def run(args: argparse.Namespace) -> int:
         model = session_model(session, args.model)
         init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
         names = list(session.camera_names if cameras is None else cameras)
+        ignore = _ignore_masks(session, args.ignore_region)
         t_bg = time.perf_counter()
         backgrounds, how = background_models(session, names, frames=frames)
         print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
               f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+        no_video = [n for n, h in how.items() if h != "video"]
+        if no_video:
+            print(f"warning: camera(s) {', '.join(no_video)} have no background video: their background is the "
+                  "temporal median of the take, which swallows a subject who stays in one place; record ~2 s "
+                  "of the empty room per camera ([[camera]] background in session.toml)", file=sys.stderr)
         total = count_frames(session, names[0], frames) if names else None
         records = []
         t0 = time.perf_counter()
@@ -70,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
         with open(args.out, "w", encoding="utf-8") as out:
             for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
                                      frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
-                                     method=args.method):
+                                     method=args.method,
+                                     scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
+                                     ignore=ignore):
                 out.write(json.dumps(rec) + "\n")
                 records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
                 _progress(len(records), total, time.perf_counter() - t0, rec)
@@ -81,6 +96,16 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)
     return 0 if summary["frames"] else 1
+
+
+def _ignore_masks(session, texts) -> dict:
+    """Camera name -> ignore mask from session.toml's ``ignore`` lists and ``--ignore-region``s."""
+    regions = session_ignore_regions(session.root / "session.toml")
+    for text in texts:
+        name, box = parse_ignore_region(text)
+        regions.setdefault(name, []).append(box)
+    sizes = {n: session.camera_model(n).size for n in session.camera_names}
+    return ignore_masks(sizes, regions)
 
 
 def _progress(done: int, total: int | None, elapsed_s: float, rec: dict) -> None:

@@ -126,6 +126,7 @@ def test_roi_only_processes_the_box(scene, models):
     roi = (int(xs.min()) - 10, int(ys.min()) - 10, int(xs.max()) + 11, int(ys.max()) + 11)
     seg = segment_frame(model, frame, roi=roi)
     assert seg.roi == roi
+    np.testing.assert_array_equal(seg.silhouette_roi, seg.silhouette[roi[1]:roi[3], roi[0]:roi[2]])
     assert iou(seg.silhouette, person) >= 0.95
     outside = np.ones_like(person)
     outside[roi[1]:roi[3], roi[0]:roi[2]] = False

@@ -100,6 +100,11 @@ class _StackedChamfer:
 
     def __init__(self, chamfer) -> None:
         self.chamfer = list(chamfer)
+        # per camera: the arguments of tracker.kernels.sample_chamfer before the points
+        self._args = [((ch.silhouette_q, ch.edges_q) if ch.silhouette_q.size else
+                       (np.zeros((0, 0), ch.silhouette_q.dtype), np.zeros((0, 0), ch.silhouette_q.dtype)))
+                      + (float(ch.offset_xy[0]), float(ch.offset_xy[1]), float(ch.max_code), float(ch.resolution_px))
+                      for ch in self.chamfer]
 
     @classmethod
     def build(cls, chamfer: Sequence):
@@ -135,16 +140,14 @@ class _StackedChamfer:
         if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
             order = np.argsort(cr, kind="stable")
             rows, cr, dest = rows[order], cr[order], dest[order]
-        bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
+        bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1)).tolist()
         uv = np.ascontiguousarray(uv, dtype=float)
         trunc = np.inf if truncate_px is None else float(truncate_px)
-        for c, ch in enumerate(self.chamfer):
+        weight = float(edge_weight)
+        for c, args in enumerate(self._args):
             b0, b1 = bounds[c], bounds[c + 1]
             if b1 > b0:
-                sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
-                sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
-                               float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
-                               float(edge_weight), d, grad, dest[b0:b1])
+                sample_chamfer(*args, uv, rows[b0:b1], trunc, weight, d, grad, dest[b0:b1])
         return d, grad
 
 

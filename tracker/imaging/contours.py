@@ -100,6 +100,19 @@ def _row_indices(shape: tuple) -> np.ndarray:
     return idx
 
 
+@lru_cache(maxsize=32)
+def _layout(model: BodyModel, n_samples: int, cameras: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per (model, n_samples, cameras), read-only: the sample heights (n_parts, n_samples), the
+    height of every row (N,) and the image sizes (n_cams, 2)."""
+    zs = sample_heights(model, n_samples)
+    shape = (len(cameras), model.n_parts, 2, n_samples)
+    z_rows = np.ascontiguousarray(np.broadcast_to(zs[None, :, None, :], shape).reshape(-1))
+    size = np.array([cam.size for cam in cameras], dtype=float)
+    for arr in (zs, z_rows, size):
+        arr.setflags(write=False)
+    return zs, z_rows, size
+
+
 def sample_heights(model: BodyModel, n_samples: int) -> np.ndarray:
     """The fixed axial sample positions of every part, shape (n_parts, n_samples), metres.
 
@@ -135,7 +148,7 @@ def contour_generator_angles(cones: np.ndarray, m: np.ndarray) -> tuple[np.ndarr
     """
     # F = -b m1, G = -a m2, H = a b (1 + k m3), D = F² + G² - H²; t± = (-G ± √D) / (H - F) =
     # (H + F) / (-G ∓ √D), each root taken in the form whose numerator does not cancel
-    # (tracker.kernels._ruling_angles)
+    # (tracker.kernels.projection._ruling_angles)
     cones, m = np.broadcast_arrays(np.asarray(cones, dtype=float)[..., :3], np.asarray(m, dtype=float))
     shape = m.shape[:-1]
     theta, real = ruling_angles(np.ascontiguousarray(cones.reshape(-1, 3)), np.ascontiguousarray(m.reshape(-1, 3)))
@@ -177,9 +190,8 @@ def extremal_contours(
     if pose.rotation.shape[0] != model.n_parts:
         raise ValueError(f"pose: has {pose.rotation.shape[0]} parts, model {model.name!r} has {model.n_parts}")
     n_cams, n_parts = len(cameras), model.n_parts
-    zs = sample_heights(model, n_samples)  # (n_parts, n_samples)
+    zs, z_rows, size = _layout(model, n_samples, tuple(cameras))
     st = stack_cameras(cameras)  # world2cam rotations (n_cams, 3, 3), translations (n_cams, 3), intrinsics
-    size = np.array([cam.size for cam in cameras], dtype=float)  # (n_cams, 2)
     # per (camera, part): the rulings' angles from the camera centre in the part frame (module
     # docstring); per sample: world point (1 + k z) (a cos θ R e1 + b sin θ R e2) + z R e3 + t,
     # projected (tracker.kernels.contour_points)
@@ -197,7 +209,7 @@ def extremal_contours(
         cam=idx[0],
         part=idx[1],
         side=idx[2],
-        z=np.broadcast_to(zs[None, :, None, :], shape).reshape(-1),
+        z=z_rows,
         theta=theta,
         points=points,
         uv=uv,

@@ -10,6 +10,10 @@ inside the convex hull of its corners' images, so without distortion the rectang
 whole predicted silhouette grown by the margins; with lens distortion ``margin_px`` also covers
 the (small) bulge of the distorted edges between corners.
 
+The margins must cover the prediction's error: ``segment_frame`` crops the distance images to
+the rectangle, so a contour point the fit moves outside it sees the truncation distance
+(docs/performance.md has the measured figures).
+
 The rectangle is ``(x0, y0, x1, y1)``, half-open, clipped to the image: what
 ``segmentation.pipeline.segment_frame(..., roi=...)`` takes.  ``None`` means "the whole frame":
 a part reaching behind (or into) the camera plane, or a pose that is not finite.
@@ -44,8 +48,8 @@ def part_box_corners(model: BodyModel, pose: Pose, *, margin_m: float = 0.0) -> 
     return world.reshape(-1, 3)
 
 
-def pose_rois(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], *, margin_m: float = 0.10,
-              margin_px: int = 8) -> list[tuple[int, int, int, int] | None]:
+def pose_rois(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], *, margin_m: float = 0.05,
+              margin_px: int = 4) -> list[tuple[int, int, int, int] | None]:
     """Region of interest of every camera for the body at ``params`` (module docstring).
 
     Parameters

@@ -1,0 +1,212 @@
+"""Tracking in a real scene: decide which foreground is body before fitting it.
+
+``SceneTracker`` wraps ``tracker.fitting.tracking.Tracker`` with the segmentation of every frame
+and the clutter of ``segmentation.clutter``:
+
+1. each camera's frame is segmented with the clutter cut out (operator ignore regions and the
+   learned static clutter), except where the body's projection at the last fit covers it;
+2. the tracker fits the frame set on those silhouettes; the gate (RMS, inside fraction, IoU)
+   judges the fit against them;
+3. a *trusted* fit (RMS and inside fraction within the tracker's limits, and a share of the
+   foreground left unexplained no larger than ``max_unexplained``) feeds the static-clutter
+   learner: foreground the body does not cover that stays unchanged for ``learn_frames`` frames
+   becomes clutter.  A fit that put a limb on a prop leaves the real limb unexplained; the
+   bound on the unexplained share keeps such a fit from teaching the learner;
+4. while no clutter is learned yet (the first ``warmup_frames`` frames after an
+   initialisation), the reverse (silhouette → model) term is off: it would pull the nearest limb
+   onto the outline of a prop; the model → image terms alone keep a good start where it is;
+   recovery searches wait too, and later keep to a CPU budget (``recovery_gap``,
+   ``recovery_share``);
+5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``).
+
+The bound on the unexplained share is the only guard against a wrong fit teaching the learner
+the real body as clutter; a fit that starts on the prop and stays there can learn the person.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Mapping
+
+import cv2
+import numpy as np
+
+from segmentation.background import BackgroundModel
+from segmentation.clutter import StaticClutter, segment_without_clutter
+from segmentation.pipeline import SegmentationParams
+from tracker.fitting.tracking import Tracker
+from tracker.search.scoring import ScoreViews
+from tracker.search.seated import initialise_any
+
+__all__ = ["SceneOptions", "SceneTracker"]
+
+
+@dataclass(frozen=True)
+class SceneOptions:
+    """Options of :class:`SceneTracker`.
+
+    learn : learn static clutter (False: only the ignore regions are cut)
+    learn_frames : frames a pixel must be static, unexplained foreground to become clutter
+    colour_tol : ``StaticClutter.colour_tol``
+    margin_m : the body's projection is grown by this much (metres at the body's depth) before it
+        counts as explained, so its outline's pixels are never learned
+    max_unexplained : a fit leaving more than this share of the foreground unexplained does not
+        feed the learner
+    warmup_frames : frames after an initialisation with the reverse term off and no recovery
+    recovery_gap, recovery_share : the CPU budget of recovery (a search costs tens of frames'
+        fits): at least ``recovery_gap`` frames between two searches, and a search only while the
+        time spent in searches is at most ``recovery_share`` of the time spent tracking
+    seated : the first pose is searched standing (T/A) and seated (``tracker.search.seated``)
+    heights : subject heights (metres) the seated search also tries, the tracker's model re-sized
+        to the best (None: only the model's own; a seated subject's height is not on the hull)
+    """
+
+    learn: bool = True
+    learn_frames: int = 25
+    colour_tol: float = 40.0
+    margin_m: float = 0.04
+    max_unexplained: float = 0.45
+    warmup_frames: int = 25
+    recovery_gap: int = 25
+    recovery_share: float = 0.2
+    seated: bool = True
+    heights: tuple | None = None
+
+
+class SceneTracker:
+    """Segment, cut clutter, fit, learn; one pose record per frame set.
+
+    Parameters
+    ----------
+    tracker : Tracker (its cameras are the studio's)
+    backgrounds : camera name -> BackgroundModel
+    ignore : camera name -> (h, w) bool mask of the operator's ignore regions (optional)
+    options : SceneOptions
+    segmentation : SegmentationParams for every camera
+
+    Attributes
+    ----------
+    learners : camera name -> StaticClutter (empty when ``options.learn`` is False)
+    last_segmentation : camera name -> FrameSegmentation of the last frame (the body's silhouettes)
+    """
+
+    def __init__(self, tracker: Tracker, backgrounds: Mapping[str, BackgroundModel], *,
+                 ignore: Mapping[str, np.ndarray] | None = None, options: SceneOptions = SceneOptions(),
+                 segmentation: SegmentationParams | None = None) -> None:
+        self.tracker = tracker
+        self.backgrounds = dict(backgrounds)
+        self.options = options
+        self.segmentation = segmentation or SegmentationParams()
+        self.ignore = {n: np.asarray(m, dtype=bool) for n, m in (ignore or {}).items()}
+        for n, m in self.ignore.items():
+            cam = tracker.cameras.get(n)
+            if cam is None:
+                raise ValueError(f"ignore: unknown camera {n!r}")
+            if m.shape != (cam.height, cam.width):
+                raise ValueError(f"ignore[{n!r}]: shape {m.shape} != (h, w) = {(cam.height, cam.width)}")
+        self.learners = ({n: StaticClutter((c.width, c.height), learn_frames=options.learn_frames,
+                                           colour_tol=options.colour_tol) for n, c in tracker.cameras.items()}
+                         if options.learn else {})
+        self._views = self._render_views()
+        self._base_options = tracker.options
+        self._since_init = 0
+        self._since_recovery = options.recovery_gap
+        self._tracking_s = 0.0
+        self._recovery_s = 0.0
+        self._recover = tracker.recover
+        self._inits = tracker.n_initialisations
+        self._explained: dict[str, np.ndarray] = {}
+        self.last_segmentation: dict = {}
+
+    def _render_views(self) -> ScoreViews:
+        cams = list(self.tracker.cameras.values())
+        return ScoreViews(self.tracker.model, cams, [np.zeros((c.height, c.width), np.uint8) for c in cams], scale=0.5)
+
+    def clutter(self, name: str) -> np.ndarray | None:
+        """Camera ``name``'s learned clutter (h, w) bool, or None (the ignore regions are apart:
+        ``ignore``)."""
+        learner = self.learners.get(name)
+        return None if learner is None else learner.mask
+
+    def explained(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        """The body's projection at ``params`` per camera, (h, w) bool, grown by ``margin_m``."""
+        out = {}
+        pelvis = np.asarray(params[:3], dtype=float)
+        for small, (name, cam) in zip(self._views.render(np.asarray(params, dtype=float)),
+                                       self.tracker.cameras.items()):
+            full = cv2.resize(small.astype(np.uint8), (cam.width, cam.height), interpolation=cv2.INTER_NEAREST)
+            depth = max(float(cam.depth(pelvis[None])[0]), 0.3)
+            r = int(np.ceil(self.options.margin_m * cam.matrix[0, 0] / depth))
+            if r > 0:
+                full = cv2.dilate(full, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
+            out[name] = full.astype(bool)
+        return out
+
+    def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
+        """Segment ``images`` (camera name -> BGR uint8 (h, w, 3)), fit, learn; the pose record."""
+        segs, raws = {}, {}
+        for name, img in images.items():
+            segs[name], raws[name] = segment_without_clutter(
+                self.backgrounds[name], img, self.clutter(name), keep=self._explained.get(name),
+                ignore=self.ignore.get(name), params=self.segmentation)
+        self.last_segmentation = segs
+        tr = self.tracker
+        if tr.params is None and self.options.seated:
+            self._initialise(segs)
+        warm = self._since_init < self.options.warmup_frames and self.options.learn
+        tr.options = replace(self._base_options, reverse_weight=0.0) if warm else self._base_options
+        tr.recover = (self._recover and not warm and self._since_recovery >= self.options.recovery_gap
+                      and self._recovery_s <= self.options.recovery_share * self._tracking_s)
+        t0 = time.perf_counter()
+        rec = tr.step(frame_id, timestamp_ns, {n: s.chamfer for n, s in segs.items()},
+                      silhouettes={n: s.silhouette for n, s in segs.items()}, images=images)
+        tr.options, tr.recover = self._base_options, self._recover
+        dt = time.perf_counter() - t0
+        self._tracking_s += dt
+        self._since_recovery += 1
+        if tr.n_initialisations != self._inits:
+            self._inits, self._since_init, self._since_recovery = tr.n_initialisations, 0, 0
+            self._recovery_s += dt
+        else:
+            self._since_init += 1
+        if "params" not in rec:
+            self._explained = {}
+            return rec
+        params = np.asarray(rec["params"], dtype=float)
+        self._explained = self.explained(params)
+        if self.learners and self._trusted(rec):
+            fg = {n: raws[n] > 0 for n in images}
+            n_fg = sum(int(np.count_nonzero(m)) for m in fg.values())
+            n_out = sum(int(np.count_nonzero(fg[n] & ~self._explained[n])) for n in images)
+            if n_fg and n_out <= self.options.max_unexplained * n_fg:
+                for n, img in images.items():
+                    self.learners[n].update(img, raws[n], self._explained[n])
+        return rec
+
+    def _initialise(self, segs: Mapping) -> None:
+        """The first pose: standing or seated search on the frame's silhouettes (nothing learned
+        yet); leaves the tracker uninitialised when the search fails (it then tries its own)."""
+        tr = self.tracker
+        names = [n for n in tr.cameras if n in segs and np.any(segs[n].silhouette)]
+        if not names:
+            return
+        heights = [] if self.options.heights is None else list(self.options.heights)
+        try:
+            res, model = initialise_any(tr.model, [tr.cameras[n] for n in names],
+                                        {n: segs[n].silhouette for n in names}, {n: segs[n].chamfer for n in names},
+                                        heights=heights)
+        except ValueError:
+            return
+        if model is not tr.model:
+            tr.model = model
+            self._views = self._render_views()
+        tr.params = tr.model.clamp(np.asarray(res.params, dtype=float))
+        tr.n_initialisations += 1
+
+    def _trusted(self, rec: dict) -> bool:
+        """The fit's model → image figures are within the tracker's limits (the IoU may not be:
+        it counts the clutter still to learn)."""
+        rms, inside = rec.get("rms_px"), rec.get("inside_fraction")
+        return (rms is not None and inside is not None and rms <= self.tracker.rms_limit()
+                and inside >= self.tracker.options.min_inside_fraction)
