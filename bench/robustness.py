@@ -149,6 +149,10 @@ def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, ever
     return float(1e3 * rt.residual_m.mean())
 
 
+#: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``)
+TRACK_OPTIONS: dict = {}
+
+
 def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
              ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours") -> dict:
     """Render, track and score one clip; returns its per-clip record.
@@ -162,7 +166,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
         records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
-        it = track_session(session, backgrounds=backgrounds, method=method)
+        it = track_session(session, backgrounds=backgrounds, method=method, **TRACK_OPTIONS)
         while not (budget_s and cpu_s > budget_s):
             t0, c0 = time.perf_counter(), time.process_time()
             rec = next(it, None)
@@ -255,12 +259,16 @@ def main(argv=None) -> int:
     ap.add_argument("--method", choices=("contours", "blobs"), default="contours",
                     help="contours: the Knossow contour tracker; blobs: the BMVC'04 blob tracker (tracker.blobs)")
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
+    ap.add_argument("--no-front-back", action="store_true",
+                    help="track without the front/back guard (tracker.fitting.hypotheses), for comparison")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
                     help="combine the --out files of several runs (nothing is run)")
     args = ap.parse_args(argv)
     if args.merge:
         return _emit(merge(args.merge), args)
+    if args.no_front_back:
+        TRACK_OPTIONS["front_back"] = None
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)

@@ -21,6 +21,7 @@ from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
 from service.backgrounds import background_models
 from tracker.body.model import BodyModel, load_model
+from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
@@ -49,7 +50,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   backgrounds: dict[str, BackgroundModel] | None = None,
                   clock: Callable[[], float] = time.perf_counter, method: str = "contours",
                   blob_options=None, scene: SceneOptions | None = None,
-                  ignore: dict[str, np.ndarray] | None = None) -> Iterator[dict]:
+                  ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
+                  front_back: FrontBackOptions | None = FrontBackOptions()) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -59,10 +61,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Body model (a name is sized by the session's subject).
     sliding, solver, options, segmentation
         Contour tracker settings (``tracker.fitting.tracking.Tracker``, ``SegmentationParams``).
-    frames : range or None
-        Frame ids (None: all).
-    cameras : sequence of str or None
-        Camera names (None: all).
+    frames, cameras : range or None, sequence of str or None
+        Frame ids, camera names (None: all).
     initial_params : ndarray, shape (n_params,), optional
         Start pose; else automatic initialisation on the first frame.
     backgrounds : dict, optional
@@ -74,6 +74,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Contours only: decide which foreground is body (``tracker.fitting.scene``).
     ignore : dict, optional
         Camera name -> (h, w) bool mask of pixels that are never body (with ``scene``).
+    colour, front_back : bool, FrontBackOptions or None
+        Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
 
     Yields
     ------
@@ -91,7 +93,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
-                      options=options, clock=clock)
+                      options=options, clock=clock, front_back=front_back)
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation)
@@ -103,7 +105,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
-                           silhouettes={n: s.silhouette for n, s in segs.items()})
+                           silhouettes={n: s.silhouette for n, s in segs.items()},
+                           images={n: f.image for n, f in group.items()} if colour else None)
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock) -> Iterator[dict]:

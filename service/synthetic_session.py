@@ -27,7 +27,7 @@ from capture.camera import Camera
 from capture.session import write_session_toml
 from tracker.synthetic.bvh import load_bvh
 from tracker.synthetic.retarget import Retargeted, retarget_bvh
-from tracker.synthetic.synth import add_noise, ground_truth_record, synthetic_studio
+from tracker.synthetic.synth import Palette, add_noise, ground_truth_record, synthetic_studio
 
 __all__ = ["make_synthetic_session", "CODECS"]
 
@@ -112,6 +112,7 @@ def make_synthetic_session(
     name: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     retargeted: Retargeted | None = None,
+    palette: Palette | None = None,
 ) -> Path:
     """Render a synthetic session from BVH motion; returns ``out_dir``.
 
@@ -136,6 +137,8 @@ def make_synthetic_session(
         Called as ``progress(done, total)`` after each frame.
     retargeted : Retargeted, optional
         Reuse motion already retargeted (``bvh_path`` then only names the session).
+    palette : Palette, optional
+        The subject's colours (default: drawn from ``seed``, ``tracker.synthetic.synth.make_palette``).
     """
     if codec not in CODECS:
         raise ValueError(f"codec must be one of {CODECS}, got {codec!r}")
@@ -157,7 +160,7 @@ def make_synthetic_session(
     # replay reads a background as one video or one image (not a sequence)
     bg_codec = codec if codec != "png" else ("ffv1" if ffv1_ok else "png1")
     rng = np.random.default_rng(seed)
-    studio = synthetic_studio(motion, cameras=cameras, size=size, seed=seed, rng=rng)
+    studio = synthetic_studio(motion, cameras=cameras, size=size, seed=seed, rng=rng, palette=palette)
     cams, backgrounds = studio.cameras, studio.backgrounds
 
     save_calibration(out / "calibration.toml", cams)

@@ -108,7 +108,10 @@ def test_demo_lossless_real_tracker_equals_offline(tmp_path):
     offline = list(track_session(load_session(summary.session)))
     table = _pose_table(live, offline)
     assert [p["frame"] for p in live] == [o["frame"] for o in offline] == [0, 1, 2, 3], table
-    assert all(o["ok"] and o["cameras"] == 3 for o in offline), table
+    # the first frame may be held by the front/back guard (tracker.fitting.hypotheses) while it weighs the
+    # initialised pose against its mirror
+    assert all((o["ok"] or (o["frame"] == 0 and o["reason"].startswith("front/back ambiguous")))
+               and o["cameras"] == 3 for o in offline), table
     # Equal to rounding: the last bits (~1e-15) were once reported to differ from the workers' after other
     # tests in this process; in 116 stress runs and a whole-suite run they were identical (max |diff| 0).
     # 1e-9 (nanometres, nanoradians) still catches any real difference (a camera missing from a set moves

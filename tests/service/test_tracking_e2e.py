@@ -35,6 +35,8 @@ def test_thirty_frames_from_automatic_initialisation(tmp_path, cameras, limit_mm
     truth = _truth(root)
     records = list(track_session(load_session(root)))  # no initial pose: tracker.search.initialise on frame 0
     assert len(records) == 30
-    assert [r["frame"] for r in records if not r["ok"]] == []
+    # no frame lost; the first may be held by the front/back guard while it weighs the pose against its mirror
+    assert [r["frame"] for r in records if not r["ok"] and not (r["frame"] < 2 and r["reason"].startswith(
+        "front/back ambiguous"))] == []
     errs = [_mean_error_m(r, truth) for r in records]
     assert 1e3 * np.mean(errs) < limit_mm, [round(1e3 * e) for e in errs]

@@ -160,7 +160,7 @@ class SceneTracker:
                       and self._recovery_s <= self.options.recovery_share * self._tracking_s)
         t0 = time.perf_counter()
         rec = tr.step(frame_id, timestamp_ns, {n: s.chamfer for n, s in segs.items()},
-                      silhouettes={n: s.silhouette for n, s in segs.items()})
+                      silhouettes={n: s.silhouette for n, s in segs.items()}, images=images)
         tr.options, tr.recover = self._base_options, self._recover
         dt = time.perf_counter() - t0
         self._tracking_s += dt

@@ -28,6 +28,7 @@ from capture.camera import Camera
 from tracker.body.kinematics import joint_centre_array
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
+from tracker.fitting.hypotheses import FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
 from tracker.search.initialise import SearchOptions, initialise
@@ -220,6 +221,12 @@ class Tracker:
         ``silhouettes`` (``tracker.search.recovery`` seeded by the last good pose; the T/A-pose search of
         ``tracker.search.initialise`` when there was none)
     clock : callable returning seconds (latency measurement), default ``time.perf_counter``
+    front_back : ``tracker.fitting.hypotheses.FrontBackOptions`` of the front/back guard (None: no
+        guard): from an automatic initialisation and after every re-initialisation the pose's mirror
+        is tracked too and frames are not ok ("front/back ambiguous") until the evidence (fit,
+        feet, colour of the frame's ``images``, walking direction) separates them; a pose given
+        as ``initial_params`` is taken as resolved; with the guard the periodic check of
+        ``TrackerOptions.front_back_every`` is not run (the guard's own checks replace it)
 
     Attributes
     ----------
@@ -232,7 +239,8 @@ class Tracker:
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
                  initial_params=None, options: TrackerOptions = TrackerOptions(), recover: bool = True,
-                 patience: int = 3, clock: Callable[[], float] = time.perf_counter) -> None:
+                 patience: int = 3, clock: Callable[[], float] = time.perf_counter,
+                 front_back: FrontBackOptions | None = FrontBackOptions()) -> None:
         if solver not in ("lm", "lsq"):
             raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
         self.model = model
@@ -263,6 +271,9 @@ class Tracker:
             self.params = model.clamp(p)
         self.last_result: SolverResult | None = None
         self.n_initialisations = 0
+        self.guard = None if front_back is None else FrontBackGuard(model, front_back)
+        if self.guard is not None and self.params is not None:
+            self.guard.state = "resolved"
 
     def predict(self) -> np.ndarray | None:
         """Start pose for the next frame (constant velocity when enabled), shape (n_params,); None before initialisation."""
@@ -349,8 +360,34 @@ class Tracker:
                                   options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0))
         return res_t, cost_t.evaluate(np.asarray(res_t.params))
 
+    def _guard(self, record, cams, chs, images, res, terms, bad, views):
+        """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
+        bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
+        ("" or why the frame is not ok although the fit is good)."""
+        def fit(start, prediction, iterations=None):
+            opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
+                                                                      ftol=min(self.options.ftol, 2e-3))
+            r, cost = fit_frame(self.model, cams, chs, start, prediction=prediction, sliding=self.sliding,
+                                solver=self.solver, options=opts)
+            return r, cost.evaluate(np.asarray(r.params))
+
+        iou = (lambda p: float(views().score(p))) if views is not None else None
+        out = self.guard.update(t_s=1e-9 * record["timestamp_ns"], cams=cams, chs=[chs[c.name] for c in cams],
+                                images=[images[c.name] for c in cams] if images and all(c.name in images for c in cams)
+                                else None, res=res, terms=terms, ok=not bad, fit=fit, iou=iou)
+        record["front_back"] = self.guard.state
+        record["front_back_cues"] = {k: round(float(v), 3) for k, v in out.cues.items()}
+        swapped = out.swap is not None
+        if swapped:
+            res, terms = out.swap
+            self._last_iou = None
+            bad = self._bad(terms, views)
+            self.n_turned += 1
+        return res, terms, terms.rms_px(), terms.inside_fraction(), bad, swapped, out.reason
+
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
-             silhouettes: Mapping[str, np.ndarray] | None = None) -> dict:
+             silhouettes: Mapping[str, np.ndarray] | None = None,
+             images: Mapping[str, np.ndarray] | None = None) -> dict:
         """Fit one frame set and return its pose record (a JSON-ready dict, DESIGN.md).
 
         Parameters
@@ -361,6 +398,8 @@ class Tracker:
             Camera name -> sampler; a camera absent this frame is left out.
         silhouettes : mapping str -> ndarray, shape (h, w), optional
             Camera name -> mask; needed for (re)initialisation and the IoU checks.
+        images : mapping str -> ndarray, shape (h, w, 3), optional
+            Camera name -> BGR frame: the front/back guard's colour cues (``tracker.fitting.hypotheses``).
 
         Returns
         -------
@@ -422,7 +461,9 @@ class Tracker:
                     if not bad:
                         self.monitor.reset()
                     restarted = True  # no velocity across a re-initialisation
-        if self.options.front_back_every > 0 and views is not None and not restarted:
+                    if self.guard is not None:
+                        self.guard.reset()
+        if self.options.front_back_every > 0 and views is not None and not restarted and self.guard is None:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
                 self._since_front_back = 0
@@ -436,10 +477,15 @@ class Tracker:
                         self.monitor.reset()
                     self.n_turned += 1
                     restarted = True  # no velocity across the turn
+        unsure = ""
+        if self.guard is not None:
+            res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
+                                                                        views)
+            restarted = restarted or swapped
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not bad, params=[float(v) for v in res.params],
+            ok=not bad and not unsure, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -448,8 +494,9 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
+        if bad or unsure:
+            record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else []))
         if bad:
-            record["reason"] = f"poor fit: {bad}"
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
         else:

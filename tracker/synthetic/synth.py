@@ -68,10 +68,14 @@ class Palette:
         BGR per part, float.
     light : ndarray, shape (3,)
         Unit direction of the light, pointing down.
+    back : ndarray, shape (n_parts, 3), or None
+        BGR of each part's back half (the part frame's -x side: hair on the head, the back of a
+        shirt; ``tracker.synthetic.tpose.sided_palette``); None: as ``colours``.
     """
 
     colours: np.ndarray
     light: np.ndarray
+    back: np.ndarray | None = None
 
 
 def make_palette(model: BodyModel, rng: np.random.Generator) -> Palette:
@@ -156,6 +160,7 @@ def render_frame(
     # Lambert on a cylinder about each axis, averaged over the lit half: ∝ sin(angle(axis, light))
     lit = np.sqrt(np.clip(1.0 - (axis @ -palette.light) ** 2, 0.0, 1.0))
     part_rgb = palette.colours * (0.55 + 0.45 * lit)[:, None]
+    back_rgb = None if palette.back is None else palette.back * (0.55 + 0.45 * lit)[:, None]
     images = []
     for cam, lab, bg, floor in zip(cameras, labels, backgrounds, floor_masks):
         img = bg.copy()
@@ -173,9 +178,37 @@ def render_frame(
             d = cv2.distanceTransform(np.where(internal_edges(lab_r) > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 3)
             rim = 0.7 + 0.3 * np.sqrt(np.minimum(d, 6.0) / 6.0)
             patch = img[roi]
-            patch[body] = np.clip(part_rgb[lab_r[body]] * rim[body][:, None], 0, 255).astype(np.uint8)
+            rgb = part_rgb[lab_r[body]]
+            if back_rgb is not None:
+                back = _back_sides(model, pose, cam, palette)[roi][body]
+                rgb[back] = back_rgb[lab_r[body][back]]
+            patch[body] = np.clip(rgb * rim[body][:, None], 0, 255).astype(np.uint8)
         images.append(img)
     return images, labels
+
+
+def _back_sides(model: BodyModel, pose: Pose, camera: Camera, palette: Palette) -> np.ndarray:
+    """Pixels (h, w) bool where a part whose back colour differs from its front shows its back
+    half (part frame x < 0): per part, the nearer half drawn over the farther."""
+    from tracker.imaging.render import cone_points
+
+    out = np.zeros((camera.height, camera.width), np.uint8)
+    sided = np.flatnonzero(np.any(palette.back != palette.colours, axis=1))
+    if sided.size == 0:
+        return out.astype(bool)
+    local = cone_points(model, n_theta=16, n_z=3)
+    pts = np.einsum("pij,pmj->pmi", pose.rotation, local) + pose.translation[:, None, :]
+    front = local[..., 0] >= 0.0
+    mid = pts.mean(axis=1)
+    depth = camera.depth(mid)
+    uv = camera.project(pts.reshape(-1, 3)).reshape(pts.shape[0], -1, 2)
+    ok = camera.depth(pts.reshape(-1, 3)).reshape(pts.shape[:2]) > 0.05
+    for p in sided[np.argsort(-depth[sided])]:  # far parts first
+        facing = float((camera.center - mid[p]) @ pose.rotation[p][:, 0]) > 0.0  # the front half is nearer
+        halves = [(~front[p], 1), (front[p], 0)] if facing else [(front[p], 0), (~front[p], 1)]
+        for sel, value in halves:
+            fill_convex_hulls(out, uv[p][None], (ok[p] & sel)[None], [0], [value])
+    return out.astype(bool)
 
 
 def _roi(mask: np.ndarray, *, pad: int) -> tuple[slice, slice] | None:
@@ -250,7 +283,7 @@ class SyntheticStudio:
 
 
 def synthetic_studio(motion: Retargeted, *, cameras: int | Sequence[Camera] = 6, size: tuple[int, int] = (800, 600),
-                     seed: int = 0, rng: np.random.Generator) -> SyntheticStudio:
+                     seed: int = 0, rng: np.random.Generator, palette: Palette | None = None) -> SyntheticStudio:
     """Cameras, room, palette and light for rendering ``motion``.
 
     Parameters
@@ -264,6 +297,8 @@ def synthetic_studio(motion: Retargeted, *, cameras: int | Sequence[Camera] = 6,
         Seed of the room texture.
     rng : numpy.random.Generator
         Draws the palette and the light (the caller's noise continues the same stream).
+    palette : Palette, optional
+        The subject's colours instead of the drawn ones (drawn all the same: the same noise).
 
     Returns
     -------
@@ -276,7 +311,8 @@ def synthetic_studio(motion: Retargeted, *, cameras: int | Sequence[Camera] = 6,
         cams = fit_ring_cameras(pts, cameras, size=tuple(size))
     else:
         cams = list(cameras)
-    palette = make_palette(mdl, rng)
+    drawn = make_palette(mdl, rng)
+    palette = drawn if palette is None else palette
     reach = max(np.linalg.norm(c.center[:2]) for c in cams)
     texture = make_room_texture(seed, wall_radius_m=max(7.0, reach + 2.0), extent_m=max(8.0, reach + 3.0))
     rendered = [render_background(c, texture, with_floor_mask=True) for c in cams]
