@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 
 from capture.calibration import CalibrationError, load_calibration
+from capture.errors import CaptureError
 from capture.session import CALIBRATION_FILE, Session, SessionError, load_session, write_session_toml
 from capture.sources import EndOfStream, Frame, SourceError, SourceSpec, parse_source_specs
 from capture.tomlio import load_file
@@ -59,7 +60,7 @@ CODECS = {"png": None, "ffv1": ("FFV1", ".avi"), "mjpg": ("MJPG", ".avi")}
 _FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)}
 
 
-class RecorderError(Exception):
+class RecorderError(CaptureError):
     """Recording failed; the message names the file or camera."""
 
 

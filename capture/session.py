@@ -46,8 +46,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from capture.atomic import write_text_atomic
 from capture.calibration import CalibrationError, load_calibration
 from capture.camera import Camera
+from capture.errors import CaptureError
 from capture.tomlio import dumps, load_file
 
 __all__ = [
@@ -69,7 +71,7 @@ _CAMERA_KEYS = {"name", "video", "images", "background", "timestamps"}
 _PATTERN = re.compile(r"%(0?)(\d*)d")
 
 
-class SessionError(ValueError):
+class SessionError(CaptureError, ValueError):
     """A session directory is malformed; the message names the file, key or camera."""
 
 
@@ -364,7 +366,5 @@ def write_session_toml(
     data["camera"] = cams
     root.mkdir(parents=True, exist_ok=True)
     out = root / SESSION_FILE
-    tmp = out.with_suffix(".toml.tmp")
-    tmp.write_text(dumps(data))
-    tmp.replace(out)
+    write_text_atomic(out, dumps(data))
     return out

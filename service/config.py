@@ -51,13 +51,14 @@ from typing import Any, Mapping
 
 from capture.sources import parse_source_specs
 from capture.tomlio import tomllib
+from service.errors import ServiceError
 from service.wire.bus import MODES, ZenohSettings
 from service.wire.messages import ENCODINGS, check_name, MessageError
 
 BACKENDS = ("replay", "opencv")
 
 
-class ConfigError(ValueError):
+class ConfigError(ServiceError, ValueError):
     """A studio configuration problem; the message names the file and key."""
 
 

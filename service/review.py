@@ -21,16 +21,17 @@ import numpy as np
 
 from capture.replay import iter_frame_sets
 from capture.session import Session
-from tracker.imaging.contours import extremal_contours
+from service.errors import ServiceError
+from service.offline import session_model
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel, available_models
-from service.offline import session_model
+from tracker.imaging.contours import extremal_contours
 from tracker.imaging.overlay import draw_contours, draw_skeleton, draw_text, resize_to_width, side_colours, tile_images
 
 __all__ = ["ReviewError", "load_records", "status_lines", "FrameOverlay", "ReviewSummary", "write_review"]
 
 
-class ReviewError(ValueError):
+class ReviewError(ServiceError, ValueError):
     """A pose file or record that cannot be reviewed (the message names the file and line)."""
 
 

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from service.commands.argtypes import positive_float
 from service.commands.synth import image_size
 
 HELP = "run the whole live pipeline over zenoh on loopback on a synthetic studio (rendered once, cached)"
@@ -16,7 +17,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", type=int, default=6, help="cameras on a ring around the subject (default 6)")
     parser.add_argument("--frames", type=int, default=90, help="frames of motion at --fps (default 90: a 3 s hop)")
     parser.add_argument("--size", type=image_size, default=(320, 240), help="WIDTHxHEIGHT of the cameras")
-    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--fps", type=positive_float, default=30.0)
     parser.add_argument("--motion", default="scaled_131_03", help="bundled CMU clip (tracker/data)")
     parser.add_argument("--live", action="store_true",
                         help="live delivery (real-time replay, stale sets dropped) instead of lossless")

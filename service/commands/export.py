@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from service.commands.argtypes import positive_float
+
 HELP = "export recorded poses (JSONL) to BVH, TRC (OpenSim), C3D and CSV"
 
 UP_HELP = ("up axis of the files: 'y' writes tracker (x, y, z) as (x, z, -y), a -90 deg rotation about X; "
@@ -28,7 +30,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default=None, help="body model for BVH (default: the records' 'model')")
     parser.add_argument("--height-m", type=float, default=None, help="subject height the tracker used")
     parser.add_argument("--session", default=None, help="take height/segment lengths from this session")
-    parser.add_argument("--fps", type=float, default=None, help="frame rate (default: from the timestamps)")
+    parser.add_argument("--fps", type=positive_float, default=None, help="frame rate (default: from the timestamps)")
 
 
 def model_for_export(args, records):

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from capture.session import SessionError, load_session
-from tracker.body.model import ModelError, available_models
+from service.atomic import JsonlWriter
 from service.offline import background_models, session_model, summarise, track_session
+from tracker.body.model import available_models
 
 HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
 
@@ -31,7 +32,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_frames(text: str | None) -> range | None:
-    """``"A:B"`` -> ``range(A, B)``; ``"A:"`` -> from A on; ``":B"`` -> up to B."""
+    """``"A:B"`` -> ``range(A, B)``; ``"A:"`` -> from A on; ``":B"`` -> up to B (SessionError if malformed)."""
     if text is None:
         return None
     parts = text.split(":")
@@ -41,9 +42,9 @@ def parse_frames(text: str | None) -> range | None:
         a = int(parts[0]) if parts[0] else 0
         b = int(parts[1]) if parts[1] else 2**62
     except ValueError:
-        raise ValueError(f"--frames: expected A:B (frame ids), got {text!r}") from None
+        raise SessionError(f"--frames: expected A:B (frame ids), got {text!r}") from None
     if a < 0 or b <= a:
-        raise ValueError(f"--frames: expected 0 <= A < B, got {text!r}")
+        raise SessionError(f"--frames: expected 0 <= A < B, got {text!r}")
     return range(a, b)
 
 
@@ -58,37 +59,43 @@ def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
             else:
                 raise ValueError("no record")
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"--initial-pose {path}: cannot read the first record's params ({exc})") from None
+        raise SessionError(f"--initial-pose {path}: cannot read the first record's params ({exc})") from None
     if p.shape != (n_params,) or not np.all(np.isfinite(p)):
-        raise ValueError(f"--initial-pose {path}: params has {p.size} values, the model needs {n_params}")
+        raise SessionError(f"--initial-pose {path}: params has {p.size} values, the model needs {n_params}")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
+    """Track; the poses go to ``OUT.partial`` (flushed per record) and replace ``OUT`` only when every
+    frame was tracked (:class:`service.atomic.JsonlWriter`): a failing or interrupted run never
+    truncates an existing ``OUT``, and its finished frames are kept (named on stderr)."""
+    session = load_session(args.session)
+    frames = parse_frames(args.frames)
+    cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
+    model = session_model(session, args.model)
+    init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
+    names = list(session.camera_names if cameras is None else cameras)
+    t_bg = time.perf_counter()
+    backgrounds, how = background_models(session, names, frames=frames)
+    print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
+          f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+    total = _frame_count(session, frames)
+    records = []
+    t0 = time.perf_counter()
+    out = JsonlWriter(args.out)
     try:
-        session = load_session(args.session)
-        frames = parse_frames(args.frames)
-        cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
-        model = session_model(session, args.model)
-        init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
-        names = list(session.camera_names if cameras is None else cameras)
-        t_bg = time.perf_counter()
-        backgrounds, how = background_models(session, names, frames=frames)
-        print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
-              f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
-        total = _frame_count(session, frames)
-        records = []
-        t0 = time.perf_counter()
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.out, "w", encoding="utf-8") as out:
-            for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
-                out.write(json.dumps(rec) + "\n")
-                records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
-                _progress(len(records), total, time.perf_counter() - t0, rec)
-    except (SessionError, ModelError, ValueError, OSError) as exc:
-        print(f"contourcap track: error: {exc}", file=sys.stderr)
-        return 2
+        for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
+                                 frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+            out.write(json.dumps(rec).encode())
+            records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
+            _progress(len(records), total, time.perf_counter() - t0, rec)
+    except BaseException:
+        kept = out.abandon()
+        if kept is not None:
+            print(f"\ncontourcap track: the {out.count} frames tracked before the failure are in {kept}",
+                  file=sys.stderr)
+        raise
+    out.commit()
     summary = summarise(records, time.perf_counter() - t0).as_dict()
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)

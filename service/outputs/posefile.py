@@ -10,13 +10,15 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from service.atomic import atomic_open
+from service.errors import ServiceError
 from service.wire.messages import MessageError
 from service.wire.records import PoseRecord
 
 __all__ = ["ExportError", "read_pose_records", "write_pose_records", "fps_from_records"]
 
 
-class ExportError(ValueError):
+class ExportError(ServiceError, ValueError):
     """A pose file cannot be read or exported; the message names the file (and line)."""
 
 
@@ -42,7 +44,7 @@ def read_pose_records(path) -> list[PoseRecord]:
 def write_pose_records(path, records: Iterable[PoseRecord]) -> int:
     """Write records as JSONL; returns the count."""
     n = 0
-    with open(path, "wb") as f:
+    with atomic_open(path, "wb") as f:
         for rec in records:
             f.write(rec.to_bytes() + b"\n")
             n += 1

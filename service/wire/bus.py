@@ -31,6 +31,7 @@ from typing import Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
+from service.errors import ServiceError
 from service.wire.messages import MessageError, check_name
 from service.wire.records import CreditMessage, StatusMessage
 
@@ -39,7 +40,7 @@ T = TypeVar("T")
 MODES = ("live", "lossless")
 
 
-class BusError(RuntimeError):
+class BusError(ServiceError, RuntimeError):
     """The zenoh session could not be opened or reached no peer/router (wrong address, TLS, credentials)."""
 
 
