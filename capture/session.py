@@ -39,6 +39,7 @@ to the session root.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -198,10 +199,17 @@ def read_timestamps(path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _resolve(root: Path, value, where: str) -> Path:
-    if not isinstance(value, str) or not value:
+    """``root / value`` for a path written in the session file, which must stay inside the session
+    folder: relative, without a ``..`` that leaves it (checked on the text: a symlink placed inside the
+    folder, as ``contourcap import`` makes, is the operator's choice and is followed)."""
+    if not isinstance(value, str) or not value or "\x00" in value:
         raise SessionError(f"{where}: must be a non-empty string path")
     p = Path(value)
-    return p if p.is_absolute() else root / p
+    norm = os.path.normpath(value)
+    if p.is_absolute() or p.drive or norm == ".." or norm.startswith(".." + os.sep) or norm.startswith("../"):
+        raise SessionError(f"{where}: {value!r} leaves the session folder (paths must be relative to it, "
+                           "without '..'); place the file, or a symlink to it, inside the folder")
+    return root / p
 
 
 def _optional_path(root: Path, table: dict, key: str, where: str) -> Path | None:

@@ -70,3 +70,118 @@ def test_fps_zero_refused(argv, tmp_path, capsys):
         main([a.format(poses=poses, tmp=tmp_path) for a in argv])
     assert exc.value.code == 2
     assert "--fps" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["run", "view", "echo"])
+def test_studio_toml_of_random_bytes(command, tmp_path, capsys):
+    bad = tmp_path / "studio.toml"
+    bad.write_bytes(b"\xff\xfe" + np.random.default_rng(2).bytes(300))
+    rc = main([command, "--config", str(bad)])
+    one_line_error(capsys, rc, str(bad))
+
+
+def test_demo_unknown_motion_before_anything_is_made(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc = main(["demo", "--motion", "nope", "--cache", str(tmp_path / "cache")])
+    one_line_error(capsys, rc, "nope")
+    assert os.listdir(tmp_path) == []
+
+
+def test_demo_default_output_is_not_the_working_directory():
+    from service.commands.demo import add_args, options_from_args
+    import argparse
+
+    p = argparse.ArgumentParser()
+    add_args(p)
+    opts = options_from_args(p.parse_args(["--cache", "/some/cache"]))
+    assert opts.out_dir is None  # run_demo puts it under the cache: <cache>/last-demo
+
+
+@pytest.mark.parametrize("escape", ["../../../etc/passwd", "/etc/passwd", "a/../../outside.avi"])
+def test_session_path_escaping_is_refused_by_name(escape, session_dir, capsys):
+    toml = session_dir / "session.toml"
+    toml.write_text(toml.read_text().replace('video = "cam1.avi"', f'video = "{escape}"'))
+    rc = main(["replay", str(session_dir)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert "leaves the session folder" in err and escape in err and "cam1" in err
+
+
+def test_session_symlink_inside_the_folder_is_followed(session_dir, tmp_path):
+    from capture.session import load_session
+
+    outside = tmp_path / "media.avi"
+    (session_dir / "cam1.avi").rename(outside)
+    (session_dir / "cam1.avi").symlink_to(outside)
+    assert load_session(session_dir).camera("cam1").video == session_dir / "cam1.avi"
+
+
+def _pose(frame: int, ok: bool = True) -> bytes:
+    import json
+
+    rec = {"frame": frame, "timestamp_ns": frame * 40_000_000, "ok": ok,
+           "joints": {"pelvis": [0.0, 0.0, 1.0], "head": [0.0, 0.0, 1.7]}}
+    if not ok:
+        rec = {"frame": frame, "timestamp_ns": frame * 40_000_000, "ok": False, "reason": "lost"}
+    return json.dumps(rec).encode()
+
+
+def test_export_skips_and_reports_a_cut_last_line(tmp_path, capsys):
+    poses = tmp_path / "p.jsonl"
+    whole = b"\n".join(_pose(k) for k in range(5)) + b"\n"
+    poses.write_bytes(whole + _pose(5)[:17])  # a power cut in the middle of the last record
+    rc = main(["export", str(poses), "--csv", str(tmp_path / "p.csv")])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "skipped 1 line" in err and "line 6" in err and "cut short" in err
+    assert len((tmp_path / "p.csv").read_text().splitlines()) == 1 + 5
+
+
+def test_export_malformed_line_refused_unless_skip_bad(tmp_path, capsys):
+    poses = tmp_path / "p.jsonl"
+    poses.write_bytes(_pose(0) + b"\n\x1b[2J{not json\n" + _pose(1) + b"\n")
+    out = tmp_path / "p.csv"
+    out.write_bytes(EXISTING)
+    rc = main(["export", str(poses), "--csv", str(out)])
+    last = one_line_error(capsys, rc, f"{poses}:2", "--skip-bad")
+    assert "\x1b" not in last
+    assert out.read_bytes() == EXISTING
+    rc = main(["export", str(poses), "--csv", str(out), "--skip-bad"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "skipped 1 line" in err and "\x1b" not in err
+    assert len(out.read_text().splitlines()) == 1 + 2
+
+
+def test_export_all_lost_names_the_input(tmp_path, capsys):
+    poses = tmp_path / "lost.jsonl"
+    poses.write_bytes(b"\n".join(_pose(k, ok=False) for k in range(3)) + b"\n")
+    bvh = tmp_path / "out.bvh"
+    bvh.write_bytes(EXISTING)
+    rc = main(["export", str(poses), "--bvh", str(bvh)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert str(poses) in err.strip().splitlines()[-1] and "lost" in err
+    assert bvh.read_bytes() == EXISTING
+
+
+def test_export_without_session_says_the_height_it_assumes(capsys):
+    import argparse
+
+    from service.commands.export import model_for_export
+
+    args = argparse.Namespace(model=None, height_m=None, session=None)
+    assert model_for_export(args, []).name == "knossow40"
+    assert "1.75 m" in capsys.readouterr().err
+    model_for_export(argparse.Namespace(model=None, height_m=1.6, session=None), [])
+    assert capsys.readouterr().err == ""
+
+
+def test_echo_escapes_received_strings():
+    from service.commands.echo import format_pose
+    from service.wire.records import PoseRecord
+
+    rec = PoseRecord.from_dict({"frame": 3, "timestamp_ns": 0, "ok": False,
+                                "reason": "\x1b]52;c;ZXZpbA==\x07\x1b[2J\u202eevil"})
+    line = format_pose(rec)
+    assert "\x1b" not in line and "\x07" not in line and "\u202e" not in line
+    assert "\\x1b]52" in line and "\\u202e" in line
