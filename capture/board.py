@@ -180,9 +180,8 @@ def detect_checkerboard(gray: np.ndarray, board: Checkerboard) -> np.ndarray | N
 
     Tries ``findChessboardCornersSB`` (exhaustive + accuracy) then the classic
     detector, whose corners are refined with ``cornerSubPix`` (window sized
-    from the corner spacing).  SB's own sub-pixel corners are kept: on the
-    real uu_studio views, re-refining them with ``cornerSubPix`` doubled the
-    board-fit RMS (0.14-0.22 px -> 0.44 px).  Returns raw pixel coordinates,
+    from the corner spacing).  SB's own sub-pixel corners are kept (refining
+    them again made the board fit worse: docs/tuning.md).  Returns raw pixel coordinates,
     shape (n_corners, 2), in OpenCV's order (``cols`` per row, origin at
     whichever corner the detector picked: see ``relabel_to_origin``).
     """

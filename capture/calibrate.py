@@ -54,6 +54,7 @@ class Intrinsics:
 
     @classmethod
     def from_camera(cls, cam: Camera) -> "Intrinsics":
+        """The intrinsic part of a calibrated camera."""
         return cls(cam.name, cam.matrix, cam.distortion, cam.size)
 
 

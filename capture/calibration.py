@@ -49,6 +49,7 @@ class CalibrationError(CaptureError, ValueError):
 
 
 def cameras_to_toml_dict(cameras: Sequence[Camera]) -> dict:
+    """The calibration TOML tables of ``cameras`` (``cam_00`` ... and ``[metadata] units = "m"``)."""
     out: dict = {}
     for i, cam in enumerate(cameras):
         out[f"cam_{i:02d}"] = {
@@ -64,7 +65,15 @@ def cameras_to_toml_dict(cameras: Sequence[Camera]) -> dict:
 
 
 def save_calibration(path, cameras: Sequence[Camera]) -> Path:
-    """Write cameras as an anipose-layout calibration TOML in metres."""
+    """Write cameras as an anipose-layout calibration TOML in metres.
+
+    Parameters
+    ----------
+    path : path
+        File written (replaced).
+    cameras : sequence of Camera
+        Unique names, else ``CalibrationError``.
+    """
     path = Path(path)
     names = [c.name for c in cameras]
     if len(set(names)) != len(names):

@@ -238,6 +238,7 @@ class Camera:
         return (u >= -margin) & (v >= -margin) & (u <= self.width - 1 + margin) & (v <= self.height - 1 + margin)
 
     def with_name(self, name: str) -> "Camera":
+        """The same camera under another name."""
         return Camera(name, self.matrix, self.distortion, self.rotation, self.translation, self.size)
 
     @classmethod

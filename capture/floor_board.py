@@ -119,7 +119,28 @@ def floor_view(
     outline=None,
     origin_hint=None,
 ) -> FloorView:
-    """Board corners in one camera from a few frames of a static board (see module doc)."""
+    """Board corners in one camera from a few frames of a static board (see module doc).
+
+    Parameters
+    ----------
+    name : str
+        Camera name.
+    frames : sequence of ndarray, shape (h, w), uint8
+        Grey frames of the static board.
+    frame_ids : sequence of int
+        Their frame indices (reported in ``FloorView.frames``).
+    intr : Intrinsics
+    board : Checkerboard
+    outline : array_like, shape (4, 2), optional
+        The user's four outer pattern corners (pixels), for views where detection fails.
+    origin_hint : array_like, shape (2,), optional
+        Pixel near the board corner that is the world origin.
+
+    Returns
+    -------
+    FloorView
+        Corners (n, 2) raw pixels in board order, or None with the reason.
+    """
     hint = origin_hint if origin_hint is not None else (None if outline is None else np.asarray(outline)[0])
     found, used = [], []
     for n, (f, k) in enumerate(zip(frames, frame_ids)):
@@ -197,7 +218,25 @@ def calibrate_floor(
     n_frames: int = 3,
     progress: Progress | None = None,
 ) -> FloorCalibration:
-    """Extrinsics of every camera from its video of the board lying on the floor (see module doc)."""
+    """Extrinsics of every camera from its video of the board lying on the floor (see module doc).
+
+    Parameters
+    ----------
+    intrinsics : sequence of Intrinsics
+        One per camera (their names are the camera names).
+    videos : mapping
+        Camera name -> video (or image) of the board on the floor.
+    board : Checkerboard
+    outlines, origin_hints : mapping, optional
+        Camera name -> outline (4, 2) / origin hint (2,) in pixels (see :func:`floor_view`).
+    n_frames : int
+        Frames read per video.
+    progress : Progress, optional
+
+    Returns
+    -------
+    FloorCalibration
+    """
     if n_frames < 1:
         raise ValueError(f"n_frames: need at least 1 frame per video, got {n_frames}")
     outlines, origin_hints = dict(outlines or {}), dict(origin_hints or {})

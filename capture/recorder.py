@@ -19,10 +19,8 @@ drops below ``min_free_bytes``, checked once per second of footage) naming
 the file.  ``cv2.VideoWriter`` cannot report errors, hence the frame-count
 check of every closed segment.
 
-Studio config (``load_capture_config``) reads the capture part of the
-service's ``studio.toml``: ``[studio] name, session, calibration``,
-``[trigger] backend = "none" | "usb", fps``, ``[[camera]]`` (see
-``capture.sources.SourceSpec``); other tables are the service's.
+``load_capture_config`` reads the capture part of the service's ``studio.toml``
+(``capture.studio``) and loads its replay session.
 """
 
 from __future__ import annotations
@@ -41,8 +39,9 @@ import numpy as np
 from capture.calibration import CalibrationError, load_calibration
 from capture.errors import CaptureError
 from capture.session import CALIBRATION_FILE, Session, SessionError, load_session, write_session_toml
-from capture.sources import EndOfStream, Frame, SourceError, SourceSpec, parse_source_specs
-from capture.tomlio import load_file
+from capture.backends import SourceSpec
+from capture.sources import EndOfStream, Frame, SourceError
+from capture.studio import parse_studio_capture, read_studio_toml
 
 __all__ = [
     "CODECS",
@@ -70,17 +69,36 @@ class DiskFullError(RecorderError):
 
 @dataclass(frozen=True)
 class CameraRecording:
+    """What one camera stored.
+
+    Attributes
+    ----------
+    name : str
+    frames : int
+        Frames stored.
+    first_frame_id, last_frame_id : int or None
+        Ids of the first and last stored frame (None: nothing stored).
+    dropped : int
+        Gaps in frame ids between the first and last stored frame.
+    rejected : int
+        Frames whose id was not above the previous one (not stored).
+    error : str or None
+        Why this camera's source stopped early.
+    """
+
     name: str
     frames: int
     first_frame_id: int | None
     last_frame_id: int | None
-    dropped: int  # gaps in frame ids between the first and last stored frame
-    rejected: int  # frames whose id was not above the previous one (not stored)
-    error: str | None = None  # why this camera's source stopped early
+    dropped: int
+    rejected: int
+    error: str | None = None
 
 
 @dataclass(frozen=True)
 class RecordingSummary:
+    """The session directory written and each camera's :class:`CameraRecording`."""
+
     root: Path
     cameras: tuple[CameraRecording, ...]
 
@@ -313,6 +331,21 @@ def record(sources: Sequence, recorder: Recorder, *, max_frames: int | None = No
 
     A source that fails (``StreamLostError`` …) stops alone and is named in
     its ``CameraRecording.error``; a recorder failure stops all and is raised.
+
+    Parameters
+    ----------
+    sources : sequence of Source
+        Not yet opened; each is entered on its thread.
+    recorder : Recorder
+        Closed at the end.
+    max_frames : int, optional
+        Frames per camera.
+    stop : threading.Event, optional
+        Set to end the recording (also set by a recorder failure).
+
+    Returns
+    -------
+    RecordingSummary
     """
     stop = threading.Event() if stop is None else stop
     errors: dict[str, str] = {}
@@ -350,7 +383,21 @@ def record(sources: Sequence, recorder: Recorder, *, max_frames: int | None = No
 
 @dataclass(frozen=True)
 class CaptureConfig:
-    """The capture part of a studio config."""
+    """The capture part of a studio config, its replay session loaded.
+
+    Attributes
+    ----------
+    name : str
+        Studio name (the default session name).
+    fps : float
+        Frames per second (see ``capture.studio.StudioCapture.fps``).
+    trigger : {"none", "usb"}
+    session : Session or None
+        The replay session, loaded when a camera uses the replay backend.
+    calibration : Path or None
+        ``[studio] calibration``, else the session's ``calibration.toml`` when it has one.
+    cameras : tuple of SourceSpec
+    """
 
     name: str
     fps: float
@@ -361,41 +408,19 @@ class CaptureConfig:
 
 
 def load_capture_config(path) -> CaptureConfig:
-    """Read the capture part of ``studio.toml`` (keys in the module docstring); errors name file and key.
-
-    ``fps``: ``[trigger] fps``, else the replay session's, else 30.
-    ``calibration``: ``[studio] calibration``, else the session's.  The
-    session is loaded only when a camera uses the replay backend.
-    """
+    """Read the capture part of ``studio.toml`` (``capture.studio``); ``RecorderError`` names file and key."""
     path = Path(path)
-    data = load_file(path, error=RecorderError, what="studio config")
-    base = path.resolve().parent
-    studio = data.get("studio", {})
-    trigger = data.get("trigger", {})
-    if not isinstance(studio, dict) or not isinstance(trigger, dict):
-        raise RecorderError(f"{path}: [studio] and [trigger] must be tables")
     try:
-        cams = parse_source_specs(data.get("camera"), where=str(path))
+        cap = parse_studio_capture(read_studio_toml(path), where=str(path), base=path.resolve().parent)
     except ValueError as exc:
         raise RecorderError(str(exc)) from None
     session = None
-    if "session" in studio and any(c.backend == "replay" for c in cams):
+    if any(c.backend == "replay" for c in cap.cameras):
         try:
-            session = load_session(base / str(studio["session"]), require_calibration=False)
+            session = load_session(cap.session, require_calibration=False)
         except SessionError as exc:
             raise RecorderError(f"{path}: studio.session: {exc}") from None
-    if any(c.backend == "replay" for c in cams) and session is None:
-        raise RecorderError(f"{path}: studio.session: replay cameras need a session directory")
-    backend = trigger.get("backend", "none")
-    if backend not in ("none", "usb"):
-        raise RecorderError(f"{path}: trigger.backend: must be 'none' or 'usb', got {backend!r}")
-    fps = trigger.get("fps", session.fps if session is not None else 30.0)
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0:
-        raise RecorderError(f"{path}: trigger.fps: must be a positive number, got {fps!r}")
-    calibration = None
-    if "calibration" in studio:
-        calibration = base / str(studio["calibration"])
-    elif session is not None and (session.root / CALIBRATION_FILE).is_file():
+    calibration = cap.calibration
+    if calibration is None and session is not None and (session.root / CALIBRATION_FILE).is_file():
         calibration = session.root / CALIBRATION_FILE
-    name = studio.get("name", "studio")
-    return CaptureConfig(str(name), float(fps), backend, session, calibration, cams)
+    return CaptureConfig(cap.name, cap.fps, cap.trigger, session, calibration, cap.cameras)

@@ -21,6 +21,10 @@ Pacing:
 (pass ``k`` adds ``k * (last_id - first_id + 1)`` to ids and
 ``k * (last_ts - first_ts + 1e9 / fps)`` to timestamps) so a synchroniser
 downstream never sees an id twice.
+
+``preload=True`` decodes the camera's footage into memory when opened and serves
+it from there (a stand-in for a camera that delivers decoded frames: decoding is
+then a cost of opening, not of reading).
 """
 
 from __future__ import annotations
@@ -34,19 +38,35 @@ from typing import Callable, Iterator, Sequence
 import cv2
 import numpy as np
 
+from capture.errors import CaptureError
 from capture.session import Session, image_frame_ids, image_path, read_timestamps
 from capture.sources import EndOfStream, Frame, OpenError, SourceBase, SourceError, SourceTimeout
 
-__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "PACINGS"]
+__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "count_frames", "PACINGS",
+           "FrameRangeError"]
+
+
+class FrameRangeError(CaptureError, ValueError):
+    """A ``--frames`` range that is malformed, or that holds no frame of the session (its length named)."""
 
 PACINGS = ("fast", "realtime", "step")
 _IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm"}
 
 
 def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | None:
-    """``"START:STOP"`` (STOP excluded; either may be empty) -> ``range``; ``None``/``""`` -> ``None``.
+    """The frame ids of a ``--frames`` option.
 
-    Raises ``ValueError`` naming ``option`` on anything else.
+    Parameters
+    ----------
+    text : str or None
+        ``"START:STOP"`` (STOP excluded; either may be empty: from 0 / to the end).
+    option : str
+        Option name for the error message.
+
+    Returns
+    -------
+    range or None
+        None for ``None`` or ``""`` (every frame); ``ValueError`` naming ``option`` on anything else.
     """
     if not text:
         return None
@@ -57,10 +77,30 @@ def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | 
         start = int(parts[0]) if parts[0].strip() else 0
         stop = int(parts[1]) if parts[1].strip() else 2**62
     except ValueError:
-        raise ValueError(f"{option}: expected START:STOP (frame ids, STOP excluded), got {text!r}") from None
+        raise FrameRangeError(f"{option}: expected START:STOP (frame ids, STOP excluded), got {text!r}") from None
     if start < 0 or stop <= start:
-        raise ValueError(f"{option}: need 0 <= START < STOP, got {text!r}")
+        raise FrameRangeError(f"{option}: need 0 <= START < STOP, got {text!r}")
     return range(start, stop)
+
+
+def count_frames(session: Session, camera: str, frames: range | None = None) -> int | None:
+    """How many frames ``read_frames(session, camera, frames=frames)`` will give, for progress and ETA.
+
+    Image sequences are counted exactly; videos by their containers' frame counts (summed over
+    segment files, clipped to ``frames``).  None when unknown (a container without a count).
+    """
+    cam = session.camera(camera)
+    if cam.images is not None:
+        ids = image_frame_ids(cam.images)
+        return int(sum(int(i) in frames for i in ids)) if frames is not None else int(ids.size)
+    total = 0
+    for path in cam.video_files:
+        cap = cv2.VideoCapture(str(path))
+        total += max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+        cap.release()
+    if frames is not None:
+        total = max(0, min(total, frames.stop) - max(frames.start, 0))
+    return total or None
 
 
 class _Reader:
@@ -143,6 +183,33 @@ class _Reader:
             self.capture = None
 
 
+class _Preloaded:
+    """A ``_Reader`` pass decoded into memory: the same ``next()`` / ``close()``, plus ``rewind()``."""
+
+    def __init__(self, reader: _Reader):
+        self.where = reader.where
+        self.items: list = []
+        try:
+            while (item := reader.next()) is not None:
+                self.items.append(item)
+        finally:
+            reader.close()
+        self.index = 0
+
+    def next(self):
+        if self.index >= len(self.items):
+            return None
+        self.index += 1
+        return self.items[self.index - 1]
+
+    def rewind(self) -> "_Preloaded":
+        self.index = 0
+        return self
+
+    def close(self):
+        self.items = []
+
+
 class _VideoChain:
     """Video segment files read back to back (one file = one segment).
 
@@ -220,6 +287,8 @@ class ReplaySource(SourceBase):
         Replay the camera's background media instead of its footage.
     step_timeout_s : float or None
         How long ``read()`` waits for ``step()`` in ``step`` pacing (None = forever).
+    preload : bool
+        Decode the footage into memory in ``open()`` and read from there.
     """
 
     def __init__(
@@ -234,6 +303,7 @@ class ReplaySource(SourceBase):
         frames: range | None = None,
         background: bool = False,
         step_timeout_s: float | None = None,
+        preload: bool = False,
     ):
         if pacing not in PACINGS:
             raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
@@ -249,7 +319,8 @@ class ReplaySource(SourceBase):
         self.frames = frames
         self.background = background
         self.step_timeout_s = step_timeout_s
-        self._reader: _Reader | None = None
+        self.preload = preload
+        self._reader: _Reader | _Preloaded | None = None
         self._ended = False
         self._pass = 0
         self._first: tuple[int, int] | None = None  # (frame_id, timestamp_ns) of a pass's first frame
@@ -261,8 +332,12 @@ class ReplaySource(SourceBase):
     def open(self) -> None:
         """Open the camera's media; raises ``OpenError`` naming the file."""
         self.close()
-        self._reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        self._reader = self._new_reader()
         self._ended = False
+
+    def _new_reader(self) -> _Reader | _Preloaded:
+        reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        return _Preloaded(reader) if self.preload else reader
 
     def close(self) -> None:
         if self._reader is not None:
@@ -279,8 +354,11 @@ class ReplaySource(SourceBase):
         item = self._reader.next()
         if item is not None or not self.loop or self._first is None:
             return item
-        self._reader.close()
-        self._reader = _Reader(self.session, self.name, background=self.background, frames=self.frames)
+        if isinstance(self._reader, _Preloaded):
+            self._reader.rewind()
+        else:
+            self._reader.close()
+            self._reader = self._new_reader()
         self._pass += 1
         return self._reader.next()
 

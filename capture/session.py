@@ -119,15 +119,18 @@ class Session:
 
     @property
     def camera_names(self) -> tuple[str, ...]:
+        """Camera names in session order."""
         return tuple(c.name for c in self.cameras)
 
     def camera(self, name: str) -> SessionCamera:
+        """The session's camera ``name`` (its media); ``SessionError`` naming the file if absent."""
         for cam in self.cameras:
             if cam.name == name:
                 return cam
         raise SessionError(f"{self.root / SESSION_FILE}: no camera named {name!r} (have {list(self.camera_names)})")
 
     def camera_model(self, name: str) -> Camera:
+        """The calibrated ``Camera`` of ``name``; ``SessionError`` if the calibration lacks it."""
         for cam in self.calibration:
             if cam.name == name:
                 return cam

@@ -83,6 +83,7 @@ def dumps(data: Mapping[str, Any]) -> str:
 
 
 def loads(text: str) -> dict:
+    """Parse TOML text (``tomllib.loads``)."""
     return tomllib.loads(text)
 
 

@@ -48,6 +48,7 @@ from __future__ import annotations
 import errno
 import math
 import struct
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Protocol
@@ -75,6 +76,7 @@ __all__ = [
     "Trigger",
     "TriggerBox",
     "SoftwareTrigger",
+    "start_trigger_box",
 ]
 
 VENDOR_ID = 0x1209
@@ -122,6 +124,8 @@ class TriggerProtocolError(TriggerError):
 
 @dataclass(frozen=True)
 class TriggerInfo:
+    """What a box says about itself: protocol version, firmware (major, minor), output count, serial."""
+
     protocol: int
     firmware: tuple[int, int]
     outputs: int
@@ -293,12 +297,15 @@ class TriggerBox:
         self.period_us = period
 
     def start(self) -> None:
+        """Start pulsing (free-running) and reset the pulse counter."""
         self._out(Request.START, b"", "START")
 
     def stop(self) -> None:
+        """Stop pulsing."""
         self._out(Request.STOP, b"", "STOP")
 
     def arm(self, n_pulses: int) -> None:
+        """Emit exactly ``n_pulses`` pulses at the set rate, then stop."""
         if not 1 <= int(n_pulses) < 2**32:
             raise ValueError(f"n_pulses must be in [1, 2**32), got {n_pulses}")
         self._out(Request.ARM, struct.pack(ARM_FMT, int(n_pulses)), "ARM")
@@ -361,12 +368,15 @@ class SoftwareTrigger:
         self.info = TriggerInfo(PROTOCOL_VERSION, (0, 0), 0, "software")
 
     def set_rate(self, fps: float, *, pulse_width_us: int | None = None) -> None:
+        """Pulse rate (frames per second); the width is ignored."""
         self.period_us = _period_us(fps)
 
     def start(self) -> None:
+        """Count pulses from now on the injected clock."""
         self._t0, self._limit, self._stopped_count = self._clock(), None, None
 
     def arm(self, n_pulses: int) -> None:
+        """Start, and stop counting after ``n_pulses`` pulses."""
         if not 1 <= int(n_pulses) < 2**32:
             raise ValueError(f"n_pulses must be in [1, 2**32), got {n_pulses}")
         self.start()
@@ -403,9 +413,64 @@ class SoftwareTrigger:
         return c.last_frame_id, self._t0 + c.last_frame_id * self.period_us * 1000
 
     def frame_id_at(self, timestamp_ns: int, *, latency_ns: int = 0) -> int:
+        """Id of the latest pulse at or before ``timestamp_ns - latency_ns`` (clock ns)."""
         if self._t0 is None:
             raise TriggerError("software trigger: frame_id_at before start()")
         return max(int((timestamp_ns - latency_ns - self._t0) // (self.period_us * 1000)), 0)
 
     def close(self) -> None:
         self._t0 = None
+
+
+def start_trigger_box(fps: float, *, stop: threading.Event, resync_s: float = 2.0,
+                      on_lost: Callable[[TriggerError], None] | None = None, backend=None,
+                      clock: Callable[[], int] | None = None) -> TriggerBox:
+    """Open the USB trigger box, run it at ``fps`` and keep its clock anchored.
+
+    The box is started, given two periods to pulse, and its clock anchored (``refresh``); a
+    daemon thread re-anchors it every ``resync_s`` until ``stop`` is set.  A box lost later
+    calls ``on_lost(error)`` and sets ``stop``.
+
+    Parameters
+    ----------
+    fps : float
+        Pulse rate (pulses per second).
+    stop : threading.Event
+        Ends the re-anchoring thread; set by it when the box is lost.
+    resync_s : float
+        Seconds between re-anchorings.
+    on_lost : callable (TriggerError) -> None, optional
+        Told why the box was lost (from the re-anchoring thread).
+    backend : pyusb backend, optional
+        For tests (a fake device).
+    clock : callable () -> int, optional
+        Host nanosecond clock the box's pulses are mapped to (default ``time.monotonic_ns``).
+
+    Returns
+    -------
+    TriggerBox
+        Running; the caller stops and closes it.  ``TriggerError`` if the box is absent or fails
+        to start (it is closed first).
+    """
+    box = TriggerBox.find(backend=backend, **({} if clock is None else {"clock": clock}))
+    try:
+        box.set_rate(fps)
+        box.start()
+        time.sleep(2.0 / fps)
+        box.refresh()
+    except BaseException:
+        box.close()  # the caller never sees this box: release the device here
+        raise
+
+    def resync() -> None:
+        while not stop.wait(resync_s):
+            try:
+                box.refresh()
+            except TriggerError as exc:
+                if on_lost is not None:
+                    on_lost(exc)
+                stop.set()
+                return
+
+    threading.Thread(target=resync, name="trigger-resync", daemon=True).start()
+    return box

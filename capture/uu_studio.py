@@ -99,9 +99,27 @@ def import_uu_studio(
 ) -> ImportResult:
     """Convert the uu_studio folder ``src`` into the session directory ``out`` (see module doc).
 
-    Raises ``UUImportError`` naming the missing file, or the camera that
-    could not be calibrated and why; nothing is written before the
-    calibration has succeeded.
+    Parameters
+    ----------
+    src, out : path
+        The uu_studio folder; the session directory written.
+    corners_file : path
+        Floor-board outlines and origin hints of the views where detection fails.
+    copy : bool
+        Copy the videos into ``out`` (else ``out`` holds symbolic links to them).
+    name : str
+        Session name.
+    overwrite : bool
+        Replace a session already in ``out``.
+    n_frames : int
+        Board frames read per floor video.
+    progress : Progress, optional
+
+    Returns
+    -------
+    ImportResult
+        ``UUImportError`` names the missing file, or the camera that could not be calibrated
+        and why; nothing is written before the calibration has succeeded.
     """
     src, out = Path(src), Path(out)
     board_file = src / "checkerboard.xml"

@@ -20,7 +20,7 @@
 
     [trigger]                         # optional USB trigger box
     backend = "none"                  # none | usb
-    fps = 50.0
+    fps = 50.0                        # default: the replay session's fps, else 30 (capture.studio)
 
     [tracker]
     host = "host-a"
@@ -49,13 +49,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from capture.sources import parse_source_specs
-from capture.tomlio import tomllib
+from capture.studio import DEFAULT_FPS, parse_studio_capture, read_studio_toml
 from service.errors import ServiceError
 from service.wire.bus import MODES, ZenohSettings
 from service.wire.messages import ENCODINGS, check_name, MessageError
 
-BACKENDS = ("replay", "opencv")
 
 
 class ConfigError(ServiceError, ValueError):
@@ -64,12 +62,31 @@ class ConfigError(ServiceError, ValueError):
 
 @dataclass(frozen=True)
 class CameraConfig:
+    """One ``[[camera]]`` of the studio (the capture keys as ``capture.backends.SourceSpec`` reads them).
+
+    Attributes
+    ----------
+    name, host : str
+        Camera name; the host it is plugged into.
+    backend : {"replay", "opencv"}
+    source : str
+        opencv: device index, device path or video file; replay: unused.
+    encoding : {"raw", "jpeg", "png"}
+        Frame encoding on the wire.
+    width, height : int or None
+        opencv: requested capture size (pixels).
+    fps : float or None
+        opencv: requested rate (frames per second; default ``[trigger] fps``).
+    exposure : float or None
+        opencv: requested exposure (driver units).
+    """
+
     name: str
     host: str
     backend: str = "replay"
     source: str = ""
     encoding: str = "raw"
-    width: int | None = None       # opencv: requested capture size and exposure (capture.sources keys)
+    width: int | None = None
     height: int | None = None
     fps: float | None = None
     exposure: float | None = None
@@ -77,13 +94,44 @@ class CameraConfig:
 
 @dataclass(frozen=True)
 class TriggerConfig:
+    """``[trigger]``: ``backend`` ("none" or "usb"), ``fps`` (frames per second, see
+    ``capture.studio.StudioCapture.fps``) and the other keys as ``options``."""
+
     backend: str = "none"
-    fps: float = 50.0
+    fps: float = DEFAULT_FPS
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class StudioConfig:
+    """A validated ``studio.toml`` (the keys are in the module docstring).
+
+    Attributes
+    ----------
+    path : Path or None
+        The file (None when parsed from a mapping without a base folder).
+    studio : str
+        Studio name, the zenoh key prefix.
+    delivery : {"live", "lossless"}
+    session, calibration : Path or None
+        Replay session; calibration file (None: the session's).
+    model : str
+        Body model name or file.
+    jpeg_quality : int
+        1..100, for ``encoding = "jpeg"`` cameras.
+    zenoh : ZenohSettings
+    trigger : TriggerConfig
+    tracker_host : str
+    set_timeout_ms : float
+        Live: how long a frame set waits for missing cameras (milliseconds).
+    window : int
+        Lossless: frames in flight before the cameras wait.
+    router_host : str or None
+    router : ZenohSettings or None
+        ``[router]``, when this studio runs its own.
+    cameras : tuple of CameraConfig
+    """
+
     path: Path | None
     studio: str
     delivery: str
@@ -102,13 +150,16 @@ class StudioConfig:
 
     @property
     def hosts(self) -> tuple[str, ...]:
+        """Every host named in the config (cameras, tracker, router), first mention first."""
         hs = [c.host for c in self.cameras] + [self.tracker_host] + ([self.router_host] if self.router_host else [])
         return tuple(dict.fromkeys(hs))
 
     def cameras_on(self, host: str) -> tuple[CameraConfig, ...]:
+        """The cameras plugged into ``host``."""
         return tuple(c for c in self.cameras if c.host == host)
 
     def camera(self, name: str) -> CameraConfig:
+        """The camera called ``name``; ``ConfigError`` if there is none."""
         for c in self.cameras:
             if c.name == name:
                 return c
@@ -190,40 +241,38 @@ def _zenoh(r: _Reader, z: Mapping) -> ZenohSettings:
 
 
 def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path | None = None) -> StudioConfig:
-    """Validate a parsed studio TOML; relative paths are resolved against ``base``."""
+    """Validate a parsed studio TOML.
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed file.
+    where : str
+        File name for the error messages.
+    base : Path, optional
+        Folder relative paths are resolved against (the file's); None leaves them relative.
+
+    Returns
+    -------
+    StudioConfig
+        ``ConfigError`` naming the file and key if a key is missing, unknown or invalid.
+    """
     r = _Reader(where, base)
     r.unknown(data, {"studio", "zenoh", "trigger", "tracker", "router", "camera"}, "")
     s = r.get(data, "studio", "", (dict,))
     r.unknown(s, {"name", "delivery", "session", "calibration", "model", "jpeg_quality"}, "studio")
-    cams_raw = r.get(data, "camera", "", (list,))
-    if not cams_raw:
-        raise r.err("camera", "at least one [[camera]] is needed")
-    cams, seen = [], set()
-    for i, c in enumerate(cams_raw):
+    r.get(data, "camera", "", (list,))
+    try:  # the capture part (cameras, session, trigger) is read as `contourcap record` reads it
+        cap = parse_studio_capture(data, where=where, base=base)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    cams = []
+    for i, (c, spec) in enumerate(zip(data["camera"], cap.cameras)):
         p = f"camera[{i}]"
-        if not isinstance(c, dict):
-            raise r.err(p, "expected a table")
-        r.unknown(c, {"name", "host", "backend", "source", "encoding", "width", "height", "fps", "exposure"}, p)
-        try:  # the capture keys are validated as `contourcap record` does, so one studio.toml serves both
-            (spec,) = parse_source_specs([{k: v for k, v in c.items() if k != "encoding"}], where=r.where)
-        except ValueError as exc:
-            raise ConfigError(str(exc)) from None
-        cam = CameraConfig(r.name(c, "name", p), r.name(c, "host", p),
-                           r.get(c, "backend", p, (str,), "replay", choices=BACKENDS),
-                           str(r.get(c, "source", p, (str, int), "")),
-                           r.get(c, "encoding", p, (str,), "raw", choices=ENCODINGS),
-                           width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure)
-        if cam.name in seen:
-            raise r.err(f"{p}.name", f"duplicate camera {cam.name!r}")
-        seen.add(cam.name)
-        cams.append(cam)
-    session = r.path(s, "session", "studio")
-    if session is None and any(c.backend == "replay" for c in cams):
-        raise r.err("studio.session", "replay cameras need a session directory")
-    t = r.get(data, "trigger", "", (dict,), {})
-    trigger = TriggerConfig(r.get(t, "backend", "trigger", (str,), "none", choices=("none", "usb")),
-                            float(r.get(t, "fps", "trigger", (int, float), 50.0)),
-                            {k: v for k, v in t.items() if k not in ("backend", "fps")})
+        cams.append(CameraConfig(r.name(c, "name", p), r.name(c, "host", p), spec.backend, str(spec.source),
+                                 r.get(c, "encoding", p, (str,), "raw", choices=ENCODINGS),
+                                 width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure))
+    trigger = TriggerConfig(cap.trigger, cap.fps, dict(cap.trigger_options))
     tr = r.get(data, "tracker", "", (dict,), {})
     r.unknown(tr, {"host", "set_timeout_ms", "window"}, "tracker")
     ro = r.get(data, "router", "", (dict,), None)
@@ -245,8 +294,7 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     return StudioConfig(
         path=Path(where) if base is not None else None, studio=r.name(s, "name", "studio"),
         delivery=r.get(s, "delivery", "studio", (str,), "live", choices=MODES),
-        session=Path(session) if session else None,
-        calibration=Path(c) if (c := r.path(s, "calibration", "studio")) else None, model=r.get(s, "model", "studio", (str,), "knossow40"),
+        session=cap.session, calibration=cap.calibration, model=r.get(s, "model", "studio", (str,), "knossow40"),
         jpeg_quality=quality, zenoh=zen, trigger=trigger,
         tracker_host=r.name(tr, "host", "tracker", cams[0].host), set_timeout_ms=timeout, window=window,
         router_host=r.name(ro, "host", "router") if ro is not None else None,
@@ -258,11 +306,7 @@ def load_config(path) -> StudioConfig:
     """Read and validate ``studio.toml``; ConfigError names the file and key."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        data = read_studio_toml(path)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     return parse_config(data, where=str(path), base=path.resolve().parent)

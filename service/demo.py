@@ -9,8 +9,8 @@
 3. This process is the hub and the client: it records every pose (``poses.jsonl``), bridges poses,
    images and silhouettes to rerun (``demo.rrd``) and exports ``poses.bvh``.  Lossless, it taps
    every camera's frames; live, only the first ``live_image_cameras`` cameras' (a tap decodes every
-   frame of its cameras in this process: all six at 800x600 cost ~24 % of a core beside the
-   pipeline), every ``image_every``-th frame logged.  Silhouettes (small chamfer images) and poses
+   frame of its cameras in this process, which competes with the pipeline: docs/tuning.md), every
+   ``image_every``-th frame logged.  Silhouettes (small chamfer images) and poses
    of every camera, always.
 4. The summary: frames, ``fps_out`` (between the first and the last pose: a burst after a slow start
    reads as real time), ``poses_per_s`` (live: poses over the replay window), latency p50/p99, median
@@ -41,6 +41,28 @@ HOST = "demo"
 
 @dataclass(frozen=True)
 class DemoOptions:
+    """What ``contourcap demo`` renders and runs.
+
+    Attributes
+    ----------
+    cameras, size, frames, fps, motion
+        The synthetic session: camera count, image size (w, h) in pixels, frame count, frames per
+        second, bundled CMU motion name.
+    delivery : {"lossless", "live"}
+    out_dir, cache_dir : Path
+        Outputs (poses, BVH, rrd); rendered sessions, keyed by their options.
+    image_every : int
+        Log every n-th frame's images to rerun.
+    timeout_s : float
+        Give up after this long (seconds).
+    live_start_delay_s, live_duration_s : float
+        Live: seconds until session time 0 is due (the workers start meanwhile); seconds of replay.
+    live_image_cameras : int
+        Live: cameras whose frames are tapped for rerun.
+    segment_plugin, fit_plugin : str or None
+        ``module:callable`` replacing the segmenter or the tracker.
+    """
+
     cameras: int = 6
     size: tuple[int, int] = (320, 240)
     frames: int = 90
@@ -60,6 +82,12 @@ class DemoOptions:
 
 @dataclass(frozen=True)
 class DemoSummary:
+    """The demo's result (the module docstring lists what each figure measures).
+
+    Times in seconds unless the name says ``_ms``; ``fps_*`` and ``poses_per_s`` per second of wall
+    time; ``mean_joint_error_m`` in metres; paths as strings; None where a figure does not apply.
+    """
+
     frames: int
     ok: int
     cameras: int
@@ -82,6 +110,7 @@ class DemoSummary:
     rrd: str
 
     def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
         return asdict(self)
 
 

@@ -1,8 +1,8 @@
 """Track a recorded session in one process: background models → segmentation → tracker.
 
 The offline twin of the live pipeline (``contourcap track``).  Per camera a YUV background model
-is learned from the session's background video when it has one, else from the temporal median of
-up to ``median_frames`` session frames spread over the clip (the person must move); every frame is
+is learned by :func:`service.backgrounds.learn_background` (background media, else a temporal
+median of session frames); every frame is
 segmented with ``segmentation.pipeline.segment_frame`` and each frame set is fitted by
 ``tracker.fitting.tracking.Tracker``.  Yields one DESIGN.md pose record per frame id.
 """
@@ -15,10 +15,11 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from capture.replay import iter_frame_sets, read_frames
+from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
 from segmentation.pipeline import SegmentationParams, segment_frame
+from service.backgrounds import background_models
 from tracker.body.model import BodyModel, load_model
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
@@ -40,43 +41,37 @@ def _check_cameras(session: Session, cameras: Sequence[str] | None) -> list[str]
     return names
 
 
-def background_models(session: Session, cameras: Sequence[str], *, frames: range | None = None,
-                      median_frames: int = 25) -> tuple[dict[str, BackgroundModel], dict[str, str]]:
-    """One background model per camera and how each was made (``"video"`` or ``"median"``)."""
-    models, how = {}, {}
-    for name in cameras:
-        cam = session.camera(name)
-        if cam.background is not None:
-            models[name] = BackgroundModel.from_frames(f.image for f in read_frames(session, name, background=True))
-            how[name] = "video"
-            continue
-        # keep an evenly strided subset while reading (never the whole clip in memory)
-        images, stride = [], 1
-        for i, f in enumerate(read_frames(session, name, frames=frames)):
-            if i % stride == 0:
-                images.append(f.image)
-            if len(images) >= 2 * median_frames:
-                images, stride = images[::2], stride * 2
-        if len(images) < 3:
-            raise SessionError(f"{session.root}: camera {name!r} has no background video and only "
-                               f"{len(images)} frame(s), too few for a median background")
-        pick = np.unique(np.linspace(0, len(images) - 1, min(median_frames, len(images))).round().astype(int))
-        models[name] = BackgroundModel.from_median([images[i] for i in pick])
-        how[name] = "median"
-    return models, how
-
-
 def track_session(session: Session, *, model: str | BodyModel = "knossow40", sliding: bool = True,
                   solver: str = "lm", frames: range | None = None, cameras: Sequence[str] | None = None,
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
                   clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
-    """Pose records (dicts) for every frame set of ``session`` in frame-id order.
+    """Pose records for every frame set of ``session``, in frame-id order.
 
-    ``frames``: range of frame ids (None: all); ``cameras``: names to use (None: all);
-    ``initial_params``: start pose (n_params,), else automatic initialisation
-    (``tracker.search.initialise``) on the first frame.  ``backgrounds`` skips learning them.
+    Parameters
+    ----------
+    session : Session
+    model : str or BodyModel
+        Body model (a name is sized by the session's subject).
+    sliding, solver, options
+        Tracker settings (``tracker.fitting.tracking.Tracker``).
+    frames : range or None
+        Frame ids (None: all).
+    cameras : sequence of str or None
+        Camera names (None: all).
+    initial_params : ndarray, shape (n_params,), optional
+        Start pose; else automatic initialisation on the first frame.
+    segmentation : SegmentationParams, optional
+    backgrounds : dict, optional
+        Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
+    clock : callable () -> float
+        Seconds, for the tracker's timings.
+
+    Yields
+    ------
+    dict
+        A DESIGN.md pose record per frame id.
     """
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
@@ -105,10 +100,12 @@ class TrackSummary:
     fps: float
 
     def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict (NaN as None)."""
         return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.__dict__.items()}
 
 
 def summarise(records: Sequence[dict], elapsed_s: float) -> TrackSummary:
+    """Counts and medians of pose records (``ok``, ``iterations``, ``rms_px`` keys) tracked in ``elapsed_s`` seconds."""
     ok = [r for r in records if r.get("ok")]
     its = [r["iterations"] for r in ok]
     rms = [r["rms_px"] for r in ok if r.get("rms_px") is not None]

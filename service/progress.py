@@ -22,6 +22,26 @@ def _clock_text(seconds: float) -> str:
 
 
 class Progress:
+    """A one-line progress bar with rate and ETA, redrawn at most every ``min_interval_s``.
+
+    Parameters
+    ----------
+    total : int, optional
+        Items expected (None: no bar, no ETA).
+    unit : str
+        Name of an item in the line.
+    enabled : bool
+        False draws nothing.
+    stream : text stream, optional
+        Where to draw (default ``sys.stderr`` at draw time).
+    clock : callable () -> float
+        Seconds.
+    width : int
+        Bar width (characters).
+    min_interval_s : float
+        Least time between redraws (seconds).
+    """
+
     def __init__(self, total: int | None = None, *, unit: str = "frames", enabled: bool = True,
                  stream: TextIO | None = None, clock: Callable[[], float] = time.monotonic,
                  width: int = 30, min_interval_s: float = 0.2) -> None:  # fmt: skip
@@ -34,15 +54,18 @@ class Progress:
 
     @property
     def stream(self) -> TextIO | None:
+        """The stream drawn on."""
         return self._stream if self._stream is not None else sys.stderr
 
     def __call__(self, done: int, total: int | None = None, label: str = "") -> None:
+        """Set the items done (and the total) and redraw; ``label`` prefixes the line."""
         self.done = done
         if total is not None:
             self.total = total
         self._draw(label)
 
     def advance(self, n: int = 1, *, label: str = "") -> None:
+        """``n`` more items done; redraw."""
         self.done += n
         self._draw(label)
 
@@ -68,6 +91,7 @@ class Progress:
         self._open = True
 
     def close(self) -> None:
+        """End the line (the next output starts on a new one)."""
         stream = self.stream
         if self._open and stream is not None:
             stream.write("\n")

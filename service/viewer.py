@@ -92,6 +92,7 @@ class RerunBridge:
         self.logged["poses"] += 1
 
     def wants(self, frame_id: int) -> bool:
+        """Whether frame ``frame_id``'s images are logged (every ``image_every``-th)."""
         return frame_id % self.image_every == 0
 
     def on_frame(self, frame: FrameMessage) -> None:

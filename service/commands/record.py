@@ -49,42 +49,11 @@ def _select(cfg, args):
     return specs
 
 
-def _start_trigger(fps: float, stop: threading.Event, resync_s: float, errors: list, *, backend=None):
-    """Open and start the USB trigger box; a daemon thread re-anchors its clock every ``resync_s``.
-
-    A trigger failure (e.g. unplugged) stops the recording and is appended to ``errors``.
-    """
-    import time
-
-    from capture.trigger import TriggerBox, TriggerError
-
-    box = TriggerBox.find(backend=backend)
-    try:
-        box.set_rate(fps)
-        box.start()
-        time.sleep(2.0 / fps)
-        box.refresh()
-    except BaseException:
-        box.close()  # the caller never sees this box: release the device here
-        raise
-
-    def resync() -> None:
-        while not stop.wait(resync_s):
-            try:
-                box.refresh()
-            except TriggerError as exc:
-                errors.append(str(exc))
-                stop.set()
-                return
-
-    threading.Thread(target=resync, name="trigger-resync", daemon=True).start()
-    return box
-
-
 def run(args: argparse.Namespace) -> int:
     from capture.recorder import Recorder, RecorderError, load_capture_config, record
-    from capture.sources import SourceError, open_source
-    from capture.trigger import TriggerError
+    from capture.backends import open_source
+    from capture.sources import SourceError
+    from capture.trigger import TriggerError, start_trigger_box
 
     box = None
     try:
@@ -95,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         trigger_errors: list[str] = []
         frame_id_at = None
         if cfg.trigger == "usb" and any(s.backend == "opencv" for s in specs):
-            box = _start_trigger(cfg.fps, stop, args.resync_s, trigger_errors)
+            box = start_trigger_box(cfg.fps, stop=stop, resync_s=args.resync_s,
+                                    on_lost=lambda exc: trigger_errors.append(str(exc)))
             frame_id_at = box.frame_id_at
         sources = [open_source(s, session=cfg.session, frame_id_at=frame_id_at, pacing=args.pacing) for s in specs]
         rec = Recorder(

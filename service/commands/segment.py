@@ -74,53 +74,6 @@ def _params(args):
     return SegmentationParams(max_components=args.max_components, auto_roi=not args.no_auto_roi)
 
 
-def _frame_count(session, name: str, frames: range | None) -> int | None:
-    from capture.session import image_frame_ids
-
-    cam = session.camera(name)
-    if cam.images is not None:
-        ids = image_frame_ids(cam.images)
-        return int(sum(int(i) in frames for i in ids)) if frames is not None else int(ids.size)
-    total = 0
-    for path in cam.video_files:
-        cap = cv2.VideoCapture(str(path))
-        total += max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
-        cap.release()
-    if frames is not None:
-        total = max(0, min(total, frames.stop) - max(frames.start, 0))
-    return total or None
-
-
-def learn_background(session, name: str, *, background_frames: int, median_frames: int,
-                     covariance: str, frames: range | None = None):
-    """``(BackgroundModel, how)`` for one camera: from background media, else a session median."""
-    from capture.replay import read_frames
-    from capture.session import SessionError
-    from segmentation import BackgroundModel, bgr_to_yuv, evenly_spaced
-
-    if background_frames < 1:
-        raise ValueError(f"background_frames: expected >= 1, got {background_frames}")
-    cam = session.camera(name)
-    if cam.background is not None:
-        images = []
-        for f in read_frames(session, name, background=True):
-            images.append(f.image)
-            if len(images) >= background_frames:
-                break
-        if len(images) == 1:  # a single background image: the variances are the model's floor
-            model = BackgroundModel(bgr_to_yuv(images[0]),
-                                    np.zeros(images[0].shape[:2] + (6,), np.float32), covariance=covariance)
-            return model, "background image"
-        if not images:
-            raise SessionError(f"{cam.background}: camera {name!r}: background media has no frames")
-        return BackgroundModel.from_frames(images, covariance=covariance), f"background media ({len(images)} frames)"
-    images = evenly_spaced((f.image for f in read_frames(session, name, frames=frames)), median_frames)
-    if len(images) < 3:
-        raise SessionError(f"{session.root}: camera {name!r} has no background media and only "
-                           f"{len(images)} frame(s), too few for a median background")
-    return BackgroundModel.from_median(images), f"median of {len(images)} session frames"
-
-
 def _full_distance_png(chamfer, which: np.ndarray) -> np.ndarray:
     """The quantised distance image pasted into the full image (truncation code outside the crop)."""
     w, h = chamfer.image_size
@@ -143,6 +96,7 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
     from capture.replay import read_frames
     from capture.session import SessionError
     from segmentation import segment_frame
+    from service.backgrounds import learn_background
 
     names = list(session.camera_names if cameras is None else cameras)
     unknown = [n for n in names if n not in session.camera_names]
@@ -154,8 +108,9 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
         cam_dir = out / name
         cam_dir.mkdir(parents=True, exist_ok=True)
         t0 = clock()
-        model, how = learn_background(session, name, background_frames=background_frames,
-                                      median_frames=median_frames, covariance=covariance, frames=frames)
+        learnt = learn_background(session, name, background_frames=background_frames,
+                                  median_frames=median_frames, covariance=covariance, frames=frames)
+        model, how = learnt.model, learnt.describe()
         learn_s = clock() - t0
         if save_models:
             model.save(cam_dir / "background.npz")
@@ -194,7 +149,7 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
 
 
 def run(args) -> int:
-    from capture.replay import parse_frame_range
+    from capture.replay import count_frames, parse_frame_range
     from capture.session import SessionError, load_session
     from capture.sources import SourceError
 
@@ -211,7 +166,7 @@ def run(args) -> int:
         if names == []:
             raise ValueError(f"--cameras: no camera names in {args.cameras!r}")
         selected = names or list(session.camera_names)
-        counts = [_frame_count(session, n, frames) for n in selected if n in session.camera_names]
+        counts = [count_frames(session, n, frames) for n in selected if n in session.camera_names]
         total = sum(counts) if counts and all(c is not None for c in counts) else None
         progress = Progress(total, enabled=not args.no_progress)
         try:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
 from service.atomic import JsonlWriter
 from service.offline import background_models, session_model, summarise, track_session
@@ -29,23 +30,6 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
-
-
-def parse_frames(text: str | None) -> range | None:
-    """``"A:B"`` -> ``range(A, B)``; ``"A:"`` -> from A on; ``":B"`` -> up to B (SessionError if malformed)."""
-    if text is None:
-        return None
-    parts = text.split(":")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        a = int(parts[0]) if parts[0] else 0
-        b = int(parts[1]) if parts[1] else 2**62
-    except ValueError:
-        raise SessionError(f"--frames: expected A:B (frame ids), got {text!r}") from None
-    if a < 0 or b <= a:
-        raise SessionError(f"--frames: expected 0 <= A < B, got {text!r}")
-    return range(a, b)
 
 
 def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
@@ -70,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     frame was tracked (:class:`service.atomic.JsonlWriter`): a failing or interrupted run never
     truncates an existing ``OUT``, and its finished frames are kept (named on stderr)."""
     session = load_session(args.session)
-    frames = parse_frames(args.frames)
+    frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
     model = session_model(session, args.model)
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
@@ -79,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     backgrounds, how = background_models(session, names, frames=frames)
     print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
           f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
-    total = _frame_count(session, frames)
+    total = count_frames(session, names[0], frames) if names else None
     records = []
     t0 = time.perf_counter()
     out = JsonlWriter(args.out)
@@ -100,26 +84,6 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)
     return 0 if summary["frames"] else 1
-
-
-def _frame_count(session, frames: range | None) -> int | None:
-    """Frames to expect (for the ETA) from camera 0's timestamps/images count; None if unknown."""
-    try:
-        import cv2
-
-        cam = session.cameras[0]
-        if cam.video is None:
-            return None
-        cap = cv2.VideoCapture(str(cam.video))
-        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        cap.release()
-    except Exception:  # noqa: BLE001 - the ETA is optional
-        return None
-    if n <= 0:
-        return None
-    if frames is not None:
-        n = max(0, min(n, frames.stop) - frames.start)
-    return n
 
 
 def _progress(done: int, total: int | None, elapsed_s: float, rec: dict) -> None:

@@ -88,12 +88,12 @@ def run(args: argparse.Namespace) -> int:
         return 2
     keys = Keys(cfg.studio)
     component = "track" if args.role == "track" else f"{args.role}-{'-'.join(cams) if args.cameras else host}"
-    from service.workers.loops import WorkerError
+    from service.workers.base import WorkerError
 
     finished = False
     try:
         if args.role == "camera":
-            from service.workers.loops import EpochPacer, run_camera_worker
+            from service.workers.camera import EpochPacer, run_camera_worker
 
             paced = args.epoch_ns is not None and cfg.delivery == "live"
             box = start_trigger(cfg, stop) if needs_trigger(cfg, cams) else None
@@ -111,13 +111,13 @@ def run(args: argparse.Namespace) -> int:
                     box.stop()
                     box.close()
         elif args.role == "segment":
-            from service.workers.loops import run_segment_worker
+            from service.workers.segment import run_segment_worker
 
             stats = run_segment_worker(session, keys, build_segmenters(cfg, cams, plugin=args.plugin),
                                        mode=cfg.delivery, stop=stop, component=component,
                                        idle_exit_s=args.idle_exit_s)
         else:
-            from service.workers.loops import run_track_worker
+            from service.workers.track import run_track_worker
 
             fitter = build_fitter(cfg, plugin=args.plugin)
             idle = None if args.idle_exit_s is None else args.idle_exit_s

@@ -7,7 +7,7 @@ those notices — the newest id held by the most live cameras — and demands it
 ``demand/track``); segment workers decode and segment that frame only.  So every camera segments the
 same frame id (sets complete), the CPU goes to frames the tracker can take, and the tracker demands
 the next set before fitting the current one, so segmentation of one set overlaps the fit of the
-previous one.  No I/O here (clocks injected); the zenoh wiring is in :mod:`service.workers.loops`.
+previous one.  No I/O here (clocks injected); the zenoh wiring is in :mod:`service.workers.segment` and :mod:`service.workers.track`.
 """
 
 from __future__ import annotations
@@ -16,14 +16,14 @@ import collections
 import threading
 from typing import Callable
 
-from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, _int, _unpack, check_name
+from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, meta_int, unpack_message, check_name
 
 
 def frame_header(data: bytes) -> tuple[str, int]:
     """``(camera, frame_id)`` of a FrameMessage's bytes: header, sizes and meta validated, the
     pixels left alone (they are validated by ``FrameMessage.from_bytes`` when demanded)."""
-    meta, _ = _unpack(data, TYPE_FRAME, MAX_BYTES)
-    return check_name(meta.get("camera")), _int(meta, "frame_id")
+    meta, _ = unpack_message(data, TYPE_FRAME, MAX_BYTES)
+    return check_name(meta.get("camera")), meta_int(meta, "frame_id")
 
 
 class FrameRing:

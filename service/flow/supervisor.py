@@ -52,7 +52,31 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
               epoch_ns: int | None = None, idle_exit_s: float | None = None, segment_plugin: str | None = None,
               fit_plugin: str | None = None, loop_replay: bool = False,
               python: str = sys.executable) -> list[ProcessSpec]:
-    """The processes ``contourcap run`` starts on ``host``."""
+    """The processes ``contourcap run`` starts on ``host`` (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : StudioConfig
+    config_path : str
+        The studio TOML the workers read.
+    host : str
+    hub : str, optional
+        Peer mode: the supervisor's hub endpoint the workers connect to.
+    epoch_ns : int, optional
+        Live replay: wall-clock time (ns) at which session time 0 is due.
+    idle_exit_s : float, optional
+        Segment and track workers exit after this long without input (replays).
+    segment_plugin, fit_plugin : str, optional
+        ``module:callable`` replacing the segmenter / the tracker.
+    loop_replay : bool
+        Replay cameras loop the session.
+    python : str
+        Interpreter of the children.
+
+    Returns
+    -------
+    list of ProcessSpec
+    """
     worker = (python, "-m", "service.commands.worker")  # skips loading every other sub-command
     common = ("--config", str(config_path), "--host", host) + (("--hub", hub) if hub else ())
     specs = []
@@ -77,7 +101,20 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
 
 
 class Supervisor:
-    """Keeps child processes running (see module docstring).  Not thread-safe: drive it from one thread."""
+    """Keeps child processes running (see module docstring).  Not thread-safe: drive it from one thread.
+
+    Parameters
+    ----------
+    specs : sequence of ProcessSpec
+    backoff_s, max_backoff_s : float
+        First and largest restart delay (seconds); the delay doubles per quick death.
+    stable_s : float
+        A child that ran this long before dying restarts after ``backoff_s`` again.
+    grace_s : float
+        :meth:`stop`: seconds between SIGTERM and SIGKILL.
+    clock, popen, cwd, env
+        Injected for tests; ``cwd`` / ``env`` of the children.
+    """
 
     def __init__(self, specs: Sequence[ProcessSpec], *, backoff_s: float = 0.5, max_backoff_s: float = 10.0,
                  stable_s: float = 10.0, grace_s: float = 5.0, clock: Callable[[], float] = time.monotonic,
@@ -94,6 +131,7 @@ class Supervisor:
         log.info("started %s (pid %d)", child.spec.name, child.proc.pid)
 
     def start(self) -> None:
+        """Start every child."""
         for child in self.children:
             self._spawn(child)
 
@@ -125,9 +163,11 @@ class Supervisor:
 
     @property
     def all_finished(self) -> bool:
+        """Every child exited with status 0."""
         return all(c.finished for c in self.children)
 
     def pid(self, name: str) -> int | None:
+        """Process id of the running child ``name``, or None."""
         for c in self.children:
             if c.spec.name == name and c.proc is not None:
                 return c.proc.pid

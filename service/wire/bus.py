@@ -45,32 +45,43 @@ class BusError(ServiceError, RuntimeError):
 
 
 class Keys:
-    """Key expressions of one studio."""
+    """Key expressions of one studio, all under ``contourcap/<studio>/``.
+
+    A name argument left at ``"*"`` gives the wildcard expression (subscriptions to every camera,
+    component or consumer).
+    """
 
     def __init__(self, studio: str = "default") -> None:
         self.studio = check_name(studio, "studio")
         self.root = f"contourcap/{self.studio}"
 
     def frame(self, cam: str = "*") -> str:
+        """``cam/<cam>/frame``: a camera's FrameMessages."""
         return f"{self.root}/cam/{cam}/frame"
 
     def chamfer(self, cam: str = "*") -> str:
+        """``cam/<cam>/chamfer``: a camera's ChamferMessages."""
         return f"{self.root}/cam/{cam}/chamfer"
 
     @property
     def pose(self) -> str:
+        """``pose``: the tracker's PoseRecords."""
         return f"{self.root}/pose"
 
     def status(self, component: str = "*") -> str:
+        """``status/<component>``: StatusMessages and liveliness tokens."""
         return f"{self.root}/status/{component}"
 
     def credit(self, consumer: str = "*") -> str:
+        """``credit/<consumer>``: lossless acknowledgements (CreditMessage)."""
         return f"{self.root}/credit/{consumer}"
 
     def have(self, cam: str = "*") -> str:
+        """``cam/<cam>/have``: the frame ids a segment worker holds (HaveMessage)."""
         return f"{self.root}/cam/{cam}/have"
 
     def demand(self, consumer: str = "*") -> str:
+        """``demand/<consumer>``: the frame a consumer wants segmented (DemandMessage)."""
         return f"{self.root}/demand/{consumer}"
 
     def camera_of(self, key: str) -> str | None:
@@ -83,11 +94,22 @@ class Keys:
 class ZenohSettings:
     """How to reach the other processes.  Paths are files on this host.
 
-    mode: ``peer`` | ``client`` | ``router``; listen/connect: zenoh endpoints such as
-    ``tcp/127.0.0.1:7447`` or ``tls/host:7447``; tls_*: PEM files; user/password: usrpwd auth;
-    auth_dictionary: a ``user:password`` per line file (routers); config_file: a zenoh JSON5 file
-    applied first (then the fields above override it); connect_timeout_s: how long to wait for a
-    peer/router when ``connect`` is set before raising :class:`BusError`.
+    Attributes
+    ----------
+    mode : {"peer", "client", "router"}
+    listen, connect : tuple of str
+        Zenoh endpoints such as ``tcp/127.0.0.1:7447`` or ``tls/host:7447``.
+    multicast_scouting : bool
+    tls_root_ca, tls_cert, tls_key : str or None
+        PEM files; ``tls_mtls`` asks for client certificates.
+    user, password : str or None
+        usrpwd authentication (both or neither).
+    auth_dictionary : str or None
+        Routers: a file of ``user:password`` lines.
+    config_file : str or None
+        A zenoh JSON5 file applied first (the fields above override it).
+    connect_timeout_s : float
+        How long to wait for a peer/router when ``connect`` is set before :class:`BusError` (seconds).
     """
 
     mode: str = "peer"
@@ -261,12 +283,14 @@ class Inbox(Generic[T]):
             self._cv.notify_all()
 
     def recv(self, timeout_s: float | None = None) -> Received | None:
+        """The oldest item, waiting up to ``timeout_s`` seconds (None: forever); None on timeout."""
         with self._cv:
             if not self._items and not self._cv.wait_for(lambda: bool(self._items), timeout_s):
                 return None
             return self._items.popleft()
 
     def drain(self) -> list[Received]:
+        """Every item held, oldest first, without waiting."""
         with self._cv:
             out = list(self._items)
             self._items.clear()
@@ -276,6 +300,7 @@ class Inbox(Generic[T]):
         return len(self._items)
 
     def close(self) -> None:
+        """Undeclare the subscriber (items held stay readable)."""
         try:
             self._sub.undeclare()
         except Exception:  # session already closed
@@ -382,12 +407,31 @@ class StatusReporter:
         self._last_processed = 0.0
 
     def count(self, name: str, n: float = 1) -> None:
+        """Add ``n`` to counter ``name``."""
         self.counters[name] += n
 
     def latency(self, ms: float) -> None:
+        """Record one latency (milliseconds); the next status reports their mean."""
         self._lat.append(float(ms))
 
     def tick(self, *, state: str = "running", force: bool = False, **gauges: float) -> StatusMessage | None:
+        """Publish a status once ``period_s`` passed since the last (always when ``force``).
+
+        Parameters
+        ----------
+        state : str
+            ``"running"``, ``"finished"`` or ``"failed"``.
+        force : bool
+            Publish now regardless of the period.
+        **gauges : float
+            Current values reported beside the counters (queue depths, cameras present, ...).
+
+        Returns
+        -------
+        StatusMessage or None
+            What was published (counters, ``fps`` of ``processed`` since the last status,
+            mean ``latency_ms``, gauges), or None if it was not time yet.
+        """
         now = self._clock()
         dt = now - self._last_t
         if dt < self.period_s and not force:
@@ -404,6 +448,7 @@ class StatusReporter:
         return msg
 
     def close(self) -> None:
+        """Withdraw the status publisher and the liveliness token."""
         for obj in (self._pub, self._token):
             try:
                 obj.undeclare()

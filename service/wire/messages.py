@@ -63,14 +63,39 @@ def check_name(value: Any, what: str = "camera") -> str:
     return value
 
 
-def _int(meta: Mapping, key: str, *, lo: int = 0, hi: int = 2**63 - 1) -> int:
+def meta_int(meta: Mapping, key: str, *, lo: int = 0, hi: int = 2**63 - 1) -> int:
+    """An integer field of untrusted decoded meta, validated.
+
+    Parameters
+    ----------
+    meta : mapping
+        Decoded JSON object (e.g. the meta of :func:`unpack_message`).
+    key : str
+        Field name; it is named in the error.
+    lo, hi : int
+        Inclusive bounds.
+
+    Returns
+    -------
+    int
+        ``meta[key]``; :class:`MessageError` if absent, a bool, not an int or out of bounds.
+    """
     v = meta.get(key)
     if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
         raise MessageError(f"{key}: expected an integer in [{lo}, {hi}], got {v!r:.80}")
     return v
 
 
-def _float(meta: Mapping, key: str) -> float:
+def meta_float(meta: Mapping, key: str) -> float:
+    """A finite number field of untrusted decoded meta as ``float``; :class:`MessageError` otherwise.
+
+    Parameters
+    ----------
+    meta : mapping
+        Decoded JSON object.
+    key : str
+        Field name; it is named in the error.
+    """
     v = meta.get(key)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise MessageError(f"{key}: expected a finite number, got {v!r:.80}")
@@ -118,12 +143,36 @@ def dumps_json(obj: Mapping) -> bytes:
         raise MessageError(f"cannot encode: {exc}") from None
 
 
-def _pack(msg_type: int, meta: Mapping, payload: bytes) -> bytes:
+def pack_message(msg_type: int, meta: Mapping, payload: bytes) -> bytes:
+    """Header + compact JSON ``meta`` + ``payload`` (the binary layout in the module docstring)."""
     m = dumps_json(meta)
     return HEADER.pack(MAGIC, msg_type, VERSION, 0, len(m), len(payload)) + m + payload
 
 
-def _unpack(data: Any, expect_type: int, max_bytes: int) -> tuple[dict, memoryview]:
+def unpack_message(data: Any, expect_type: int, max_bytes: int) -> tuple[dict, memoryview]:
+    """Split untrusted bytes of a binary message into its meta and payload, header checked.
+
+    Parameters
+    ----------
+    data : bytes-like
+        The whole message.
+    expect_type : int
+        ``TYPE_FRAME`` or ``TYPE_CHAMFER``.
+    max_bytes : int
+        Largest message accepted.
+
+    Returns
+    -------
+    meta : dict
+        The decoded JSON meta (fields not yet validated: use :func:`meta_int` / :func:`meta_float`).
+    payload : memoryview
+        The bytes after the meta.
+
+    Raises
+    ------
+    MessageError
+        Wrong magic, type or version, sizes that do not add up, or meta that is not a JSON object.
+    """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise MessageError(f"expected bytes, got {type(data).__name__}")
     view = memoryview(data).cast("B")
@@ -201,7 +250,23 @@ class FrameMessage:
     @classmethod
     def from_image(cls, camera: str, frame_id: int, timestamp_ns: int, image: np.ndarray, *,
                    encoding: str = "raw", jpeg_quality: int = 90) -> "FrameMessage":
-        """Encode ``image`` (h, w) or (h, w, 3) uint8/uint16 as raw, JPEG or PNG."""
+        """A frame message of one camera image.
+
+        Parameters
+        ----------
+        camera : str
+            Camera name (a short safe name).
+        frame_id : int
+            Trigger pulse number.
+        timestamp_ns : int
+            Capture time (ns).
+        image : ndarray, shape (h, w) or (h, w, 3), uint8 or uint16
+            BGR for colour.
+        encoding : {"raw", "jpeg", "png"}
+            ``raw`` sends the pixels as they are (little-endian).
+        jpeg_quality : int
+            1..100 for ``jpeg``.
+        """
         image = np.ascontiguousarray(image)
         if encoding == "raw":
             data = image.astype(image.dtype.newbyteorder("<"), copy=False).tobytes()
@@ -231,13 +296,15 @@ class FrameMessage:
         return img
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         meta = {"camera": self.camera, "frame_id": self.frame_id, "timestamp_ns": self.timestamp_ns,
                 "encoding": self.encoding, "shape": list(self.shape), "dtype": self.dtype}
-        return _pack(TYPE_FRAME, meta, self.data)
+        return pack_message(TYPE_FRAME, meta, self.data)
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = MAX_BYTES) -> "FrameMessage":
-        meta, payload = _unpack(data, TYPE_FRAME, max_bytes)
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
+        meta, payload = unpack_message(data, TYPE_FRAME, max_bytes)
         camera = check_name(meta.get("camera"))
         encoding = meta.get("encoding")
         if encoding not in ENCODINGS:
@@ -252,7 +319,7 @@ class FrameMessage:
             raise MessageError(f"camera {camera}: shape {shape} x {dtype.name} != payload {len(payload)} bytes")
         if encoding != "raw" and len(payload) == 0:
             raise MessageError(f"camera {camera}: empty {encoding} payload")
-        return cls(camera, _int(meta, "frame_id"), _int(meta, "timestamp_ns"), encoding, shape,
+        return cls(camera, meta_int(meta, "frame_id"), meta_int(meta, "timestamp_ns"), encoding, shape,
                    bytes(payload), dtype.name)
 
 
@@ -285,12 +352,14 @@ class ChamferMessage:
         object.__setattr__(self, "attrs", MappingProxyType(dict(self.attrs)))
 
     def array(self, name: str) -> np.ndarray:
+        """The read-only array called ``name`` (e.g. ``"silhouette"``, shape (h, w) of the ROI); KeyError if absent."""
         for n, a in self.arrays:
             if n == name:
                 return a
         raise KeyError(f"camera {self.camera}: no array {name!r} (have {[n for n, _ in self.arrays]})")
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         specs, chunks = [], []
         for name, arr in self.arrays:
             if arr.dtype.name not in DTYPES or arr.ndim != 2:
@@ -301,18 +370,19 @@ class ChamferMessage:
                 "image_size": list(self.image_size), "roi_xy": list(self.roi_xy),
                 "truncation_px": self.truncation_px, "scale": self.scale, "arrays": specs,
                 "attrs": dict(self.attrs)}
-        return _pack(TYPE_CHAMFER, meta, b"".join(chunks))
+        return pack_message(TYPE_CHAMFER, meta, b"".join(chunks))
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = MAX_BYTES) -> "ChamferMessage":
-        meta, payload = _unpack(data, TYPE_CHAMFER, max_bytes)
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
+        meta, payload = unpack_message(data, TYPE_CHAMFER, max_bytes)
         camera = check_name(meta.get("camera"))
         w, h = _shape(meta.get("image_size"), "image_size", (2,))
         roi = meta.get("roi_xy")
         if not isinstance(roi, list) or len(roi) != 2:
             raise MessageError(f"camera {camera}: roi_xy must be [x, y], got {roi!r:.40}")
-        x0 = _int({"roi_x": roi[0]}, "roi_x", hi=w - 1)
-        y0 = _int({"roi_y": roi[1]}, "roi_y", hi=h - 1)
+        x0 = meta_int({"roi_x": roi[0]}, "roi_x", hi=w - 1)
+        y0 = meta_int({"roi_y": roi[1]}, "roi_y", hi=h - 1)
         specs = meta.get("arrays")
         if not isinstance(specs, list) or not 0 < len(specs) <= 16:
             raise MessageError(f"camera {camera}: arrays must be a list of 1..16 specs")
@@ -336,6 +406,6 @@ class ChamferMessage:
         attrs = meta.get("attrs", {})
         if not isinstance(attrs, dict) or len(attrs) > 32:
             raise MessageError(f"camera {camera}: attrs must be an object of at most 32 numbers")
-        attrs = {check_name(k, "attr name"): _float(attrs, k) for k in attrs}
-        return cls(camera, _int(meta, "frame_id"), _int(meta, "timestamp_ns"), (w, h), (x0, y0),
-                   _float(meta, "truncation_px"), _float(meta, "scale"), tuple(arrays), attrs)
+        attrs = {check_name(k, "attr name"): meta_float(attrs, k) for k in attrs}
+        return cls(camera, meta_int(meta, "frame_id"), meta_int(meta, "timestamp_ns"), (w, h), (x0, y0),
+                   meta_float(meta, "truncation_px"), meta_float(meta, "scale"), tuple(arrays), attrs)

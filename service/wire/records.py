@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from service.wire.messages import MessageError, _float, _int, check_name, dumps_json, loads_json
+from service.wire.messages import MessageError, meta_float, meta_int, check_name, dumps_json, loads_json
 
 POSE_MAX_BYTES = 1024 * 1024
 STATUS_MAX_BYTES = 64 * 1024
@@ -56,8 +56,8 @@ class PoseRecord:
         if not isinstance(obj, Mapping):
             raise MessageError(f"pose: expected an object, got {type(obj).__name__}")
         obj = dict(obj)
-        frame = _int(obj, "frame")
-        ts = _int(obj, "timestamp_ns")
+        frame = meta_int(obj, "frame")
+        ts = meta_int(obj, "timestamp_ns")
         ok = obj.get("ok")
         if not isinstance(ok, bool):
             raise MessageError(f"ok: expected true/false, got {ok!r:.40}")
@@ -75,10 +75,10 @@ class PoseRecord:
                              for k, v in joints.items()}
         for key in ("rms_px", "latency_ms"):
             if obj.get(key) is not None:
-                obj[key] = _float(obj, key)
+                obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):
             if key in obj:
-                _int(obj, key)
+                meta_int(obj, key)
         return cls(frame, ts, ok, MappingProxyType(obj))
 
     @property
@@ -87,6 +87,7 @@ class PoseRecord:
         return {k: np.asarray(v, float) for k, v in self.fields.get("joints", {}).items()}
 
     def get(self, key: str, default: Any = None) -> Any:
+        """Field ``key`` of the record, or ``default``."""
         return self.fields.get(key, default)
 
     def replace(self, **updates: Any) -> "PoseRecord":
@@ -94,13 +95,16 @@ class PoseRecord:
         return PoseRecord.from_dict({**self.fields, **updates})
 
     def to_dict(self) -> dict[str, Any]:
+        """The record as a plain dict (a copy)."""
         return dict(self.fields)
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json(dict(self.fields))
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = POSE_MAX_BYTES) -> "PoseRecord":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         return cls.from_dict(loads_json(data, max_bytes=max_bytes, what="pose"))
 
 
@@ -118,19 +122,21 @@ class StatusMessage:
         object.__setattr__(self, "stats", MappingProxyType(dict(self.stats)))
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "component": self.component, "state": self.state,
                            "timestamp_ns": self.timestamp_ns, "stats": dict(self.stats)})
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = STATUS_MAX_BYTES) -> "StatusMessage":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
         obj = loads_json(data, max_bytes=max_bytes, what="status")
         _check_version(obj, "status")
         stats = obj.get("stats", {})
         if not isinstance(stats, dict) or len(stats) > 64:
             raise MessageError("stats: expected an object of at most 64 numbers")
-        stats = {check_name(k, "stat name"): _float(stats, k) for k in stats}
+        stats = {check_name(k, "stat name"): meta_float(stats, k) for k in stats}
         return cls(check_name(obj.get("component"), "component"), check_name(obj.get("state"), "state"),
-                   _int(obj, "timestamp_ns"), stats)
+                   meta_int(obj, "timestamp_ns"), stats)
 
 
 @dataclass(frozen=True)
@@ -143,13 +149,14 @@ class _ConsumerFrame:
     WHAT = "record"
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "consumer": self.consumer, "frame_id": self.frame_id})
 
     @classmethod
     def from_bytes(cls, data: bytes, *, max_bytes: int = 4096):
         obj = loads_json(data, max_bytes=max_bytes, what=cls.WHAT)
         _check_version(obj, cls.WHAT)
-        return cls(check_name(obj.get("consumer"), "consumer"), _int(obj, "frame_id"))
+        return cls(check_name(obj.get("consumer"), "consumer"), meta_int(obj, "frame_id"))
 
 
 @dataclass(frozen=True)
@@ -187,6 +194,7 @@ class HaveMessage:
         return max(self.frame_ids) if self.frame_ids else None
 
     def to_bytes(self) -> bytes:
+        """The wire bytes (see the module docstring)."""
         return dumps_json({"v": RECORD_VERSION, "camera": self.camera, "frames": list(self.frame_ids)})
 
     @classmethod
@@ -196,4 +204,4 @@ class HaveMessage:
         frames = obj.get("frames")
         if not isinstance(frames, list) or len(frames) > HAVE_MAX_FRAMES:
             raise MessageError(f"frames: expected a list of at most {HAVE_MAX_FRAMES} frame ids")
-        return cls(check_name(obj.get("camera")), tuple(_int({"frames": f}, "frames") for f in frames))
+        return cls(check_name(obj.get("camera")), tuple(meta_int({"frames": f}, "frames") for f in frames))

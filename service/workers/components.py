@@ -51,6 +51,8 @@ class BackgroundSegmenter:
         self._learning: list[np.ndarray] = []
 
     def __call__(self, frame: FrameMessage, image: np.ndarray) -> ChamferMessage | None:
+        """Chamfer images of ``image`` (h, w, 3) uint8 BGR, or None while learning; MessageError if
+        the image is not BGR or not the background model's size."""
         from segmentation.background import BackgroundModel
         from segmentation.pipeline import segment_frame
 
@@ -92,6 +94,16 @@ class TrackerFitter:
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None) -> "TrackerFitter":
+        """A tracker on ``session``'s calibration with ``model`` sized by its subject.
+
+        Parameters
+        ----------
+        session : capture.session.Session
+        model : str
+            Body model name or file.
+        initial_params : ndarray, shape (n_params,), optional
+            Start pose; else automatic initialisation on the first frame set.
+        """
         from tracker.body.model import load_model
         from tracker.fitting.tracking import Tracker
 
@@ -99,6 +111,7 @@ class TrackerFitter:
         return cls(Tracker(body, list(session.calibration), initial_params=initial_params))
 
     def __call__(self, frame_id: int, timestamp_ns: int, chamfer: dict) -> dict:
+        """The pose record of one frame set (``chamfer``: camera name -> ChamferMessage)."""
         images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
         silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
         return self.tracker.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)

@@ -15,7 +15,8 @@ import pytest
 from capture.recorder import DiskFullError, Recorder, RecorderError, load_capture_config, record
 from capture.replay import ReplaySource, read_frames
 from capture.session import load_session
-from capture.sources import Frame, StreamLostError, parse_source_specs
+from capture.backends import parse_source_specs
+from capture.sources import Frame, StreamLostError
 from tests.support.sessions import make_session
 
 REPO = Path(__file__).resolve().parents[2]

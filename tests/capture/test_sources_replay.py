@@ -182,3 +182,19 @@ def test_parse_frame_range():
     for bad in ("3", "a:b", "9:3", "-1:2", "1:2:3"):
         with pytest.raises(ValueError, match="--frames"):
             parse_frame_range(bad)
+
+
+@pytest.mark.parametrize("kind", ["video", "images"])
+def test_preloaded_replay_serves_what_a_looping_replay_reads(tmp_path, rng, kind):
+    """``preload=True`` decodes at open and then reads exactly what a reading replay reads (loop or not)."""
+    session, _ = make_session(tmp_path, rng, cams=("cam1",), n_frames=5, kind=kind, drops={"cam1": [2]}, csv=True)
+    for loop in (True, False):
+        with ReplaySource(session, "cam1", loop=loop, preload=True) as pre, \
+                ReplaySource(session, "cam1", loop=loop) as ref:
+            for _ in range(12 if loop else 4):
+                a, b = pre.read(), ref.read()
+                assert (a.camera, a.frame_id, a.timestamp_ns) == (b.camera, b.frame_id, b.timestamp_ns)
+                assert np.array_equal(a.image, b.image)
+            if not loop:
+                with pytest.raises(EndOfStream):
+                    pre.read()

@@ -200,3 +200,20 @@ def test_property_lossless_input_gives_complete_sets(n_cams, n_ids, random):
         out += sync.poll(0)
     assert ids(out) == list(range(n_ids)) and all(s.complete for s in out)
     assert sync.stats.timeouts == 0 and sync.stats.duplicates == 0
+
+
+def test_live_assembler_newest_wins_in_camera_order():
+    """Live mode on the same rules: the newest ready set leaves, older ones are stale; items keep the
+    configured camera order; a duplicate keeps the first item."""
+    from capture.sync import FrameSetAssembler
+
+    asm = FrameSetAssembler(("a", "b"), mode="live", timeout_s=0.1, absent_after_s=1.0)
+    asm.add("b", 1, "b1", 0.0)
+    asm.add("a", 1, "a1", 0.0)
+    asm.add("a", 1, "a1-again", 0.0)
+    asm.add("b", 2, "b2", 0.01)
+    asm.add("a", 2, "a2", 0.01)
+    (fs,) = asm.pop_ready(0.01)
+    assert fs.frame_id == 2 and list(fs.items) == ["a", "b"] and fs.reason == "complete"
+    assert (asm.stale, asm.counts["duplicates"]) == (1, 1)
+    assert asm.pop_ready(0.02) == [] and len(asm) == 0

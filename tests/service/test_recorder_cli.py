@@ -63,11 +63,12 @@ def test_record_trigger_resync_thread_stops_on_unplug():
     import errno
     import threading
 
-    from service.commands.record import _start_trigger
+    from capture.trigger import start_trigger_box
 
     box = FakeBox()
     stop, errors = threading.Event(), []
-    tb = _start_trigger(50.0, stop, 0.01, errors, backend=FakeTriggerBackend(box))
+    tb = start_trigger_box(50.0, stop=stop, resync_s=0.01, on_lost=lambda exc: errors.append(str(exc)),
+                           backend=FakeTriggerBackend(box))
     last_id, last_host_ns = tb.refresh()
     assert tb.frame_id_at(last_host_ns) == last_id
     box.unplugged_errno = errno.ENODEV
@@ -80,8 +81,7 @@ def test_record_trigger_start_failure_releases_the_device():
 
     import pytest
 
-    from capture.trigger import TriggerError
-    from service.commands.record import _start_trigger
+    from capture.trigger import TriggerError, start_trigger_box
 
     class Backend(FakeTriggerBackend):
         closed = 0
@@ -92,5 +92,5 @@ def test_record_trigger_start_failure_releases_the_device():
     box = FakeBox()
     box.stall.add(0x03)  # the box refuses START
     with pytest.raises(TriggerError):
-        _start_trigger(50.0, threading.Event(), 1.0, [], backend=Backend(box))
+        start_trigger_box(50.0, stop=threading.Event(), backend=Backend(box))
     assert Backend.closed == 1

@@ -60,5 +60,9 @@ def test_capture_keys_shared_with_record(tmp_path):
     cam0 = load_config(path).camera("cam0")
     assert (cam0.width, cam0.height, cam0.exposure) == (800, 600, -6.0)
     assert {c.name: c.width for c in load_capture_config(path).cameras}["cam0"] == 800
+    record, service = load_capture_config(path), load_config(path)  # one reader: the same values
+    assert (record.fps, record.trigger) == (service.trigger.fps, service.trigger.backend)
+    assert [(c.name, c.backend, c.width, c.exposure) for c in record.cameras] == [
+        (c.name, c.backend, c.width, c.exposure) for c in service.cameras]
     with pytest.raises(ConfigError, match=r"camera\[0\]\.width"):
         load_config(_write(tmp_path, EXAMPLE.read_text().replace("width = 800", "width = -800", 1)))

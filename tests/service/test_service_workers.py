@@ -14,7 +14,7 @@ from capture.camera import Camera
 from capture.replay import ReplaySource, iter_frame_sets
 from capture.sources import EndOfStream, Frame, StreamLostError
 from capture.session import load_session, write_session_toml
-from service.flow.assembler import FrameSetAssembler
+from capture.sync import FrameSetAssembler
 from service.wire.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
                          wait_until_matched)
 from service.wire.messages import ChamferMessage, FrameMessage
@@ -281,20 +281,3 @@ def test_free_running_cameras_share_frame_ids_across_processes_and_restarts(tmp_
         first.close()
         if second is not None:
             second.close()
-
-
-def test_preloaded_replay_serves_what_a_looping_replay_reads(tmp_path, rng):
-    from service.workers.runtime import PreloadedReplay
-
-    session = make_session(tmp_path / "s", rng, n_frames=5)
-    for loop in (True, False):
-        pre = PreloadedReplay(ReplaySource(session, "cam1"), fps=session.fps, loop=loop)
-        with pre, ReplaySource(session, "cam1", loop=loop) as ref:
-            for _ in range(12 if loop else 5):
-                a, b = pre.read(), ref.read()
-                assert (a.camera, a.frame_id, a.timestamp_ns) == (b.camera, b.frame_id, b.timestamp_ns)
-                assert np.array_equal(a.image, b.image)
-            if not loop:
-                with pytest.raises(EndOfStream):
-                    pre.read()
-

@@ -10,7 +10,7 @@ from capture.camera import Camera
 from capture.replay import ReplaySource, iter_frame_sets
 from capture.sources import EndOfStream, Frame, StreamLostError
 from capture.session import load_session, write_session_toml
-from service.flow.assembler import FrameSetAssembler
+from capture.sync import FrameSetAssembler
 from service.wire.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
                          wait_until_matched)
 from service.wire.messages import ChamferMessage, FrameMessage

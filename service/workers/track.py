@@ -1,0 +1,206 @@
+"""The track worker: chamfer images in, frame sets assembled and fitted, pose records out.
+
+A set whose fit fails still gets a record (``ok: false`` and a reason): never silently dropped.
+Lossless mode acknowledges each frame id (credits) and waits for every camera (a set released
+incomplete would not give the offline poses); only a camera silent for
+:data:`LOSSLESS_SET_TIMEOUT_S` is given up on, so a dead one stalls, not stops, the replay.
+Live mode demands the frames it fits (:class:`~service.flow.demand.DemandPlanner`: the newest
+frame id the live cameras' segment workers hold, by their have notices; a camera silent for
+``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
+before fitting it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable
+
+import zenoh
+
+from capture.sync import FrameSetAssembler
+from service.flow.demand import DemandPlanner
+from service.wire.bus import Inbox, Keys, StatusReporter, declare_publisher, wait_any
+from service.wire.messages import ChamferMessage, MessageError
+from service.wire.records import CreditMessage, DemandMessage, HaveMessage, PoseRecord
+from service.workers.base import TRACK_CONSUMER, Fitter
+
+__all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
+
+log = logging.getLogger("contourcap.worker")
+
+LOSSLESS_SET_TIMEOUT_S = 60.0
+"""Lossless delivery: how long a frame set waits for a camera (CPU load, not loss, delays it), in seconds."""
+
+
+class TrackWorker:
+    """Assemble chamfer sets, fit them, publish one pose record per released set (see the module docstring).
+
+    Parameters
+    ----------
+    session : zenoh.Session
+    keys : Keys
+    cameras : tuple of str
+        The studio's cameras.
+    fit : Fitter
+    mode : {"live", "lossless"}
+    set_timeout_s : float
+        Live: how long a set waits for missing cameras.
+    stop : threading.Event
+    clock, wall_ns : callable
+        Monotonic clock (s) for the assembly, wall clock (ns) for the latency.
+    component : str
+        Status name.
+    max_frames, idle_exit_s : int, float, optional
+        Return after this many poses / this long without input once input came.
+    on_pose : callable (PoseRecord) -> None, optional
+        Called with every published record.
+    absent_after_s : float
+        Live: silence after which a camera is left out of the sets.
+    demand_timeout_s : float, optional
+        Live: a demand that brought nothing is given up after this (default ``max(0.25, 2 * set_timeout_s)``).
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, *,
+                 mode: str = "live", set_timeout_s: float = 0.08, stop: threading.Event,
+                 clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
+                 component: str = "track", max_frames: int | None = None, idle_exit_s: float | None = None,
+                 on_pose: Callable[[PoseRecord], None] | None = None, absent_after_s: float = 0.5,
+                 demand_timeout_s: float | None = None) -> None:
+        self.keys, self.fit, self.stop, self.clock, self.wall_ns = keys, fit, stop, clock, wall_ns
+        self.max_frames, self.idle_exit_s, self.on_pose = max_frames, idle_exit_s, on_pose
+        lossless = mode == "lossless"
+        cv = threading.Condition()
+        self.inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
+                           depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
+        self.haves = None if lossless else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
+                                                 depth=64 * len(cameras), cv=cv)
+        self.planner = None if lossless else DemandPlanner(
+            cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
+            demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
+        # lossless: every camera is waited for (absent_after_s None); "cameras" reports those heard within 1 s
+        self.absent_after_s = 1.0 if lossless else absent_after_s
+        self.asm: FrameSetAssembler = FrameSetAssembler(
+            cameras, mode=mode, absent_after_s=None if lossless else absent_after_s,
+            timeout_s=max(set_timeout_s, LOSSLESS_SET_TIMEOUT_S) if lossless else set_timeout_s)
+        self.pose_pub = declare_publisher(session, keys.pose, mode=mode)
+        self.credit_pub = (declare_publisher(session, keys.credit(TRACK_CONSUMER), mode="lossless") if lossless
+                           else None)
+        self.demand_pub = None if lossless else declare_publisher(session, keys.demand(TRACK_CONSUMER),
+                                                                  mode="lossless")
+        self.status = StatusReporter(session, keys, component, clock=clock)
+        self.sent: dict[int, int] = {}  # frame id -> earliest capture wall time (ns) of its pending set
+
+    def gauges(self) -> dict:
+        """Assembly and queue gauges for the status messages and the returned counters."""
+        asm, inbox = self.asm, self.inbox
+        out = {"queue_depth": len(inbox), "stale_sets": asm.stale, "late": asm.late, "restarts": asm.restarts,
+               "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
+               "cameras": len(asm.present(self.clock(), self.absent_after_s))}
+        if self.planner is not None:
+            out.update(bad=inbox.bad + self.haves.bad, demands=self.planner.demands,
+                       demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
+        return out
+
+    def _demand(self) -> None:
+        fid = self.planner.next_demand(self.clock(), hold=self.asm.is_pending) if self.planner is not None else None
+        if fid is not None:
+            self.demand_pub.put(DemandMessage(TRACK_CONSUMER, fid).to_bytes())
+
+    def _take_haves(self) -> None:
+        for got in self.haves.drain():
+            msg: HaveMessage = got.message
+            if self.keys.camera_of(got.key) != msg.camera:
+                self.status.count("mismatched_key")
+            elif self.planner.have(msg.camera, msg.frame_ids, self.clock()):
+                self.asm.seen(msg.camera, self.clock())
+
+    def _take_chamfers(self) -> None:
+        for got in self.inbox.drain():
+            msg: ChamferMessage = got.message
+            if self.keys.camera_of(got.key) != msg.camera:
+                self.status.count("mismatched_key")
+                continue
+            if self.planner is not None and not self.planner.wanted(msg.frame_id):
+                self.status.count("undemanded")
+                continue
+            self.asm.add(msg.camera, msg.frame_id, msg, self.clock())
+            if got.sent_ns is not None and self.asm.is_pending(msg.frame_id):
+                self.sent[msg.frame_id] = min(self.sent.get(msg.frame_id, got.sent_ns), got.sent_ns)
+
+    def _finish(self, fs) -> None:
+        """Fit one released set and publish its pose (and its credit, lossless)."""
+        first = next(iter(fs.items.values()))
+        try:
+            record = dict(self.fit(fs.frame_id, first.timestamp_ns, fs.items))
+        except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
+            log.exception("frame %d: fitting failed", fs.frame_id)
+            record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
+                      "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
+        record.setdefault("cameras", len(fs.items))
+        t0 = self.sent.pop(fs.frame_id, None)
+        if t0 is not None:
+            record["latency_ms"] = (self.wall_ns() - t0) / 1e6
+            self.status.latency(record["latency_ms"])
+        try:
+            pose = PoseRecord.from_dict(record)
+        except MessageError as exc:
+            pose = PoseRecord.from_dict({"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns,
+                                         "ok": False, "reason": f"invalid pose record: {exc}"[:200],
+                                         "cameras": len(fs.items)})
+        self.pose_pub.put(pose.to_bytes())
+        if self.on_pose is not None:
+            self.on_pose(pose)
+        if self.credit_pub is not None:
+            self.credit_pub.put(CreditMessage(TRACK_CONSUMER, fs.frame_id).to_bytes())
+        self.status.count("processed")
+        self.status.count("missing_cameras", len(fs.missing))
+
+    def _idle(self, last_input: float | None) -> bool:
+        """Input came, none for ``idle_exit_s`` and nothing is pending."""
+        return (self.idle_exit_s is not None and last_input is not None
+                and self.clock() - last_input > self.idle_exit_s
+                and not len(self.asm) and not len(self.inbox) and not (self.haves is not None and len(self.haves)))
+
+    def run(self) -> dict:
+        """Fit until ``max_frames`` poses, ``idle_exit_s`` without input, or ``stop``; returns the counters."""
+        done, last_input = 0, None  # idle time counts from the first input
+        try:
+            while not self.stop.is_set() and (self.max_frames is None or done < self.max_frames):
+                if self._idle(last_input):
+                    break
+                self._demand()
+                deadline = self.asm.next_deadline()
+                wait = 0.05 if deadline is None else min(0.05, max(0.0, deadline - self.clock()))
+                if wait_any([self.inbox] if self.haves is None else [self.inbox, self.haves], wait):
+                    last_input = self.clock()
+                if self.haves is not None:
+                    self._take_haves()
+                self._take_chamfers()
+                for fs in self.asm.pop_ready(self.clock()):
+                    if self.planner is not None:  # pipelining: the next set is segmented while this one is fitted
+                        self.planner.released(fs.frame_id)
+                        self._demand()
+                    self._finish(fs)
+                    done += 1
+                    last_input = self.clock()  # a long fit (re-initialisation) is not idleness
+                for fid in [f for f in self.sent if not self.asm.is_pending(f)]:  # bounded by the pending sets
+                    del self.sent[fid]
+                self.status.tick(**self.gauges())
+            return {**self.status.counters, **self.gauges()}
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Report 'finished' and close the inboxes and the status reporter."""
+        self.status.tick(state="finished", force=True, **self.gauges())
+        self.inbox.close()
+        if self.haves is not None:
+            self.haves.close()
+        self.status.close()
+
+
+def run_track_worker(session: zenoh.Session, keys: Keys, cameras: tuple[str, ...], fit: Fitter, **options) -> dict:
+    """``TrackWorker(session, keys, cameras, fit, **options).run()``: the counters when it ends."""
+    return TrackWorker(session, keys, cameras, fit, **options).run()
