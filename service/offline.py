@@ -15,6 +15,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from capture.media import StreamCheck
 from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
@@ -46,7 +47,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
-                  clock: Callable[[], float] = time.perf_counter) -> Iterator[dict]:
+                  clock: Callable[[], float] = time.perf_counter,
+                  stream_check: StreamCheck | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -67,6 +69,9 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
     clock : callable () -> float
         Seconds, for the tracker's timings.
+    stream_check : StreamCheck, optional
+        Sees every frame set: a camera whose stream ends early or loses declared frames is an error
+        (``capture.media.MissingFramesError``) or, when it allows, counted.
 
     Yields
     ------
@@ -81,6 +86,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock)
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+        if stream_check is not None:
+            stream_check.see(fid, tuple(group))
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},

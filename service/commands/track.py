@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from capture.media import StreamCheck, check_media
 from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
 from service.atomic import JsonlWriter
@@ -28,6 +29,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
     parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
+    parser.add_argument("--allow-missing-cameras", action="store_true",
+                        help="track on with the cameras that have frames when a camera's video is cut short or "
+                             "corrupt (reported per camera: frames read of frames expected); default: exit 2")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -59,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
     model = session_model(session, args.model)
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
     names = list(session.camera_names if cameras is None else cameras)
+    media = check_media(session, names, frames=frames)  # unreadable, wrong size, range past the end: exit 2
+    check = StreamCheck(media, allow_missing=args.allow_missing_cameras)
+    for line in check.check_lengths():
+        print(f"contourcap track: warning: {line}; tracking on without its missing frames", file=sys.stderr)
     t_bg = time.perf_counter()
     backgrounds, how = background_models(session, names, frames=frames)
     print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
@@ -69,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     out = JsonlWriter(args.out)
     try:
         for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                 frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds):
+                                 frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
+                                 stream_check=check):
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
             _progress(len(records), total, time.perf_counter() - t0, rec)
@@ -80,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         raise
     out.commit()
+    for line in check.report():
+        print(f"\ncontourcap track: warning: {line}", file=sys.stderr, end="")
     summary = summarise(records, time.perf_counter() - t0).as_dict()
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)

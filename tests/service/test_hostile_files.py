@@ -185,3 +185,75 @@ def test_echo_escapes_received_strings():
     line = format_pose(rec)
     assert "\x1b" not in line and "\x07" not in line and "\u202e" not in line
     assert "\\x1b]52" in line and "\\u202e" in line
+
+
+def test_calibration_size_must_match_the_videos(session_dir, tmp_path, capsys):
+    from capture.calibration import load_calibration, save_calibration
+    from capture.camera import Camera
+
+    cams = load_calibration(session_dir / "calibration.toml")
+    wrong = [Camera.look_at(c.name, (3, 0, 1.5), (0, 0, 1), size=(128, 96)) if c.name == "cam1" else c for c in cams]
+    save_calibration(session_dir / "calibration.toml", wrong)
+    out = tmp_path / "poses.jsonl"
+    out.write_bytes(EXISTING)
+    rc = main(["track", str(session_dir), "--out", str(out)])
+    one_line_error(capsys, rc, "cam1", "64x48", "128x96")
+    assert out.read_bytes() == EXISTING
+
+
+def test_frames_past_the_end_say_the_length(session_dir, tmp_path, capsys):
+    rc = main(["track", str(session_dir), "--out", str(tmp_path / "p.jsonl"), "--frames", "100:200"])
+    one_line_error(capsys, rc, "100:200", "6 frames")
+    assert not (tmp_path / "p.jsonl").exists()
+
+
+def test_a_cut_camera_is_named_with_frames_read_and_expected(tmp_path, rng, capsys):
+    from tests.support.sessions import make_images, write_video
+
+    make_session(tmp_path / "s", rng, cams=("cam0", "cam1", "cam2"), n_frames=8)
+    write_video(tmp_path / "s" / "cam2.avi", make_images(rng, 3))  # the recording of cam2 stopped early
+    out = tmp_path / "poses.jsonl"
+    out.write_bytes(EXISTING)
+    rc = main(["track", str(tmp_path / "s"), "--out", str(out)])
+    one_line_error(capsys, rc, "cam2", "3 frames", "longest camera 8", "--allow-missing-cameras")
+    from capture.media import MissingFramesError, StreamCheck, check_media
+    from capture.session import load_session
+
+    session = load_session(tmp_path / "s")
+    media = check_media(session, session.camera_names)
+    check = StreamCheck(media)
+    for fid in range(3):
+        check.see(fid, ("cam0", "cam1", "cam2"))
+    with pytest.raises(MissingFramesError, match=r"cam2.*3 frames read of 8 expected.*--allow-missing-cameras"):
+        check.see(3, ("cam0", "cam1"))
+    lenient = StreamCheck(media, allow_missing=True)
+    for fid in range(8):
+        assert lenient.see(fid, ("cam0", "cam1", "cam2") if fid < 3 else ("cam0", "cam1")) == (
+            [] if fid < 3 else ["cam2"])
+    assert lenient.report() == ["camera cam2: 5 frame(s) missing, 3 frames read of 8 expected"]
+    assert out.read_bytes() == EXISTING
+
+
+def test_declared_drops_are_not_missing_frames(tmp_path, rng):
+    from capture.media import StreamCheck, check_media
+    from capture.session import load_session
+
+    make_session(tmp_path / "s", rng, cams=("cam0", "cam1"), n_frames=6, csv=True, drops={"cam1": [2, 3]})
+    session = load_session(tmp_path / "s")
+    check = StreamCheck(check_media(session, session.camera_names))
+    for fid in range(6):
+        check.see(fid, ("cam0",) if fid in (2, 3) else ("cam0", "cam1"))
+    assert check.missing == {}
+
+
+def test_replay_reports_a_cut_camera_as_dropped(tmp_path, rng, capsys):
+    import json
+
+    from tests.support.sessions import make_images, write_video
+
+    make_session(tmp_path / "s", rng, cams=("cam0", "cam1"), n_frames=8)
+    write_video(tmp_path / "s" / "cam1.avi", make_images(rng, 3))
+    assert main(["replay", str(tmp_path / "s"), "--json"]) == 0
+    cams = json.loads(capsys.readouterr().out)["cameras"]
+    assert cams["cam0"]["dropped"] == 0 and cams["cam1"]["frames"] == 3
+    assert cams["cam1"]["dropped"] == 5 and cams["cam1"]["missing_at_end"] == 5
