@@ -32,6 +32,7 @@ from typing import Callable, Generic, NamedTuple, TypeVar
 import zenoh
 
 from service.errors import ServiceError
+from service.text import printable
 from service.wire.messages import MessageError, check_name
 from service.wire.records import CreditMessage, StatusMessage
 
@@ -272,7 +273,7 @@ class Inbox(Generic[T]):
             now = time.monotonic()
             if now - self._last_log > 1.0:
                 self._last_log = now
-                log.warning("bad message on %s (%d so far): %s", key, self.bad, exc)
+                log.warning("bad message on %s (%d so far): %s", printable(key), self.bad, printable(exc))
             return
         with self._cv:
             self.received += 1

@@ -99,8 +99,8 @@ class TrackWorker:
                "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
                "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
-            out.update(bad=inbox.bad + self.haves.bad, demands=self.planner.demands,
-                       demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
+            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected,
+                       demands=self.planner.demands, demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
         return out
 
     def _demand(self) -> None:
