@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["positive_float"]
+__all__ = ["positive_float", "duration_s"]
 
 
 def positive_float(text: str) -> float:
@@ -17,3 +17,17 @@ def positive_float(text: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
     return value
+
+
+def duration_s(text: str) -> float:
+    """A duration in seconds: ``2``, ``2s``, ``1.5 s``, ``500ms``, ``1m`` (finite, > 0)."""
+    t = text.strip().lower().replace(" ", "")
+    scale = 1.0
+    for suffix, factor in (("ms", 1e-3), ("s", 1.0), ("m", 60.0)):
+        if t.endswith(suffix):
+            t, scale = t[: -len(suffix)], factor
+            break
+    try:
+        return positive_float(t) * scale
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a duration such as 2s or 500ms, got {text!r}") from None

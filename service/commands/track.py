@@ -53,6 +53,16 @@ def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
     return p
 
 
+def median_warning(how: dict[str, str]) -> str | None:
+    """One warning line when some cameras' background models are a temporal median of the take."""
+    median = [n for n, h in how.items() if h == "median"]
+    if not median:
+        return None
+    return (f"no background plate for {', '.join(median)}: their backgrounds are the temporal median of the take, "
+            "which holds a subject who stays still in view as background (then lost); record the empty room "
+            "with `contourcap record --background 2s`, or add background media to session.toml")
+
+
 def run(args: argparse.Namespace) -> int:
     """Track; the poses go to ``OUT.partial`` (flushed per record) and replace ``OUT`` only when every
     frame was tracked (:class:`service.atomic.JsonlWriter`): a failing or interrupted run never
@@ -71,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     backgrounds, how = background_models(session, names, frames=frames)
     print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
           f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+    warning = median_warning(how)
+    if warning:
+        print(f"contourcap track: warning: {warning}", file=sys.stderr)
     total = count_frames(session, names[0], frames) if names else None
     records = []
     t0 = time.perf_counter()
