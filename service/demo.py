@@ -78,6 +78,7 @@ class DemoOptions:
     live_image_cameras: int = 1
     segment_plugin: str | None = None
     fit_plugin: str | None = None
+    port: int | None = None  # the loopback hub's TCP port (None: a free one)
 
 
 @dataclass(frozen=True)
@@ -196,7 +197,7 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     session_root = demo_session(opts, progress=progress)
     session = load_session(session_root)
     out = Path(opts.out_dir) if opts.out_dir is not None else Path(opts.cache_dir) / "last-demo"
-    port = free_port()
+    port = free_port() if opts.port is None else int(opts.port)
     cfg_path = write_studio(session_root, out, port=port, delivery=opts.delivery)
     cfg = load_config(cfg_path)
     n_total = opts.frames

@@ -97,4 +97,9 @@ def run(args: argparse.Namespace) -> int:
             tail = f"  ERROR: {r['error']}" if r["error"] else ""
             cut = f", {r['missing_at_end']} of them after its last frame: cut short?" if r["missing_at_end"] else ""
             print(f"{n}: {r['frames']} frames ({r['dropped']} dropped{cut}) in {r['seconds']:.3f} s = {r['fps']} fps{tail}")
+    from service.text import printable
+
+    for n in names:
+        if results[n]["error"]:
+            print(f"contourcap replay: camera {n}: {printable(results[n]['error'], limit=300)}", file=sys.stderr)
     return 1 if any(r["error"] for r in results.values()) else 0

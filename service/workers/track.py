@@ -12,6 +12,7 @@ before fitting it.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -31,6 +32,9 @@ __all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
 log = logging.getLogger("contourcap.worker")
 
 LOSSLESS_SET_TIMEOUT_S = 60.0
+# the largest chamfer message taken (a 1920x1200 camera's two uint16 images are ~9 MB): with the inbox
+# depths below, a live track worker holds at most 2 x cameras x 16 MiB of received chamfers
+CHAMFER_MAX_BYTES = 16 * 1024 * 1024
 """Lossless delivery: how long a frame set waits for a camera (CPU load, not loss, delays it), in seconds."""
 
 
@@ -72,7 +76,8 @@ class TrackWorker:
         self.max_frames, self.idle_exit_s, self.on_pose = max_frames, idle_exit_s, on_pose
         lossless = mode == "lossless"
         cv = threading.Condition()
-        self.inbox = Inbox(session, keys.chamfer("*"), ChamferMessage.from_bytes, mode=mode,
+        self.inbox = Inbox(session, keys.chamfer("*"), functools.partial(ChamferMessage.from_bytes,
+                                                                         max_bytes=CHAMFER_MAX_BYTES), mode=mode,
                            depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
         self.haves = None if lossless else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
                                                  depth=64 * len(cameras), cv=cv)
