@@ -101,3 +101,52 @@ def test_printable_escapes_everything_a_terminal_acts_on(reason):
     out = printable(reason)
     assert all(c.isprintable() for c in out), repr(out)
     assert printable("x" * 500, limit=10) == "x" * 9 + "…"
+
+
+def test_echo_stats_line_shows_rejected_and_evicted_escaped():
+    from service.commands.echo import format_stats
+
+    line = format_stats({"received": 10, "rejected": 3, "evicted": 1},
+                        {"track": {"rejected": 41.0, "fps": 9.0, "bad": 0.0},
+                         "segment-h1": {"evicted": 2.0, "rejected": 7.0}})
+    assert "received 10, rejected 3, evicted 1" in line
+    assert "track: rejected 41" in line and "fps" not in line
+    assert "segment-h1: evicted 2, rejected 7" in line
+
+
+def test_live_studio_keeps_tracking_through_far_future_haves_and_demands(tmp_path, rng, studio):
+    """A hostile peer publishes have notices and demands for frame 10^12 (and junk) on every camera's
+    keys while a 2-second session is replayed live: the tracker still fits the real frames to the end,
+    never a far-future one, and the workers count what they refused."""
+    import threading
+
+    from service.wire.records import DemandMessage, HaveMessage
+    from tests.support.workers import CAMS, fitter, make_session, segmenter, wait_for
+
+    session = make_session(tmp_path / "s", rng, n_frames=50)  # 2 s at 25 fps
+    stop = threading.Event()
+    sent = [0]
+
+    def attack():
+        while not studio.sessions and not stop.is_set():  # the track worker's listening session first
+            stop.wait(0.01)
+        attacker = studio.session()
+        while not stop.is_set() and sent[0] < 20_000:
+            for cam in CAMS:
+                attacker.put(studio.keys.have(cam), HaveMessage(cam, (FAR, FAR - 1)).to_bytes())
+                attacker.put(studio.keys.frame(cam), b"CCAP" + bytes(30))
+            attacker.put(studio.keys.demand("track"), DemandMessage("track", FAR).to_bytes())
+            sent[0] += 2 * len(CAMS) + 1
+            stop.wait(0.005)
+
+    thread = threading.Thread(target=attack, daemon=True)
+    thread.start()
+    try:
+        poses, _ = studio.run_live(session, fitter, segmenter)
+        assert wait_for(lambda: poses and poses[-1].frame == 49, 5.0), [p.frame for p in poses]
+    finally:
+        stop.set()
+        thread.join(5)
+    frames = [p.frame for p in poses]
+    assert max(frames) < 50 and frames == sorted(set(frames)) and len(frames) >= 10
+    assert sent[0] > 100
