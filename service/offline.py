@@ -47,8 +47,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   initial_params=None, options: TrackerOptions = TrackerOptions(),
                   segmentation: SegmentationParams | None = None,
                   backgrounds: dict[str, BackgroundModel] | None = None,
-                  clock: Callable[[], float] = time.perf_counter,
-                  stream_check: StreamCheck | None = None) -> Iterator[dict]:
+                  clock: Callable[[], float] = time.perf_counter, method: str = "contours",
+                  blob_options=None, stream_check: StreamCheck | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -69,6 +69,10 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
     clock : callable () -> float
         Seconds, for the tracker's timings.
+    method : {"contours", "blobs"}
+        ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``; ``sliding``,
+        ``solver``, ``options`` and ``segmentation`` are the contour tracker's).
+    blob_options : BlobOptions, optional
     stream_check : StreamCheck, optional
         Sees every frame set: a camera whose stream ends early or loses declared frames is an error
         (``capture.media.MissingFramesError``) or, when it allows, counted.
@@ -78,11 +82,17 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     dict
         A DESIGN.md pose record per frame id.
     """
+    if method not in ("contours", "blobs"):
+        raise ValueError(f"method: expected 'contours' or 'blobs', got {method!r}")
     names = _check_cameras(session, cameras)
     body = model if isinstance(model, BodyModel) else session_model(session, model)
     cams = [session.camera_model(n) for n in names]
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
+    if method == "blobs":
+        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
+                                stream_check)
+        return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock)
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
@@ -92,6 +102,20 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
                            silhouettes={n: s.silhouette for n, s in segs.items()})
+
+
+def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
+                 stream_check=None) -> Iterator[dict]:
+    from tracker.blobs import BlobOptions, BlobTracker, initialise_from_images
+
+    tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
+                          initialiser=lambda cs, images: initialise_from_images(body, cs, images, backgrounds),
+                          options=blob_options or BlobOptions(), clock=clock)
+    for fid, group in iter_frame_sets(session, cameras=[c.name for c in cams], frames=frames):
+        if stream_check is not None:
+            stream_check.see(fid, tuple(group))
+        ts = next(iter(group.values())).timestamp_ns
+        yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_chamfer", "forward_kinematics",
-           "screw_rows", "image_motion"]
+           "screw_rows", "image_motion",
+           "contour_points", "ruling_angles", "projection_jacobians", "assemble", "reverse_terms"]
 
 _Q_TOL = 1e-9  # tracker.visibility: a point exactly on another part's surface is not hidden
 _AHEAD = 1e-9  # smallest camera depth of a point (or a ray's direction) counted as in front
@@ -268,11 +269,11 @@ def nearest_rows(samples, sample_cam, uv, used, per_cam):
 
 
 @njit(cache=True)
-def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, truncate, edge_weight, d, grad):
+def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, truncate, edge_weight, d, grad, dest):
     """Bilinear distances and gradients of one camera's quantised chamfer images
     (``segmentation.distance.ChamferImages.sample``: pixel centres at integer (u, v), the arrays
     extended with the truncation code ``fill``) at rows ``rows`` (n,) of ``uv`` (N, 2), written to
-    ``d`` (n, 2) (silhouette, edge) and ``grad`` (n, 2, 2), pixels.
+    rows ``dest`` (n,) of ``d`` (., 2) (silhouette, edge) and ``grad`` (., 2, 2), pixels.
 
     sil, edge (h, w) codes stored at ``offset_x, offset_y`` of the image; ``resolution`` pixels
     per code.  Distances above ``truncate`` are clipped to it with zero gradient; the edge
@@ -303,9 +304,10 @@ def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, tr
             if value > truncate:
                 value, gx, gy = truncate, 0.0, 0.0
             wgt = 1.0 if img == 0 else edge_weight
-            d[j, img] = value * wgt
-            grad[j, img, 0] = gx * wgt
-            grad[j, img, 1] = gy * wgt
+            o = dest[j]
+            d[o, img] = value * wgt
+            grad[o, img, 0] = gx * wgt
+            grad[o, img, 1] = gy * wgt
 
 
 @njit(cache=True, inline="always")
@@ -599,3 +601,140 @@ def projection_jacobians(cam_R, cam_t, intr, dist, points, cam):
             JI[i, 0, j] = a0 * cam_R[c, 0, j] + a1 * cam_R[c, 1, j] + a2 * cam_R[c, 2, j]
             JI[i, 1, j] = b0 * cam_R[c, 0, j] + b1 * cam_R[c, 1, j] + b2 * cam_R[c, 2, j]
     return JI
+
+
+@njit(cache=True, inline="always")
+def _screw_row(motion, p, screws, affects, J, out):
+    """``J[out, k] = motion · screws[:, k]`` for the parameters k that move part p."""
+    for k in range(screws.shape[1]):
+        if affects[p, k]:
+            J[out, k] = (motion[0] * screws[0, k] + motion[1] * screws[1, k] + motion[2] * screws[2, k]
+                         + motion[3] * screws[3, k] + motion[4] * screws[4, k] + motion[5] * screws[5, k])
+
+
+@njit(cache=True)
+def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, weight, screws, affects):
+    """Residual vector and Jacobian of ``tracker.fitting.cost.ChamferCost.evaluate`` (its module docstring
+    gives the layout).
+
+    d (N, 2), grad (N, 2, 2) sampled distances and gradients of the contour rows; urows (n,)
+    the used rows (sorted); rev_r (K,) reverse residuals; ``compact``: keep only used rows' and
+    reverse samples' residuals that are non-zero or have a non-zero gradient (else the fixed
+    layout, 2 N + K).  With ``jacobian``: Mx (n, 2, 6) image motion of the used rows, part (N,),
+    match (K,) matched contour row (-1: none), unit (K, 2) directions, ``weight`` the reverse
+    weight, screws (6, n_params), affects (n_parts, n_params) bool; each row is its per-screw
+    motion (gradient · Mx, or -weight · unit · Mx) times its part's parameter screws."""
+    N, n, K = d.shape[0], urows.size, rev_r.size
+    n_params = screws.shape[1]
+    keep = np.ones((n, 2), dtype=np.bool_)
+    n_fwd = 0
+    for j in range(n):
+        i = urows[j]
+        for s in range(2):
+            if compact:
+                keep[j, s] = d[i, s] != 0.0 or grad[i, s, 0] != 0.0 or grad[i, s, 1] != 0.0
+            n_fwd += keep[j, s]
+    n_rev = 0
+    for k in range(K):
+        if not compact or rev_r[k] != 0.0:  # a matched sample has r > 0
+            n_rev += 1
+    m_rows = (n_fwd if compact else 2 * N) + n_rev
+    r = np.zeros(m_rows)
+    J = np.zeros((m_rows if jacobian else 0, n_params))
+    motion = np.empty(6)
+    row = 0
+    for j in range(n):
+        i = urows[j]
+        for s in range(2):
+            if not keep[j, s]:
+                continue
+            out = row if compact else 2 * i + s
+            r[out] = d[i, s]
+            if jacobian:
+                for q in range(6):
+                    motion[q] = grad[i, s, 0] * Mx[j, 0, q] + grad[i, s, 1] * Mx[j, 1, q]
+                _screw_row(motion, part[i], screws, affects, J, out)
+            row += 1
+    if not compact:
+        for i in range(N):  # unused rows: their residuals (0), no gradient
+            r[2 * i], r[2 * i + 1] = d[i, 0], d[i, 1]
+    base = n_fwd if compact else 2 * N
+    row = 0
+    pos = np.full(N, -1, dtype=np.intp)
+    if jacobian:
+        for j in range(n):
+            pos[urows[j]] = j
+    for k in range(K):
+        if compact and rev_r[k] == 0.0:
+            continue
+        out = base + row
+        r[out] = rev_r[k]
+        if jacobian and match[k] >= 0:
+            jm = pos[match[k]]  # matched rows are used rows
+            for q in range(6):
+                motion[q] = -weight * (unit[k, 0] * Mx[jm, 0, q] + unit[k, 1] * Mx[jm, 1, q])
+            _screw_row(motion, part[match[k]], screws, affects, J, out)
+        row += 1
+    return r, J
+
+
+@njit(cache=True)
+def reverse_terms(samples, sample_cam, uv, used, per_cam, min_px, truncate, weight, cover_px, directions, focal,
+                  cones, R, t, cam_R, cam_t, range_m):
+    """The reverse (silhouette → model) term of ``tracker.fitting.cost.ChamferCost`` (its module docstring).
+
+    samples (K, 2) boundary pixels of cameras ``sample_cam`` (K,); contour pixels ``uv`` (N, 2), used
+    rows ``used`` (N,) with ``per_cam`` rows per camera.  Each sample is matched to its nearest used
+    contour row (``nearest_rows``); one farther than ``min_px`` has the residual ``weight (dist -
+    min_px)`` (clipped at ``truncate``, unmatched beyond), unless ``cover_px`` >= 0 and its pixel's
+    ray (unit ``directions`` (K, 3)) meets the body grown by ``cover_px`` pixels at each part's depth
+    (``covered_mask``; focal (n_cams,) pixels): then it lies on the predicted silhouette.
+
+    Returns residuals (K,), matched rows (K,) (-1: none), unit directions from the match to the
+    sample (K, 2) and distances (K,) (inf: no match; 0: on the predicted silhouette)."""
+    K = samples.shape[0]
+    nearest = nearest_rows(samples, sample_cam, uv, used, per_cam)
+    r = np.zeros(K)
+    match = np.full(K, -1, dtype=np.intp)
+    unit = np.zeros((K, 2))
+    dist = np.full(K, np.inf)
+    far = np.zeros(K, dtype=np.bool_)
+    n_far = 0
+    for k in range(K):
+        j = nearest[k]
+        if j < 0:
+            continue
+        dx, dy = samples[k, 0] - uv[j, 0], samples[k, 1] - uv[j, 1]
+        dist[k] = math.sqrt(dx * dx + dy * dy)
+        if dist[k] > min_px:
+            far[k] = True
+            n_far += 1
+    if cover_px >= 0.0 and n_far > 0:
+        n_cams, n_parts = cam_R.shape[0], cones.shape[0]
+        grow = np.empty((n_cams, n_parts))  # cover_px pixels in metres at each part's origin depth
+        for c in range(n_cams):
+            for p in range(n_parts):
+                depth = cam_R[c, 2, 0] * t[p, 0] + cam_R[c, 2, 1] * t[p, 1] + cam_R[c, 2, 2] * t[p, 2] + cam_t[c, 2]
+                grow[c, p] = cover_px * max(depth, 0.0) / focal[c]
+        idx = np.flatnonzero(far)
+        on = covered_mask(cones, R, t, cam_R, cam_t, sample_cam[idx], directions[idx], grow, range_m)
+        for i in range(idx.size):
+            if on[i]:
+                far[idx[i]] = False
+                dist[idx[i]] = 0.0
+    for k in range(K):
+        if not far[k]:
+            continue
+        j = nearest[k]
+        d = dist[k]
+        rk = d - min_px
+        if rk > truncate:
+            r[k] = weight * truncate
+        else:
+            r[k] = weight * rk
+            match[k] = j
+        inv = 1.0 / max(d, 1e-12)
+        unit[k, 0] = (samples[k, 0] - uv[j, 0]) * inv
+        unit[k, 1] = (samples[k, 1] - uv[j, 1]) * inv
+    return r, match, unit, dist
+

@@ -32,6 +32,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-missing-cameras", action="store_true",
                         help="track on with the cameras that have frames when a camera's video is cut short or "
                              "corrupt (reported per camera: frames read of frames expected); default: exit 2")
+    parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
+                        help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
+                             "EM blobs and inverse kinematics (Caillette & Howard)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -91,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
                                  frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
-                                 stream_check=check):
+                                 method=args.method, stream_check=check):
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
             _progress(len(records), total, time.perf_counter() - t0, rec)

@@ -16,7 +16,7 @@ MAX_DOCSTRING_LINES = 30
 LONG_DOC_MODULES = {
     "capture.trigger", "capture.session", "capture.calib_formats", "capture.calibration", "service.config",
     "tracker.imaging.jacobian", "tracker.imaging.contours", "tracker.body.kinematics", "tracker.fitting.cost",
-    "tracker.body.model", "service.wire.messages", "service.wire.records", "service.flow.demand",
+    "tracker.body.model", "tracker.blobs.colour_hull", "service.wire.messages", "service.wire.records", "service.flow.demand",
 }
 FIGURE = re.compile(r"\d(?:[\d.,]*\d)?\s*(?:ms|mm|px|%|×)(?![A-Za-z0-9])")
 

@@ -48,15 +48,19 @@ import numpy as np
 
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours, extremal_contours
-from tracker.imaging.jacobian import apply_screws, contour_image_motion
-from tracker.kernels import nearest_rows, sample_chamfer
+from tracker.imaging.jacobian import contour_image_motion
+from tracker.kernels import assemble, reverse_terms, sample_chamfer
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
-from tracker.imaging.visibility import covered_rays, hidden_points
+from tracker.imaging.visibility import hidden_points
 
 __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+# placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
+_NO_MOTION, _NO_SCREWS = np.zeros((0, 2, 6)), np.zeros((6, 0))
+_NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+_RAY_RANGE_M = 50.0  # boundary-sample rays are followed this far (tracker.visibility.covered_rays)
 
 
 def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
@@ -115,19 +119,23 @@ class _StackedChamfer:
         return d[:, 0], grad[:, 0], d[:, 1], grad[:, 1]
 
     def sample_rows(self, uv: np.ndarray, cam: np.ndarray, rows: np.ndarray, *, truncate_px: float | None = None,
-                    edge_weight: float = 1.0):
+                    edge_weight: float = 1.0, out=None):
         """Distances (n, 2) (silhouette, edge) and gradients (n, 2, 2) at rows ``rows`` (n,) of
         ``uv`` (N, 2), ``cam`` (N,); distances above ``truncate_px`` clipped with zero gradient,
-        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``)."""
+        the edge distance scaled by ``edge_weight`` (``tracker.kernels.sample_chamfer``).  With
+        ``out = (d (N, 2), grad (N, 2, 2))`` they are written to rows ``rows`` of those instead."""
         rows = np.asarray(rows, dtype=np.intp)
         cr = np.asarray(cam)[rows]
-        order = None
+        if out is None:
+            d, grad = np.empty((rows.size, 2)), np.empty((rows.size, 2, 2))
+            dest = np.arange(rows.size)
+        else:
+            d, grad = out
+            dest = rows
         if cr.size > 1 and np.any(cr[1:] < cr[:-1]):  # group by camera (contour rows already are)
             order = np.argsort(cr, kind="stable")
-            rows, cr = rows[order], cr[order]
+            rows, cr, dest = rows[order], cr[order], dest[order]
         bounds = np.searchsorted(cr, np.arange(len(self.chamfer) + 1))
-        d = np.empty((rows.size, 2))
-        grad = np.empty((rows.size, 2, 2))
         uv = np.ascontiguousarray(uv, dtype=float)
         trunc = np.inf if truncate_px is None else float(truncate_px)
         for c, ch in enumerate(self.chamfer):
@@ -136,11 +144,7 @@ class _StackedChamfer:
                 sil = ch.silhouette_q if ch.silhouette_q.size else np.zeros((0, 0), ch.silhouette_q.dtype)
                 sample_chamfer(sil, ch.edges_q.reshape(sil.shape), float(ch.offset_xy[0]), float(ch.offset_xy[1]),
                                float(ch.max_code), float(ch.resolution_px), uv, rows[b0:b1], trunc,
-                               float(edge_weight), d[b0:b1], grad[b0:b1])
-        if order is not None:
-            inv = np.empty_like(order)
-            inv[order] = np.arange(order.size)
-            d, grad = d[inv], grad[inv]
+                               float(edge_weight), d, grad, dest[b0:b1])
         return d, grad
 
 
@@ -278,6 +282,8 @@ class ChamferCost:
         self._boundary_cam = np.repeat(np.arange(len(self.boundary)), [len(b) for b in self.boundary])
         self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
         self._rays = _pixel_rays(cameras, self.boundary) if self.reverse_cover_px is not None else None
+        self._ray_dirs = self._rays[0] if self._rays is not None else np.zeros((self.n_reverse, 3))
+        self._focal = np.array([c.matrix[0, 0] for c in cameras], dtype=float)
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
         self.n_evaluations = 0
@@ -293,7 +299,11 @@ class ChamferCost:
         d = np.zeros((N, 2))
         grad = np.zeros((N, 2, 2))
         rows = np.flatnonzero(used)
-        d[rows], grad[rows] = self._sample_rows(contours, rows)
+        if self._stacked is not None:
+            self._stacked.sample_rows(contours.uv, contours.cam, rows, truncate_px=self.truncate_px,
+                                      edge_weight=self.edge_weight, out=(d, grad))
+        else:
+            d[rows], grad[rows] = self._sample_rows(contours, rows)
         return d, grad
 
     def _sample_rows(self, contours: Contours, rows: np.ndarray):
@@ -321,41 +331,19 @@ class ChamferCost:
 
     def _reverse(self, pose: Pose, contours: Contours, used: np.ndarray):
         """Reverse residuals (K,), matched contour rows (K,), unit directions (K, 2), distances (K,)
-        (0 for a sample on the predicted silhouette)."""
-        per_cam = contours.n_points // max(len(self.cameras), 1)
-        # matched contour row of each boundary sample (-1: its camera has no used row)
-        nearest = nearest_rows(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam)
-        has = nearest >= 0
-        diff = self._boundary_all - contours.uv[nearest]
-        dist = np.linalg.norm(diff, axis=1)
-        dist_all = np.where(has, dist, np.inf)
-        far = has & (dist > self.reverse_min_px)
-        if self._rays is not None and far.any():
-            # a sample on the predicted silhouette (e.g. on an end cap, or between two contour
-            # samples) is explained by the model: no residual, whatever its nearest contour point.
-            # (Tested at every evaluation: reusing a linearisation point's answer at the trial
-            # points let steps that uncover samples look free; hop: MPJPE 7.7 -> 10.3 mm.)
-            idx = np.flatnonzero(far)
-            dirs, cam = self._rays
-            margin = self.reverse_cover_px * self._px_depth(pose)  # (n_cams, n_parts) metres
-            on = covered_rays(self.model, pose, self.cameras, cam[idx], dirs[idx], margin_m=margin)
-            far[idx[on]] = False
-            dist_all[idx[on]] = 0.0
-        r = np.where(far, dist - self.reverse_min_px, 0.0)
-        match = np.where(far, nearest, -1)
-        unit = np.where(far[:, None], diff / np.maximum(dist, 1e-12)[:, None], 0.0)
-        if self.truncate_px is not None:
-            over = r > self.truncate_px
-            r[over] = self.truncate_px
-            match[over] = -1
-        return self.reverse_weight * r, match, unit, dist_all
+        (0 for a sample on the predicted silhouette) (``tracker.kernels.reverse_terms``).
 
-    def _px_depth(self, pose: Pose) -> np.ndarray:
-        """Metres per pixel at each part's origin in each camera, (n_cams, n_parts)."""
+        A sample on the predicted silhouette (e.g. on an end cap, or between two contour samples)
+        is explained by the model: no residual, whatever its nearest contour point.  (Tested at
+        every evaluation: reusing a linearisation point's answer at the trial points let steps
+        that uncover samples look free: see docs/tuning.md, Cost.)"""
+        per_cam = contours.n_points // max(len(self.cameras), 1)
         st = stack_cameras(self.cameras)
-        depth = np.einsum("cj,pj->cp", st.rotation[:, 2, :], pose.translation) + st.translation[:, 2:3]
-        focal = np.array([c.matrix[0, 0] for c in self.cameras])
-        return np.maximum(depth, 0.0) / focal[:, None]
+        return reverse_terms(self._boundary_all, self._boundary_cam, contours.uv, used, per_cam, self.reverse_min_px,
+                             np.inf if self.truncate_px is None else self.truncate_px, self.reverse_weight,
+                             -1.0 if self.reverse_cover_px is None else self.reverse_cover_px, self._ray_dirs,
+                             self._focal, self.model.cones, pose.rotation, pose.translation, st.rotation,
+                             st.translation, _RAY_RANGE_M)
 
     def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
         """Residuals (and Jacobian) at a pose; see the module docstring for the layout.
@@ -411,43 +399,20 @@ class ChamferCost:
             self._cache = (params.copy(), pose, contours, used, d, grad, rev, fresh)
             self.n_evaluations += 1
         urows = np.flatnonzero(used)
-        if compact:
-            # a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
-            # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations
-            keep = (d[urows] != 0.0) | (grad[urows] != 0.0).any(axis=2)  # (n_used, 2)
-            r = d[urows][keep]
-        else:
-            r = d.ravel()
-        if rev is not None:
-            rkeep = rev[0] != 0.0 if compact else slice(None)  # a matched sample has r > 0
-            r = np.concatenate([r, rev[0][rkeep]])
-        J = None
+        # compact: a residual that is 0 with a 0 gradient (a contour point inside its silhouette, a
+        # boundary sample within reverse_min_px) adds nothing to the cost or the normal equations.
+        # Residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and reverse
+        # directions are applied there, then the parts' screws (tracker.kernels.assemble)
         if jacobian:
-            # residual rows are linear in the image motion J_I (A + B) (n, 2, 6): gradients and
-            # reverse directions are applied there, then one product with the parts' screws
-            n_p = self.model.n_params
             Mx = contour_image_motion(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            Mu = grad[urows] @ Mx  # (n_used, 2, 2) @ (n_used, 2, 6)
-            part = contours.part[urows]
-            Mr = rp = None
-            if rev is not None:
-                _, match, unit, _ = rev
-                m = match >= 0
-                pos = np.searchsorted(urows, match[m])  # matched rows are used rows
-                Mr = np.zeros((self.n_reverse, 6))
-                Mr[m] = -self.reverse_weight * (unit[m][:, None, :] @ Mx[pos])[:, 0]
-                rp = np.zeros(self.n_reverse, dtype=part.dtype)
-                rp[m] = part[pos]
-            if compact:
-                rows6 = [Mu[keep]] + ([] if Mr is None else [Mr[rkeep]])
-                parts = [np.broadcast_to(part[:, None], keep.shape)[keep]] + ([] if rp is None else [rp[rkeep]])
-                J = apply_screws(self.model, pose, np.concatenate(rows6), np.concatenate(parts))
-            else:
-                J = np.zeros((contours.n_points, 2, n_p))
-                J[urows] = apply_screws(self.model, pose, Mu.reshape(-1, 6), np.repeat(part, 2)).reshape(-1, 2, n_p)
-                J = J.reshape(-1, n_p)
-                if Mr is not None:
-                    J = np.concatenate([J, apply_screws(self.model, pose, Mr, rp)])
+            screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
+        else:
+            Mx, screws = _NO_MOTION, _NO_SCREWS
+        rev_r, match, unit = (rev[0], rev[1], rev[2]) if rev is not None else (_NO_REV, _NO_MATCH, _NO_UNIT)
+        r, J = assemble(d, grad, urows, rev_r, bool(compact), bool(jacobian), Mx, contours.part, match, unit,
+                        self.reverse_weight, screws, self.model.affects)
+        if not jacobian:
+            J = None
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
     def residual_fn(self, *, compact: bool = True):

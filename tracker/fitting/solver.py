@@ -203,27 +203,33 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
         sw = np.sqrt(robust_weights(r, loss=loss, f_scale=f_scale))  # IRLS weights are >= 0
         Js = J * sw[:, None]
         A = Js.T @ Js  # a product with its own transpose: one symmetric rank-k update (syrk)
-        A[np.diag_indices(x.size)] += pw
+        A.flat[::x.size + 1] += pw
         g = Js.T @ (sw * r) + pw * (x - xp)
         # freeze parameters at a bound that the gradient pushes outward
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-        if np.max(np.abs(g[free]), initial=0.0) <= gtol:
+        all_free = bool(free.all())
+        if np.max(np.abs(g if all_free else g[free]), initial=0.0) <= gtol:
             status = CONVERGED_GRADIENT
             break
-        Af = A[np.ix_(free, free)]
-        gf = g[free]
+        Af = A if all_free else A[np.ix_(free, free)]
+        gf = g if all_free else g[free]
         diag = np.diag(Af)
         diag = np.maximum(diag, max(min_diagonal, diagonal_floor * float(diag.max(initial=0.0))))
         accepted = False
         while it < max_iterations:
             it += 1
+            damped = Af.copy()
+            damped.flat[::damped.shape[0] + 1] += mu * diag
             try:
-                step_f = -np.linalg.solve(Af + mu * np.diag(diag), gf)
+                step_f = -np.linalg.solve(damped, gf)
             except np.linalg.LinAlgError:
                 mu, nu = mu * nu, nu * 2.0
                 continue
-            step = np.zeros_like(x)
-            step[free] = step_f
+            if all_free:
+                step = step_f
+            else:
+                step = np.zeros_like(x)
+                step[free] = step_f
             x_new = np.clip(x + step, lo, hi)
             step = x_new - x
             small_step = np.linalg.norm(step) <= xtol * (np.linalg.norm(x) + xtol)

@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
 
+import cv2
 import numpy as np
 
 from capture.camera import Camera
@@ -193,7 +194,10 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
 
 def _silhouette_empty(chamfer, silhouette) -> bool:
     if silhouette is not None:
-        return not np.any(silhouette)
+        s = np.asarray(silhouette)
+        if s.ndim == 2 and s.dtype == np.uint8 and s.size:
+            return cv2.countNonZero(s) == 0
+        return not np.any(s)
     q = getattr(chamfer, "silhouette_q", None)
     if q is None:
         return False

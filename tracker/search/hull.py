@@ -30,7 +30,7 @@ import numpy as np
 
 from capture.camera import Camera
 
-__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou"]
+__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou", "project_with_depth"]
 
 # the 8 corners of the unit cube, (8, 3)
 _CORNERS = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
@@ -243,7 +243,7 @@ def _common_view_bounds(cameras: Sequence[Camera], z_range, step_m: float, margi
     P = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3)
     seen = np.ones(len(P), bool)
     for cam in cameras:
-        uv, z = _project(cam, P)
+        uv, z = project_with_depth(cam, P)
         seen &= (z > 1e-3) & cam.in_image(np.nan_to_num(uv, nan=-1.0))
     if not seen.any():
         raise ValueError("the cameras share no common view between z = %.2f and %.2f m" % tuple(z_range))
@@ -268,7 +268,7 @@ def _check_inputs(cameras, silhouettes) -> list[np.ndarray]:
     return masks
 
 
-def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def project_with_depth(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (n, 2) and depths (n,) of world points X (n, 3); one matrix product without distortion."""
     if np.any(cam.distortion != 0):
         return cam.project(X), cam.depth(X)
@@ -295,7 +295,7 @@ def _classify(lower: np.ndarray, size: float, cameras, integrals, tolerance: int
         m = len(active)
         if np.any(cam.distortion != 0):
             corners = (lower[active][:, None, :] + size * _CORNERS[None]).reshape(-1, 3)
-            uv, z = _project(cam, corners)
+            uv, z = project_with_depth(cam, corners)
             u, v, z = uv[:, 0].reshape(m, 8), uv[:, 1].reshape(m, 8), z.reshape(m, 8)
         else:  # homogeneous image points are affine in the corner: project once, add 8 offsets
             P = cam.projection_matrix
@@ -340,7 +340,7 @@ def _centres_inside(centres: np.ndarray, cameras, masks, tolerance: int = 0) -> 
         idx = np.flatnonzero(misses <= tolerance)
         if idx.size == 0:
             break
-        uv, z = _project(cam, centres[idx])
+        uv, z = project_with_depth(cam, centres[idx])
         uv = np.rint(np.nan_to_num(uv, nan=-1.0, posinf=-1.0, neginf=-1.0)).astype(np.int64)
         inside = (z > 1e-6) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
         hit = np.zeros(idx.size, bool)
@@ -451,7 +451,7 @@ def render_hull(hull: VoxelHull, camera: Camera, *, chunk_pairs: int = 250_000) 
     lo = hull.centres[order] - 0.5 * hull.sizes[order, None]
     hi = hull.centres[order] + 0.5 * hull.sizes[order, None]
     corners = (lo[:, None, :] + hull.sizes[order, None, None] * _CORNERS[None]).reshape(-1, 3)
-    uv, z = _project(camera, corners)
+    uv, z = project_with_depth(camera, corners)
     front = (z > 1e-6).reshape(-1, 8).all(1)
     uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0).reshape(-1, 8, 2)
     c0 = np.clip(np.floor(uv[..., 0].min(1)), 0, w).astype(np.intp)

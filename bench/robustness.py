@@ -1,0 +1,298 @@
+"""Robustness benchmark: track people the tracker's body model was not rendered from.
+
+Every clip is one subject × one motion × one camera ring:
+
+- subjects ``tracker.synthetic.people.make_subject(i)`` for i = 0 … ``--subjects`` − 1 (segment
+  proportions ±15 %, radii ±25 %, own colours; shoes dark for even i, floor dark for i % 4 in
+  {0, 3}: dark shoes on a dark floor for i = 0, 4);
+- motions: the procedural clips of ``tracker.synthetic.motions`` (``walk_turn``, ``crouch``,
+  ``arms``, ``tpose_start``, ``nont_start``; place and heading drawn per subject and clip) and
+  ``cmu_walk`` (CMU 131_01, the bundled start–walk clip, from 1 s), resampled to ``--fps``;
+- cameras: a ring of 4 and one of 6 (``tracker.synthetic.scene.fit_ring_cameras``: the subject stays in
+  view), ``--size`` pixels.
+
+Per clip the frames are rendered (``tracker.synthetic.people.Studio``, sensor noise, JPEG
+quality 85) into a temporary session (JPEG image sequences, calibration, ``[subject] height_m`` =
+the subject's standing height measured on the rendered body), background models are learned from
+10 rendered empty-room frames per camera, and the session is tracked by
+``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
+``knossow40`` model sized from the height) exactly as ``contourcap track`` does.  The poses are
+scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
+mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
+silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
+the IK floor (the height-sized model posed onto the true joints by ``tracker.synthetic.retarget``: the
+error a perfect tracker with that model would still have).
+
+A tracker that has lost the body searches again on every bad frame (1–10 s each here), so a clip
+it cannot track would dominate the run: tracking a clip stops once it has used ``--clip-budget-s``
+CPU seconds (reading, segmenting and tracking), and its remaining frames are scored as not ok
+without a pose (``unprocessed``; a live system would not have delivered them either).
+
+Timings: ``ms_per_frame_median`` is the tracker's own per-frame latency (fit, wall clock, one
+BLAS thread), ``pipeline_ms_per_frame_median`` adds reading and segmenting the frame set; quote
+them as ratios to ``machine_ref_ms``.
+
+    python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
+                               [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
+                               [--fps 30] [--clip-budget-s 20] [--out result.json]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from capture.calibration import save_calibration  # noqa: E402
+from capture.session import load_session, write_session_toml  # noqa: E402
+from machine_ref import machine_ref_ms  # noqa: E402
+from segmentation.background import BackgroundModel  # noqa: E402
+from segmentation.pipeline import segment_frame  # noqa: E402
+from tracker.synthetic.bvh import load_bvh  # noqa: E402
+from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
+from service.offline import track_session  # noqa: E402
+from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
+from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
+from tracker.synthetic.synth import bundled_motion  # noqa: E402
+from tracker.synthetic.evaluation import score_clip, summarise_clips  # noqa: E402
+from tracker.synthetic.motions import MOTIONS, make_motion, resample_bvh  # noqa: E402
+from tracker.synthetic.people import (JOINT_NAMES, Studio, body_primitives, make_subject,  # noqa: E402
+                                      subject_height, subject_motion, subject_skeleton)
+
+CLIPS = tuple(MOTIONS) + ("cmu_walk",)
+QUICK = {"subjects": 2, "clips": "tpose_start,crouch,walk_turn", "cameras": "6", "frames": 60}
+N_BACKGROUND = 10
+IOU_EVERY = 15
+assert tuple(MODEL_JOINTS) == JOINT_NAMES
+
+
+def clip_motion(name: str, skeleton, *, subject: int, frames: int, fps: float):
+    """The BVH motion of clip ``name`` for subject index ``subject`` (seeded per subject and clip)."""
+    if name == "cmu_walk":
+        return resample_bvh(skeleton, fps=fps, frames=frames, start_s=1.0)
+    rng = np.random.default_rng(1000 * subject + CLIPS.index(name))
+    return make_motion(name, skeleton, frames=frames, fps=fps, rng=rng)
+
+
+def bench_subject(index: int):
+    """Subject ``index`` of the benchmark: shoes dark for even indices."""
+    return make_subject(index, dark_shoes=index % 2 == 0)
+
+
+def render_session(root: Path, motion, subject_index: int, n_cameras: int, size, *, ground: str = "frame") -> tuple:
+    """Render one clip into a session at ``root``; returns (truth (n, 16, 3), background models,
+    height_m, render ms per frame, median IoU of the segmented silhouettes with the true ones on
+    every ``IOU_EVERY``-th frame)."""
+    subject = bench_subject(subject_index)
+    sm = subject_motion(motion, subject, ground=ground)
+    prim = body_primitives(sm, subject)
+    pts = np.concatenate([prim.spheres(f)[0].reshape(-1, 3) for f in range(prim.n_frames)])
+    cams = fit_ring_cameras(pts, n_cameras, size=tuple(size))
+    studio = Studio(cams, seed=subject_index, dark_floor=subject_index % 4 in (0, 3))
+    rng = np.random.default_rng(7919 * subject_index + n_cameras)
+    backgrounds = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(N_BACKGROUND)])
+                   for c, bg in zip(cams, studio.backgrounds)}  # fmt: skip
+    for c in cams:
+        (root / c.name).mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    ious = []
+    for f in range(prim.n_frames):
+        images, masks = studio.render(prim, f)
+        for c, img, mask in zip(cams, images, masks):
+            decoded, jpeg = studio.camera_output(img, rng)
+            (root / c.name / f"{f:06d}.jpg").write_bytes(jpeg)
+            if f % IOU_EVERY == 0:
+                sil = segment_frame(backgrounds[c.name], decoded).silhouette > 0
+                ious.append(np.sum(sil & mask) / max(np.sum(sil | mask), 1))
+    render_ms = 1e3 * (time.perf_counter() - t0) / prim.n_frames
+    save_calibration(root / "calibration.toml", cams)
+    height = subject_height(motion, subject)
+    write_session_toml(root, name=root.name, fps=float(sm.fps),
+                       cameras=[{"name": c.name, "images": f"{c.name}/%06d.jpg"} for c in cams], height_m=height)
+    return sm.joints, backgrounds, height, render_ms, float(np.median(ious))
+
+
+def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
+    """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
+    the true joints (``tracker.synthetic.retarget``) on every ``every``-th frame: what a perfect tracker with
+    that model could reach on this subject."""
+    skel = subject_skeleton(motion, bench_subject(subject_index))
+    n = (skel.n_frames - 1) // every + 1
+    rt = retarget_bvh(skel, model="knossow40", fps=fps / every, frames=n, height_m=height_m)
+    return float(1e3 * rt.residual_m.mean())
+
+
+def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
+             ik_floor: bool = True, budget_s: float = 0.0) -> dict:
+    """Render, track and score one clip; returns its per-clip record.
+
+    ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
+    much CPU time; the frames left are scored as not ok without a pose (``unprocessed``)."""
+    t_clip = time.perf_counter()
+    motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
+    with tempfile.TemporaryDirectory(prefix="robustness_") as tmp:
+        root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
+        truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
+        session = load_session(root)
+        records, pipe_ms, cpu_s = [], [], 0.0
+        it = track_session(session, backgrounds=backgrounds)
+        while not (budget_s and cpu_s > budget_s):
+            t0, c0 = time.perf_counter(), time.process_time()
+            rec = next(it, None)
+            if rec is None:
+                break
+            cpu_s += time.process_time() - c0
+            pipe_ms.append(1e3 * (time.perf_counter() - t0))
+            records.append(rec)
+        it.close()
+    pred = np.full(truth.shape, np.nan)
+    ok = np.zeros(len(truth), bool)
+    for rec in records:
+        k = rec["frame"]
+        ok[k] = bool(rec.get("ok"))
+        if rec.get("joints"):
+            pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
+    score = score_clip(pred, ok, truth, fps=fps)
+    floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
+    lat = [r["latency_ms"] for r in records]
+    reasons = {}
+    for r in records:
+        if not r.get("ok"):
+            key = r.get("reason", "?").split(":")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "height_m": round(height, 3),
+            **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
+            "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
+            "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
+            "wall_s": time.perf_counter() - t_clip,
+            "latencies_ms": lat, "pipeline_ms": pipe_ms}
+
+
+def summarise(per_clip: list[dict]) -> dict:
+    """The headline figures over per-clip records (``run_clip``)."""
+    summary = summarise_clips(per_clip)
+    floors = [r["ik_floor_mm"] for r in per_clip if r["ik_floor_mm"] is not None]
+    lat = [v for r in per_clip for v in r["latencies_ms"]]
+    pipe = [v for r in per_clip for v in r["pipeline_ms"]]
+    return {"subjects": len({r["subject"] for r in per_clip}), "clips": len(per_clip), **summary,
+            "ik_floor_mm_mean": float(np.mean(floors)) if floors else None,
+            "unprocessed_percent": 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"],
+            "ms_per_frame_median": float(np.median(lat)) if lat else None,
+            "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None}
+
+
+def merge(paths) -> dict:
+    """One result from several ``--out`` files (e.g. subjects run in separate processes)."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    per_clip = [c for r in runs for c in r["per_clip"]]
+    drop = ("per_clip", "subject_ids", "wall_s", "machine_ref_ms", "motions", "cameras")
+    head = {k: v for k, v in runs[0].items() if k not in drop}
+    return {**head, "subject_ids": sorted({c["subject"] for c in per_clip}), **summarise(per_clip),
+            "motions": [m for m in CLIPS if any(c["clip"] == m for c in per_clip)],
+            "cameras": sorted({c["cameras"] for c in per_clip}),
+            "machine_ref_ms": float(np.median([r["machine_ref_ms"] for r in runs])),
+            "wall_s": max(r["wall_s"] for r in runs), "merged": [str(p) for p in paths], "per_clip": per_clip}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"a small subset: {QUICK['subjects']} subjects, clips {QUICK['clips']}, "
+                         f"{QUICK['cameras']} cameras, {QUICK['frames']} frames")
+    ap.add_argument("--subjects", type=int, default=6, help="subjects 0 .. N-1")
+    ap.add_argument("--subject-ids", default=None, help="comma-separated subject indices (instead of --subjects)")
+    ap.add_argument("--clips", default=",".join(CLIPS), help=f"comma-separated, from {','.join(CLIPS)}")
+    ap.add_argument("--cameras", default="4,6", help="comma-separated camera counts")
+    ap.add_argument("--frames", type=int, default=75)
+    ap.add_argument("--fps", type=float, default=30.0)
+    ap.add_argument("--size", default="320x240")
+    ap.add_argument("--all-cameras", action="store_true",
+                    help="every clip with every camera count (default: balanced, clip j of subject s uses "
+                         "cameras[(s + j) %% len(cameras)])")
+    ap.add_argument("--clip-budget-s", type=float, default=20.0,
+                    help="CPU seconds of tracking per clip after which its remaining frames count as not ok "
+                         "without a pose (0: no limit)")
+    ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
+    ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
+    ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
+                    help="combine the --out files of several runs (nothing is run)")
+    args = ap.parse_args(argv)
+    if args.merge:
+        return _emit(merge(args.merge), args)
+    if args.quick:
+        for k, v in QUICK.items():
+            setattr(args, k, v)
+        args.subject_ids = None
+    clips = [c for c in args.clips.split(",") if c]
+    unknown = [c for c in clips if c not in CLIPS]
+    if unknown or not clips:
+        ap.error(f"--clips: unknown {unknown}; available: {','.join(CLIPS)}")
+    try:
+        cams = [int(c) for c in args.cameras.split(",") if c]
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        ap.error("--cameras takes integers (e.g. 4,6) and --size WxH (e.g. 320x240)")
+    try:
+        subjects = ([int(v) for v in args.subject_ids.split(",") if v] if args.subject_ids
+                    else list(range(args.subjects)))
+    except ValueError:
+        ap.error("--subject-ids takes comma-separated integers")
+    if not subjects or min(subjects) < 0 or args.frames < 2 or not cams or min(cams) < 2 or w < 64 or h < 48:
+        ap.error("need --subjects >= 1, --frames >= 2, --cameras >= 2 each and --size at least 64x48")
+    warnings.filterwarnings("ignore", message="Gimbal lock")
+    cv2.setNumThreads(1)
+    ref = machine_ref_ms()
+    skeleton = load_bvh(bundled_motion("scaled_131_01"))
+    t_start = time.perf_counter()
+    per_clip = []
+    for s in subjects:
+        for j, name in enumerate(clips):
+            for n in (cams if args.all_cameras else [cams[(s + j) % len(cams)]]):
+                rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
+                               ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s)
+                per_clip.append(rec)
+                if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
+                    args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
+                                                    "machine_ref_ms": ref, "per_clip": per_clip}, indent=1) + "\n")
+                print(f"subject {s} {name:12s} {n} cams  MPJPE {rec['mpjpe_mm'] or float('nan'):7.1f} mm  "
+                      f"ok {rec['ok']:3d}/{rec['frames']}  mirrored {rec['mirrored']:3d} (after 1 s "
+                      f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
+                      f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
+                      f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
+                      f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
+    result = {"subject_ids": subjects, **summarise(per_clip), "machine_ref_ms": ref, "size": [w, h], "fps": args.fps,
+              "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
+              "wall_s": time.perf_counter() - t_start, "date": datetime.date.today().isoformat(), "per_clip": per_clip}
+    return _emit(result, args)
+
+
+def _emit(result: dict, args) -> int:
+    if args.out is not None:
+        args.out.write_text(json.dumps(result, indent=1) + "\n")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, val in result.items():
+            if key not in ("per_clip", "merged"):
+                print(f"{key:48s} {val:.2f}" if isinstance(val, float) else f"{key:48s} {val}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

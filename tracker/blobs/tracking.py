@@ -1,0 +1,276 @@
+"""The blob tracker: coloured hull, EM blobs and inverse kinematics per frame (BMVC'04 §3.3–4).
+
+Per frame set (camera name → BGR image):
+
+1. predict the pose (the last one, or extrapolated with ``velocity_gain``) and reconstruct the coloured hull
+   (``tracker.blobs.colour_hull``) in the zone of interest around it;
+2. ``em_iterations`` times: re-create the blobs on the model at the current pose
+   (``BlobSet.regenerate``), assign voxels to blobs (``tracker.blobs.em.expectation``, eq. 2;
+   by default each voxel is shared among its nearest blobs rather than given to one, which keeps a
+   blob that slipped onto a neighbour's voxels from locking there), re-estimate them
+   (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
+   de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
+   blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
+   a constraint, the limbs by damped least squares (or the paper's cyclic coordinate descent)
+   within the joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
+3. emit a DESIGN.md pose record (``"method": "blobs"``).
+
+The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
+pose an ``initialiser`` finds in the first frame, e.g. :func:`initialise_from_images`: the
+contour tracker's silhouette search).  A frame is ``ok: false`` when the hull in the zone is nearly
+empty, too few blobs are active, or the active blobs' means are far from where the fitted model
+puts them (``BlobOptions``); the fit is still the next frame's start, without velocity.  Never
+raises on data.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from segmentation.background import BackgroundModel
+from tracker.blobs.blobset import BlobSet, blob_layout, learn_blobs
+from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zone_of_interest
+from tracker.blobs.em import expectation, maximisation
+from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
+from tracker.body.kinematics import forward, joint_centre_array
+from tracker.body.model import JOINT_ROTATION, BodyModel
+
+__all__ = ["BlobOptions", "BlobTracker", "initialise_from_images"]
+
+_ROOT_BLOBS = ("pelvis", "abdomen", "torso.0", "left_thigh.0", "right_thigh.0")
+
+
+@dataclass(frozen=True)
+class BlobOptions:
+    """Options of :class:`BlobTracker`.
+
+    hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the
+    predicted body surface; em_iterations : expectation–maximisation–IK rounds per frame;
+    colour_weight : factor on the colour term of eq. 2; log_det : add the Gaussians' log-determinants
+    to eq. 2 (``tracker.blobs.em.expectation``); soft : share each voxel among its ``soft`` nearest
+    blobs instead of the paper's hard assignment (0); gate : largest position term of an assigned
+    voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position covariance in
+    the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
+    reaches its voxels); min_fill : filling below which a blob is inactive;
+    colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior
+    each frame (skin blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps,
+    ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
+    ``damped_least_squares``; orientation_weight, max_turn_deg : the root's orientation constraint
+    (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
+    velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
+    1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
+    min_voxels, min_active_fraction, max_goal_rms_m : below/above these a frame is ``ok: false``.
+    """
+
+    hull: HullOptions = field(default_factory=HullOptions)
+    zone_margin_m: float = 0.25
+    em_iterations: int = 2
+    colour_weight: float = 1.0
+    log_det: bool = False
+    soft: int = 3
+    gate: float = 25.0
+    motion_sigma_m: float = 0.04
+    min_fill: float = 0.3
+    colour_prior_weight: float = 0.2
+    skin_prior_weight: float = 0.5
+    ik: str = "dls"
+    ccd_sweeps: int = 3
+    ccd_attenuation: float = 1.0
+    ccd_damping: float = 1e-4
+    dls_iterations: int = 3
+    dls_damping: float = 1e-3
+    orientation_weight: float = 0.02
+    max_turn_deg: float = 60.0
+    floor_snap_m: float | None = 0.02
+    velocity_gain: float = 0.0
+    min_voxels: int = 50
+    min_active_fraction: float = 0.6
+    max_goal_rms_m: float = 0.08
+
+    def __post_init__(self):
+        if self.ik not in ("ccd", "dls"):
+            raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
+        if int(self.em_iterations) < 1:
+            raise ValueError(f"em_iterations: expected >= 1, got {self.em_iterations!r}")
+
+
+def initialise_from_images(model: BodyModel, cameras: Sequence[Camera], images: Mapping[str, np.ndarray],
+                           backgrounds: Mapping[str, BackgroundModel]) -> np.ndarray:
+    """A first pose from one frame set: segmentation and the contour tracker's silhouette search
+    (``tracker.search.initialise.initialise``); returns params (n_params,), raises ValueError on failure."""
+    from segmentation.pipeline import segment_frame
+    from tracker.search.initialise import initialise
+
+    segs = {c.name: segment_frame(backgrounds[c.name], images[c.name]) for c in cameras}
+    res = initialise(model, cameras, {n: s.silhouette for n, s in segs.items()},
+                     {n: s.chamfer for n, s in segs.items()})
+    return model.clamp(np.asarray(res.params, dtype=float))
+
+
+class BlobTracker:
+    """Frame-to-frame blob tracker of one person (module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera (the studio; a frame may bring any subset)
+    backgrounds : camera name -> BackgroundModel
+    initial_params : (n_params,) the first frame's pose, or None to use ``initialiser``
+    initialiser : callable ``(cameras, images) -> params`` run on the first frame when there is no
+        ``initial_params`` (may raise ValueError)
+    options : BlobOptions
+    clock : callable returning seconds, default ``time.perf_counter``
+
+    Attributes
+    ----------
+    params : (n_params,) the last fitted pose (None before initialisation)
+    blobs : BlobSet (None before initialisation)
+    last_hull : ColourHull of the last frame (for display)
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], backgrounds: Mapping[str, BackgroundModel], *,
+                 initial_params=None, initialiser: Callable | None = None, options: BlobOptions = BlobOptions(),
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        self.model = model
+        self.cameras = {c.name: c for c in cameras}
+        if len(self.cameras) != len(cameras):
+            raise ValueError("cameras: names must be unique")
+        missing = [n for n in self.cameras if n not in backgrounds]
+        if missing:
+            raise ValueError(f"backgrounds: no model for camera(s) {missing}")
+        self.backgrounds = dict(backgrounds)
+        self.options = options
+        self.initialiser = initialiser
+        self.clock = clock
+        self.layout = blob_layout(model)
+        self.blobs: BlobSet | None = None
+        self.params: np.ndarray | None = None
+        self.previous: np.ndarray | None = None
+        self.last_hull: ColourHull | None = None
+        if initial_params is not None:
+            p = np.asarray(initial_params, dtype=float)
+            if p.shape != (model.n_params,) or not np.all(np.isfinite(p)):
+                raise ValueError(f"initial_params: expected a finite array of shape ({model.n_params},)")
+            self.params = model.clamp(p)
+        names = self.layout.names
+        self._motion = options.motion_sigma_m**2 * np.eye(3)
+        self._root_blobs = np.array([any(n == r for r in _ROOT_BLOBS) for n in names])
+        kind = model.param_kind
+        self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
+                                                           for p in model.param_part])
+        self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
+
+    def predict(self) -> np.ndarray | None:
+        """Start pose for the next frame (n_params,) or None before initialisation."""
+        if self.params is None:
+            return None
+        if self.options.velocity_gain > 0 and self.previous is not None:
+            return self.model.clamp(self.params + self.options.velocity_gain * (self.params - self.previous))
+        return self.params
+
+    def _hull(self, cams, images, params) -> ColourHull:
+        zone = zone_of_interest(self.model, params, margin_m=self.options.zone_margin_m)
+        return coloured_hull(cams, [images[c.name] for c in cams], [self.backgrounds[c.name] for c in cams], zone,
+                             options=self.options.hull)
+
+    def _ik(self, params: np.ndarray, goals: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        o, lay, m = self.options, self.layout, self.model
+        wr = weights * self._root_blobs
+        params = fit_root(m, params, lay.part, self.blobs.point, goals, wr, orientation_weight=o.orientation_weight,
+                          max_turn_rad=np.radians(o.max_turn_deg))
+        if o.ik == "ccd":
+            params = ccd(m, params, lay.part, self.blobs.point, goals, weights, free=self._free, sweeps=o.ccd_sweeps,
+                         attenuation=o.ccd_attenuation, damping=o.ccd_damping)
+        else:
+            params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
+                                          iterations=o.dls_iterations, damping=o.dls_damping)
+        return params
+
+    def fit(self, hull: ColourHull, start: np.ndarray) -> tuple[np.ndarray, dict]:
+        """EM and IK rounds on one hull from ``start``; returns params and quality figures."""
+        o, m, blobs = self.options, self.model, self.blobs
+        params = start
+        goals = weights = None
+        for _ in range(int(o.em_iterations)):
+            pose = forward(m, params)
+            blobs.regenerate(m, pose)
+            asg = expectation(hull.centres, hull.colours, blobs.mean, blobs.cov + self._motion, blobs.colour, blobs.colour_cov,
+                              colour_weight=o.colour_weight, gate=o.gate, log_det=o.log_det, soft=o.soft)
+            stats = maximisation(asg, hull.centres, hull.sizes, self.layout.n_blobs)
+            blobs.absorb(stats, colour_prior_weight=self._prior_weight, min_fill=o.min_fill)
+            weights = np.where(blobs.active, np.minimum(blobs.fill, 1.0), 0.0)
+            goals = np.where(blobs.active[:, None], np.nan_to_num(stats.mean), blobs.mean)
+            params = self._ik(params, goals, weights)
+        if o.floor_snap_m is not None:
+            params = floor_contact(m, params, snap_m=o.floor_snap_m)
+        at = blobs.attachment(m, forward(m, params))
+        act = weights > 0
+        rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
+        return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms}
+
+    def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
+        """Fit one frame set (camera name → BGR uint8 image) and return its pose record."""
+        t0 = self.clock()
+        o = self.options
+        record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name,
+                  "method": "blobs"}
+        unknown = sorted(n for n in images if n not in self.cameras)
+        names = [n for n in self.cameras if n in images]
+        record["cameras"] = len(names)
+
+        def fail(reason: str) -> dict:
+            record.update(ok=False, reason=reason, latency_ms=1e3 * (self.clock() - t0))
+            return record
+
+        if unknown:
+            return fail(f"unknown camera(s) {unknown}")
+        if not names:
+            return fail("no camera")
+        cams = [self.cameras[n] for n in names]
+        start = self.predict()
+        if start is None:
+            if self.initialiser is None:
+                return fail("no initial pose: pass initial_params or an initialiser")
+            try:
+                start = self.model.clamp(np.asarray(self.initialiser(cams, images), dtype=float))
+            except ValueError as exc:
+                return fail(f"initialisation failed: {exc}")
+        try:
+            hull = self._hull(cams, images, start)
+        except ValueError as exc:  # a malformed image or zone: this frame is lost, the next may do
+            return fail(f"hull: {exc}")
+        self.last_hull = hull
+        t_hull = self.clock()
+        if hull.n_voxels < o.min_voxels:
+            self.previous = None
+            return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
+        if self.blobs is None:
+            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout)
+        params, quality = self.fit(hull, start)
+        joints = joint_centre_array(self.model, forward(self.model, params))
+        why = []
+        if quality["active_fraction"] < o.min_active_fraction:
+            why.append(f"{100 * quality['active_fraction']:.0f}% of blobs active < {100 * o.min_active_fraction:.0f}%")
+        if not quality["goal_rms_m"] <= o.max_goal_rms_m:
+            why.append(f"blob goals {1e3 * quality['goal_rms_m']:.0f} mm off > {1e3 * o.max_goal_rms_m:.0f}")
+        record.update(
+            ok=not why, params=[float(v) for v in params],
+            joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
+            iterations=int(o.em_iterations), voxels=int(hull.n_voxels),
+            active_fraction=quality["active_fraction"],
+            goal_rms_mm=1e3 * quality["goal_rms_m"] if np.isfinite(quality["goal_rms_m"]) else None,
+            hull_ms=1e3 * (t_hull - t0),
+        )
+        if why:
+            record["reason"] = "poor fit: " + "; ".join(why)
+            self.previous = None
+        else:
+            self.previous = self.params
+        self.params = params
+        record["latency_ms"] = 1e3 * (self.clock() - t0)
+        return record

@@ -1,0 +1,93 @@
+"""Where the body can be in each camera: image rectangles from a (predicted) pose.
+
+Segmentation only needs to look where the body can be.  Given the tracker's prediction for the
+next frame (``tracker.fitting.tracking.Tracker.predict``), each part's solid is enclosed in its bounding
+box in the part frame (the taper's largest cross-section, both caps), grown by ``margin_m`` for
+the prediction's error; the eight corners of every part's box are projected with the camera
+model (distortion included) and the rectangle around all of them, grown by ``margin_px``, is the
+region of interest of that camera.  A central projection maps a box in front of the camera
+inside the convex hull of its corners' images, so without distortion the rectangle holds the
+whole predicted silhouette grown by the margins; with lens distortion ``margin_px`` also covers
+the (small) bulge of the distorted edges between corners.
+
+The rectangle is ``(x0, y0, x1, y1)``, half-open, clipped to the image: what
+``segmentation.pipeline.segment_frame(..., roi=...)`` takes.  ``None`` means "the whole frame":
+a part reaching behind (or into) the camera plane, or a pose that is not finite.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from tracker.body.kinematics import Pose, forward
+from tracker.body.model import BodyModel
+
+__all__ = ["pose_rois", "part_box_corners"]
+
+_CORNERS = np.array(np.meshgrid([-1, 1], [-1, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
+_MIN_DEPTH_M = 0.05  # a corner closer to the camera plane than this: the whole frame
+
+
+def part_box_corners(model: BodyModel, pose: Pose, *, margin_m: float = 0.0) -> np.ndarray:
+    """World corners of every part's bounding box grown by ``margin_m`` (metres), shape
+    (n_parts * 8, 3)."""
+    a, b, k, z1, z2 = (model.cones[:, j] for j in range(5))
+    s = np.maximum(1.0 + k * z1, 1.0 + k * z2)  # the largest cross-section's scale
+    local = np.empty((model.n_parts, 8, 3))
+    local[..., 0] = (a * s + margin_m)[:, None] * _CORNERS[:, 0]
+    local[..., 1] = (b * s + margin_m)[:, None] * _CORNERS[:, 1]
+    local[..., 2] = np.where(_CORNERS[:, 2] > 0, (z2 + margin_m)[:, None], (z1 - margin_m)[:, None])
+    world = np.einsum("pij,pkj->pki", pose.rotation, local) + pose.translation[:, None, :]
+    return world.reshape(-1, 3)
+
+
+def pose_rois(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], *, margin_m: float = 0.10,
+              margin_px: int = 8) -> list[tuple[int, int, int, int] | None]:
+    """Region of interest of every camera for the body at ``params`` (module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+    params : ndarray, shape (n_params,)
+        The pose, e.g. the tracker's prediction for the frame.
+    cameras : sequence of Camera
+    margin_m : float
+        Every part's box grown by this much (metres): the prediction's expected error.
+    margin_px : int
+        The rectangle grown by this much (pixels).
+
+    Returns
+    -------
+    list, one per camera, of ``(x0, y0, x1, y1)`` (ints, half-open, inside the image) or None
+    (segment the whole frame).  A body wholly outside a camera's image gives the smallest valid
+    rectangle at the nearest image border (``segment_frame`` then finds nothing there).
+    """
+    if not (np.isfinite(margin_m) and margin_m >= 0):
+        raise ValueError(f"margin_m: expected a finite value >= 0, got {margin_m!r}")
+    if int(margin_px) != margin_px or margin_px < 0:
+        raise ValueError(f"margin_px: expected an integer >= 0, got {margin_px!r}")
+    params = np.asarray(params, dtype=float)
+    if params.shape != (model.n_params,):
+        raise ValueError(f"params: expected shape ({model.n_params},), got {params.shape}")
+    if not np.all(np.isfinite(params)):
+        return [None for _ in cameras]
+    corners = part_box_corners(model, forward(model, params), margin_m=float(margin_m))
+    out: list[tuple[int, int, int, int] | None] = []
+    for cam in cameras:
+        w, h = (int(v) for v in cam.size)
+        if not np.all(cam.depth(corners) > _MIN_DEPTH_M):
+            out.append(None)
+            continue
+        uv = cam.project(corners)
+        if not np.all(np.isfinite(uv)):
+            out.append(None)
+            continue
+        lo = np.floor(uv.min(axis=0)) - margin_px
+        hi = np.ceil(uv.max(axis=0)) + margin_px + 1  # half-open
+        x0, y0 = int(np.clip(lo[0], 0, w - 1)), int(np.clip(lo[1], 0, h - 1))
+        x1, y1 = int(np.clip(hi[0], x0 + 1, w)), int(np.clip(hi[1], y0 + 1, h))
+        out.append((x0, y0, x1, y1))
+    return out
