@@ -58,10 +58,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Body model (a name is sized by the session's subject).
     sliding, solver, options
         Tracker settings (``tracker.fitting.tracking.Tracker``).
-    frames : range or None
-        Frame ids (None: all).
-    cameras : sequence of str or None
-        Camera names (None: all).
+    frames, cameras : range or None, sequence of str or None
+        Frame ids and camera names (None: all).
     initial_params : ndarray, shape (n_params,), optional
         Start pose; else automatic initialisation on the first frame.
     segmentation : SegmentationParams, optional
@@ -74,8 +72,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         ``solver``, ``options`` and ``segmentation`` are the contour tracker's).
     blob_options : BlobOptions, optional
     stream_check : StreamCheck, optional
-        Sees every frame set: a camera whose stream ends early or loses declared frames is an error
-        (``capture.media.MissingFramesError``) or, when it allows, counted.
+        Sees each frame set (``capture.media``): names a camera cut short.
 
     Yields
     ------
