@@ -292,6 +292,7 @@ class Attack:
     cameras: tuple[str, ...]
     duration_s: float
     max_messages: int = 20_000
+    hostile: bool = True  # False: only listen to the workers' status (the clean run)
     sent: int = 0
     status: dict = field(default_factory=dict)
 
@@ -327,7 +328,9 @@ class Attack:
         big_bytes = big.to_bytes()  # ~5 MB, far-future id
         t_end = time.monotonic() + self.duration_s
         try:
-            while not stop.is_set() and time.monotonic() < t_end and self.sent < self.max_messages:
+            while not self.hostile and not stop.is_set() and time.monotonic() < t_end:
+                time.sleep(0.1)
+            while self.hostile and not stop.is_set() and time.monotonic() < t_end and self.sent < self.max_messages:
                 for cam in self.cameras:
                     session.put(keys.frame(cam), rng.bytes(int(rng.integers(1, 2000))))  # malformed
                     session.put(keys.chamfer(cam), rng.bytes(200))
@@ -370,25 +373,25 @@ def live(duration_s: float, cameras: int) -> dict:
 
             opts = replace(opts, port=port)
             stop = threading.Event()
-            attack = None
-            if label == "under_attack":
-                attack = Attack(port, tuple(f"cam{i}" for i in range(cameras)),
-                                duration_s=opts.live_start_delay_s + duration_s + 5)
-                thread = threading.Thread(target=attack.run, args=(stop,), daemon=True)
-                thread.start()
+            attack = Attack(port, tuple(f"cam{i}" for i in range(cameras)),
+                            duration_s=opts.live_start_delay_s + duration_s + 5, hostile=label == "under_attack")
+            thread = threading.Thread(target=attack.run, args=(stop,), daemon=True)
+            thread.start()
             try:
                 summary = run_demo(opts, progress=lambda m: print(m, file=sys.stderr))
             finally:
                 stop.set()
             result[f"poses_per_s_{label}"] = summary.poses_per_s
             result[f"ok_{label}"] = summary.ok
-            if attack is not None:
-                thread.join(10)
+            thread.join(10)
+            refused = int(sum(v for comp in attack.status.values() for k, v in comp.items()
+                              if k in ("rejected", "bad", "mismatched_key", "unknown")))
+            if label == "under_attack":
                 result["attack_messages"] = attack.sent
                 result["worker_status"] = attack.status
-                result["rejected_messages"] = int(sum(
-                    v for comp in attack.status.values() for k, v in comp.items()
-                    if k in ("rejected", "bad", "mismatched_key", "undemanded", "unknown")))
+                result["rejected_messages"] = refused
+            else:
+                result["rejected_messages_clean"] = refused  # a clean studio refuses nothing
     return result
 
 

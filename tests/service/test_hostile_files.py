@@ -257,3 +257,23 @@ def test_replay_reports_a_cut_camera_as_dropped(tmp_path, rng, capsys):
     cams = json.loads(capsys.readouterr().out)["cameras"]
     assert cams["cam0"]["dropped"] == 0 and cams["cam1"]["frames"] == 3
     assert cams["cam1"]["dropped"] == 5 and cams["cam1"]["missing_at_end"] == 5
+
+
+def test_review_interrupted_keeps_an_existing_video(session_dir, tmp_path):
+    from capture.session import load_session
+    from service.review import write_review
+
+    out = tmp_path / "review.mp4"
+    out.write_bytes(EXISTING)
+    records = [{"frame": k, "timestamp_ns": 0, "ok": False, "reason": "x"} for k in range(6)]
+
+    def interrupt(done, total, label):
+        if done >= 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_review(load_session(session_dir), records, video=out, progress=interrupt)
+    assert out.read_bytes() == EXISTING
+    assert sorted(os.listdir(tmp_path)) == ["review.mp4", "s"]  # no temporary file left
+    write_review(load_session(session_dir), records, video=out)
+    assert out.read_bytes() != EXISTING and out.stat().st_size > 1000
