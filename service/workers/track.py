@@ -80,7 +80,7 @@ class TrackWorker:
                                                                          max_bytes=CHAMFER_MAX_BYTES), mode=mode,
                            depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
         self.haves = None if lossless else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
-                                                 depth=64 * len(cameras), cv=cv)
+                                                 depth=64 * len(cameras), cv=cv, latest_per_key=True)
         self.planner = None if lossless else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
@@ -105,7 +105,8 @@ class TrackWorker:
                "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
             out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected,
-                       demands=self.planner.demands, demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
+                       have_dropped=self.haves.dropped, demands=self.planner.demands,
+                       demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
         return out
 
     def _demand(self) -> None:

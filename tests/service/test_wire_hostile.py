@@ -150,3 +150,32 @@ def test_live_studio_keeps_tracking_through_far_future_haves_and_demands(tmp_pat
     frames = [p.frame for p in poses]
     assert max(frames) < 50 and frames == sorted(set(frames)) and len(frames) >= 10
     assert sent[0] > 100
+
+
+class _Sample:
+    def __init__(self, key, data):
+        self.key_expr, self.attachment = key, None
+        self.payload = type("P", (), {"to_bytes": lambda _self: data})()
+
+
+class _Session:
+    def declare_subscriber(self, key, callback):
+        return type("S", (), {"undeclare": lambda _self: None})()
+
+
+def test_have_flood_on_one_key_cannot_push_out_another_cameras_notice():
+    from service.wire.bus import Inbox
+    from service.wire.records import HaveMessage
+
+    inbox = Inbox(_Session(), "contourcap/x/cam/*/have", HaveMessage.from_bytes, depth=8, latest_per_key=True)
+    inbox._on_sample(_Sample("contourcap/x/cam/cam0/have", HaveMessage("cam0", (100, 101)).to_bytes()))
+    for k in range(1000):  # a flood on cam3's key
+        inbox._on_sample(_Sample("contourcap/x/cam/cam3/have", HaveMessage("cam3", (FAR + k,)).to_bytes()))
+    got = {r.key.split("/")[3]: r.message for r in inbox.drain()}
+    assert got["cam0"].frame_ids == (100, 101) and got["cam3"].frame_ids == (FAR + 999,)
+    assert inbox.dropped == 0 and len(inbox) == 0
+    plain = Inbox(_Session(), "k/*", HaveMessage.from_bytes, depth=8)
+    plain._on_sample(_Sample("k/cam0", HaveMessage("cam0", (1,)).to_bytes()))
+    for k in range(20):
+        plain._on_sample(_Sample("k/cam3", HaveMessage("cam3", (k,)).to_bytes()))
+    assert all(r.message.camera == "cam3" for r in plain.drain())  # what the flood did before
