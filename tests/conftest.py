@@ -19,8 +19,10 @@ try:
 
     settings.register_profile("ci", derandomize=True, max_examples=50, deadline=None)
     settings.register_profile("dev", max_examples=50, deadline=None)
-    # --fuzz-long: the fuzz tests (tests/*/test_fuzz_*.py) run 100x longer, not derandomised
-    settings.register_profile("fuzz-long", max_examples=5000, deadline=None)
+    # --fuzz-long: the fuzz tests (tests/*/test_fuzz_*.py) run 100x longer (CONTOURCAP_FUZZ_EXAMPLES), not
+    # derandomised
+    settings.register_profile("fuzz-long", max_examples=int(os.environ.get("CONTOURCAP_FUZZ_EXAMPLES", 5000)),
+                              deadline=None)
     settings.load_profile("ci" if os.environ.get("CI") else "dev")
 except ImportError:  # pragma: no cover
     pass
