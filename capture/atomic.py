@@ -63,9 +63,15 @@ def _publish(tmp: Path, path: Path) -> None:
 
 
 def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    """The process umask, read without changing it (``os.umask`` would, for every thread); 0o022 if unknown."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0o022
 
 
 @contextlib.contextmanager
@@ -89,7 +95,7 @@ def atomic_path(path) -> Iterator[Path]:
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "w", **kwargs) -> Iterator[IO]:
     """``open(path, mode)`` through a temporary file renamed onto ``path`` when the block ends
-    without an exception (``mode``: ``"w"``, ``"wb"``, ``"x"`` semantics are not offered)."""
+    without an exception; ``mode`` is ``"w"``, ``"wt"`` or ``"wb"`` (``kwargs`` go to ``open``)."""
     if mode not in ("w", "wb", "wt"):
         raise ValueError(f"atomic_open: mode must be 'w', 'wt' or 'wb', got {mode!r}")
     with atomic_path(path) as tmp:

@@ -99,3 +99,12 @@ def test_sigkill_keeps_every_finished_record(tmp_path):
     assert out.read_bytes() == OLD
     lines = (tmp_path / "poses.jsonl.partial").read_bytes().splitlines()
     assert lines == [b'{"frame": %d}' % k for k in range(5)]
+
+
+def test_new_file_gets_the_umask_mode(tmp_path):
+    old = os.umask(0o027)
+    try:
+        write_text_atomic(tmp_path / "new.txt", "x")
+    finally:
+        os.umask(old)
+    assert (os.stat(tmp_path / "new.txt").st_mode & 0o777) == 0o640
