@@ -354,7 +354,7 @@ class Attack:
             session.close()
 
 
-def live(duration_s: float, cameras: int) -> dict:
+def live(duration_s: float, cameras: int, *, stub_fitter: bool = False) -> dict:
     """Poses per second of the live demo, clean and under attack, and the workers' rejected counts."""
     from service.commands import demo as demo_cmd
     from service.demo import run_demo
@@ -366,7 +366,8 @@ def live(duration_s: float, cameras: int) -> dict:
     for label in ("clean", "under_attack"):
         with tempfile.TemporaryDirectory(prefix="hostile-live-") as tmp:
             args = parser.parse_args(["--live", "--duration-s", str(duration_s), "--cameras", str(cameras),
-                                      "--out", tmp])
+                                      "--out", tmp] + (["--fit-plugin", "tests.support.plugins:fitter_factory"]
+                                                       if stub_fitter else []))
             opts = demo_cmd.options_from_args(args)
             port = free_port()
             from dataclasses import replace
@@ -392,6 +393,7 @@ def live(duration_s: float, cameras: int) -> dict:
                 result["rejected_messages"] = refused
             else:
                 result["rejected_messages_clean"] = refused  # a clean studio refuses nothing
+                result["worker_status_clean"] = attack.status
     return result
 
 
@@ -402,6 +404,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-sweep", action="store_true", help="the live attack only")
     ap.add_argument("--duration-s", type=float, default=15.0, help="live: replay window of each demo run")
     ap.add_argument("--cameras", type=int, default=4, help="live: demo cameras")
+    ap.add_argument("--stub-fitter", action="store_true",
+                    help="live: a trivial fitter plug-in (tests.support.plugins) instead of the tracker, so the "
+                         "figure is the transport and segmentation under attack, not the tracker's luck")
     opts = ap.parse_args(argv)
     ref = machine_ref_ms()
     t0 = time.perf_counter()
@@ -413,7 +418,7 @@ def main(argv=None) -> int:
            "rejected_messages": None, "machine_ref_ms": round(ref, 2), "sweep_s": round(sweep_s, 1),
            "unclean": [f"{r.name}: rc {r.rc}: {r.last_line}" for r in results if not r.clean]}
     if not opts.no_live:
-        out.update(live(opts.duration_s, opts.cameras))
+        out.update(live(opts.duration_s, opts.cameras, stub_fitter=opts.stub_fitter))
     out["max_rss_mb"] = round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, 1)
     if opts.json:
         print(json.dumps(out))

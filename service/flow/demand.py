@@ -23,6 +23,7 @@ from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, meta_int,
 RING_MAX_BYTES = 32 * 1024 * 1024  # bytes one camera's FrameRing holds at most (frames as received)
 FRAME_RATE_LIMIT_HZ = 480.0  # frames a ring takes per second at most (twice the fastest trigger)
 HAVE_RATE_LIMIT_HZ = 200.0  # have notices per camera per second the planner takes at most
+RATE_BURST = 64  # messages a key may deliver back to back (a backlog after a 2 s stall at 30 fps)
 
 
 def frame_header(data: bytes) -> tuple[str, int]:
@@ -44,7 +45,7 @@ class FrameRing:
         self.camera, self.size = check_name(camera), max(1, int(size))
         self.max_bytes, self._bytes, self._clock = int(max_bytes), 0, clock
         self.window = window if window is not None else FrameIdWindow()
-        self.rate = rate if rate is not None else RateLimit(FRAME_RATE_LIMIT_HZ, burst=2 * self.size)
+        self.rate = rate if rate is not None else RateLimit(FRAME_RATE_LIMIT_HZ, burst=RATE_BURST)
         self._frames: collections.OrderedDict[int, tuple[bytes, int | None]] = collections.OrderedDict()
         self._demands: collections.deque[tuple[int, float]] = collections.deque(maxlen=max(1, int(max_demands)))
         self.cv = cv if cv is not None else threading.Condition()
@@ -196,7 +197,7 @@ class DemandPlanner:
         if camera not in self.cameras:
             self.unknown += 1
             return False
-        limit = self._limits.setdefault(camera, RateLimit(HAVE_RATE_LIMIT_HZ, burst=16))
+        limit = self._limits.setdefault(camera, RateLimit(HAVE_RATE_LIMIT_HZ, burst=RATE_BURST))
         if not limit.allow(now_s):
             self.limited += 1
             return False

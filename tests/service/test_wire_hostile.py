@@ -59,7 +59,7 @@ def test_window_bounds_and_restart_holdoff():
 def test_have_flood_is_rate_limited():
     p = DemandPlanner(("a",))
     accepted = sum(p.have("a", (k,), 0.0) for k in range(1000))
-    assert accepted <= 16 and p.limited >= 984  # one instant: the burst only
+    assert accepted <= 64 and p.limited >= 936  # one instant: the burst only
     r = RateLimit(10.0, burst=2)
     assert [r.allow(0.0) for _ in range(3)] == [True, True, False]
     assert r.allow(0.1) and not r.allow(0.1)
