@@ -36,6 +36,7 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
+from capture.atomic import write_bytes_atomic
 from capture.calibration import CalibrationError, load_calibration
 from capture.errors import CaptureError
 from capture.session import CALIBRATION_FILE, Session, SessionError, load_session, write_session_toml
@@ -293,7 +294,7 @@ class Recorder:
             self._session = {"name": name, "fps": fps, "height_m": height_m}
             write_session_toml(self.root, cameras=[w.entry() for w in self._writers.values()], **self._session)
             if calib_text is not None:
-                (self.root / CALIBRATION_FILE).write_bytes(calib_text)
+                write_bytes_atomic(self.root / CALIBRATION_FILE, calib_text)
         except OSError as exc:
             raise _oserror(exc, str(self.root)) from None
         self._closed: RecordingSummary | None = None
