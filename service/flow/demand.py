@@ -165,8 +165,9 @@ class DemandPlanner:
       new ones count as new again (``restarts``).
     - The wire is not trusted: each camera's ids are checked against its :class:`FrameIdWindow`
       (ids beyond what a trigger at ``rate_hz`` can have produced are dropped, counted in
-      ``rejected``), and a camera's notices are rate-limited (``HAVE_RATE_LIMIT_HZ``), so a peer
-      announcing frame 10^12 or flooding notices cannot redirect the demands.
+      ``rejected``; a camera's first notice may not run ahead of the cameras already heard), and a
+      camera's notices are rate-limited (``HAVE_RATE_LIMIT_HZ``), so a peer announcing frame 10^12
+      or flooding notices cannot redirect the demands.
     """
 
     def __init__(self, cameras: tuple[str, ...], *, absent_after_s: float = 0.5, startup_grace_s: float = 0.5,
@@ -191,6 +192,7 @@ class DemandPlanner:
         self._windows: dict[str, FrameIdWindow] = {}
         self._limits: dict[str, RateLimit] = {}
         self.limited = 0  # notices over a camera's rate limit
+        self.early_rejected = 0  # ids of a camera's first notice beyond every other camera's window
 
     def have(self, camera: str, frame_ids: tuple[int, ...], now_s: float) -> bool:
         """Record a have notice; False (counted in ``unknown``) for a camera not configured."""
@@ -202,6 +204,14 @@ class DemandPlanner:
             self.limited += 1
             return False
         if frame_ids:
+            if camera not in self._windows:  # a camera's first notice: no further ahead than the others allow
+                uppers = [u for w in self._windows.values() if (u := w.upper(now_s)) is not None]
+                if uppers:
+                    kept = tuple(f for f in frame_ids if f <= max(uppers))
+                    self.early_rejected += len(frame_ids) - len(kept)
+                    frame_ids = kept
+                    if not frame_ids:
+                        return False
             window = self._windows.setdefault(camera, FrameIdWindow(rate_hz=self.rate_hz))
             frame_ids = window.filter(frame_ids, now_s)
             if not frame_ids:  # nothing plausible: not a sign of life either
@@ -222,7 +232,7 @@ class DemandPlanner:
     def rejected(self) -> int:
         """Frame ids of have notices refused as implausible (beyond a camera's window), and notices
         over the rate limit."""
-        return sum(w.rejected for w in self._windows.values()) + self.limited
+        return sum(w.rejected for w in self._windows.values()) + self.limited + self.early_rejected
 
     def live(self, now_s: float) -> tuple[str, ...]:
         """Cameras heard from within ``absent_after_s``."""

@@ -179,3 +179,14 @@ def test_have_flood_on_one_key_cannot_push_out_another_cameras_notice():
     for k in range(20):
         plain._on_sample(_Sample("k/cam3", HaveMessage("cam3", (k,)).to_bytes()))
     assert all(r.message.camera == "cam3" for r in plain.drain())  # what the flood did before
+
+
+def test_a_cameras_first_notice_cannot_jump_ahead_of_the_others():
+    p = DemandPlanner(("a", "b"))
+    p.have("a", (100, 101), 0.0)
+    p.have("b", (FAR,), 0.01)  # b's first notice is the attacker's
+    assert p.rejected == 1
+    p.have("b", (100, 101), 0.02)
+    assert p.next_demand(0.03) == 101
+    p.have("b", (FAR,), 0.04)  # and later ones meet b's own window
+    assert p.rejected == 2
