@@ -120,7 +120,7 @@ def main(argv=None) -> int:
     if opts.preload:  # inherited by the worker processes (service/commands/worker.py --preload)
         os.environ[PRELOAD_ENV] = "1"
     with tempfile.TemporaryDirectory() as tmp:
-        if opts.out == "contourcap-demo":
+        if opts.out is None:
             opts.out = tmp
         with CpuSampler() as cpu:
             summary = run_demo(demo_cmd.options_from_args(opts), progress=lambda m: print(m, file=sys.stderr))

@@ -123,7 +123,7 @@ def _spec(t, at: str) -> SourceSpec:
 
 def open_source(spec: SourceSpec, *, session: Session | None = None, clock: Callable[[], int] | None = None,
                 frame_id_at: Callable[[int], int] | None = None, pacing: str = "fast", loop: bool = False,
-                preload: bool = False) -> SourceBase:
+                preload: bool = False, background: bool = False) -> SourceBase:
     """A (not yet opened) source for one camera.
 
     Parameters
@@ -144,6 +144,9 @@ def open_source(spec: SourceSpec, *, session: Session | None = None, clock: Call
         replay: restart at the end with increasing frame ids.
     preload : bool
         replay: decode the camera's footage into memory when opened.
+    background : bool
+        replay: the camera's background media (the empty room) instead of its footage; a live camera
+        is the same stream either way.
 
     Returns
     -------
@@ -155,7 +158,8 @@ def open_source(spec: SourceSpec, *, session: Session | None = None, clock: Call
     if spec.backend == "replay":
         if session is None:
             raise OpenError(f"camera {spec.name!r}: backend 'replay' needs a session")
-        return ReplaySource(session, spec.name, pacing=pacing, clock=clock, loop=loop, preload=preload)
+        return ReplaySource(session, spec.name, pacing=pacing, clock=clock, loop=loop, preload=preload,
+                            background=background)
     return OpenCVSource(
         spec.source, name=spec.name, width=spec.width, height=spec.height, fps=spec.fps,
         exposure=spec.exposure, clock=clock, frame_id_at=frame_id_at,

@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 from scipy.linalg import rq
 
+from capture.atomic import write_text_atomic
 from capture.calibration import CalibrationError, load_calibration, save_calibration
 from capture.camera import Camera
 
@@ -278,7 +279,7 @@ def write_projection_matrix(path, camera: Camera) -> Path:
         raise ValueError(f"camera {camera.name!r}: a projection matrix cannot hold lens distortion")
     path = Path(path)
     row = " ".join(repr(float(v)) for v in camera.projection_matrix.ravel())
-    path.write_text(f'<?xml version="1.0" encoding="UTF-8" ?>\n<camera>\n{row}\n</camera>\n')
+    write_text_atomic(path, f'<?xml version="1.0" encoding="UTF-8" ?>\n<camera>\n{row}\n</camera>\n')
     return path
 
 

@@ -36,13 +36,15 @@ from typing import Sequence
 
 import numpy as np
 
+from capture.atomic import write_text_atomic
 from capture.camera import Camera, rodrigues_to_matrix
+from capture.errors import CaptureError
 from capture.tomlio import dumps, load_file
 
 __all__ = ["CalibrationError", "load_calibration", "save_calibration", "cameras_to_toml_dict", "toml_flavour"]
 
 
-class CalibrationError(ValueError):
+class CalibrationError(CaptureError, ValueError):
     """A calibration file is malformed; the message names file, section and key."""
 
 
@@ -76,7 +78,7 @@ def save_calibration(path, cameras: Sequence[Camera]) -> Path:
     names = [c.name for c in cameras]
     if len(set(names)) != len(names):
         raise CalibrationError(f"{path}: camera names must be unique, got {names}")
-    path.write_text(dumps(cameras_to_toml_dict(cameras)))
+    write_text_atomic(path, dumps(cameras_to_toml_dict(cameras)))
     return path
 
 

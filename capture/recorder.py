@@ -36,7 +36,9 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
+from capture.atomic import write_bytes_atomic
 from capture.calibration import CalibrationError, load_calibration
+from capture.errors import CaptureError
 from capture.session import CALIBRATION_FILE, Session, SessionError, load_session, write_session_toml
 from capture.backends import SourceSpec
 from capture.sources import EndOfStream, Frame, SourceError
@@ -58,7 +60,7 @@ CODECS = {"png": None, "ffv1": ("FFV1", ".avi"), "mjpg": ("MJPG", ".avi")}
 _FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)}
 
 
-class RecorderError(Exception):
+class RecorderError(CaptureError):
     """Recording failed; the message names the file or camera."""
 
 
@@ -289,12 +291,26 @@ class Recorder:
             self.root.mkdir(parents=True, exist_ok=True)
             seg = max(1, int(round(segment_s * fps)))
             self._writers = {n: _CameraWriter(self.root, n, codec, fps, seg, self._check_space) for n in names}
-            write_session_toml(self.root, name=name, fps=fps, cameras=[w.entry() for w in self._writers.values()], height_m=height_m)
+            self._session = {"name": name, "fps": fps, "height_m": height_m}
+            write_session_toml(self.root, cameras=[w.entry() for w in self._writers.values()], **self._session)
             if calib_text is not None:
-                (self.root / CALIBRATION_FILE).write_bytes(calib_text)
+                write_bytes_atomic(self.root / CALIBRATION_FILE, calib_text)
         except OSError as exc:
             raise _oserror(exc, str(self.root)) from None
         self._closed: RecordingSummary | None = None
+
+    def add_backgrounds(self, backgrounds: dict[str, str]) -> None:
+        """List background plates (camera -> path relative to the session, from
+        ``capture.background_take.record_background``) in ``session.toml`` (rewritten atomically)."""
+        unknown = sorted(set(backgrounds) - set(self._writers))
+        if unknown:
+            raise RecorderError(f"{self.root}: background for camera(s) {unknown} not being recorded")
+        entries = [{**w.entry(), **({"background": backgrounds[n]} if n in backgrounds else {})}
+                   for n, w in self._writers.items()]
+        try:
+            write_session_toml(self.root, cameras=entries, **self._session)
+        except OSError as exc:
+            raise _oserror(exc, str(self.root)) from None
 
     def _check_space(self, camera: str) -> None:
         free = self._disk_usage(self.root).free

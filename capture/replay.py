@@ -38,10 +38,16 @@ from typing import Callable, Iterator, Sequence
 import cv2
 import numpy as np
 
+from capture.errors import CaptureError
 from capture.session import Session, image_frame_ids, image_path, read_timestamps
 from capture.sources import EndOfStream, Frame, OpenError, SourceBase, SourceError, SourceTimeout
 
-__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "count_frames", "PACINGS"]
+__all__ = ["ReplaySource", "read_frames", "iter_frame_sets", "parse_frame_range", "count_frames", "PACINGS",
+           "FrameRangeError"]
+
+
+class FrameRangeError(CaptureError, ValueError):
+    """A ``--frames`` range that is malformed, or that holds no frame of the session (its length named)."""
 
 PACINGS = ("fast", "realtime", "step")
 _IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm"}
@@ -71,9 +77,9 @@ def parse_frame_range(text: str | None, *, option: str = "--frames") -> range | 
         start = int(parts[0]) if parts[0].strip() else 0
         stop = int(parts[1]) if parts[1].strip() else 2**62
     except ValueError:
-        raise ValueError(f"{option}: expected START:STOP (frame ids, STOP excluded), got {text!r}") from None
+        raise FrameRangeError(f"{option}: expected START:STOP (frame ids, STOP excluded), got {text!r}") from None
     if start < 0 or stop <= start:
-        raise ValueError(f"{option}: need 0 <= START < STOP, got {text!r}")
+        raise FrameRangeError(f"{option}: need 0 <= START < STOP, got {text!r}")
     return range(start, stop)
 
 

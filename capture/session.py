@@ -40,6 +40,7 @@ to the session root.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,8 +48,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from capture.atomic import write_text_atomic
 from capture.calibration import CalibrationError, load_calibration
 from capture.camera import Camera
+from capture.errors import CaptureError
 from capture.tomlio import dumps, load_file
 
 __all__ = [
@@ -70,7 +73,7 @@ _CAMERA_KEYS = {"name", "video", "images", "background", "timestamps", "ignore"}
 _PATTERN = re.compile(r"%(0?)(\d*)d")
 
 
-class SessionError(ValueError):
+class SessionError(CaptureError, ValueError):
     """A session directory is malformed; the message names the file, key or camera."""
 
 
@@ -200,10 +203,17 @@ def read_timestamps(path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _resolve(root: Path, value, where: str) -> Path:
-    if not isinstance(value, str) or not value:
+    """``root / value`` for a path written in the session file, which must stay inside the session
+    folder: relative, without a ``..`` that leaves it (checked on the text: a symlink placed inside the
+    folder, as ``contourcap import`` makes, is the operator's choice and is followed)."""
+    if not isinstance(value, str) or not value or "\x00" in value:
         raise SessionError(f"{where}: must be a non-empty string path")
     p = Path(value)
-    return p if p.is_absolute() else root / p
+    norm = os.path.normpath(value)
+    if p.is_absolute() or p.drive or norm == ".." or norm.startswith(".." + os.sep) or norm.startswith("../"):
+        raise SessionError(f"{where}: {value!r} leaves the session folder (paths must be relative to it, "
+                           "without '..'); place the file, or a symlink to it, inside the folder")
+    return root / p
 
 
 def _optional_path(root: Path, table: dict, key: str, where: str) -> Path | None:
@@ -368,7 +378,5 @@ def write_session_toml(
     data["camera"] = cams
     root.mkdir(parents=True, exist_ok=True)
     out = root / SESSION_FILE
-    tmp = out.with_suffix(".toml.tmp")
-    tmp.write_text(dumps(data))
-    tmp.replace(out)
+    write_text_atomic(out, dumps(data))
     return out

@@ -24,6 +24,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from capture.errors import CaptureError
+
+
 __all__ = [
     "Frame",
     "Source",
@@ -36,7 +39,7 @@ __all__ = [
 ]
 
 
-class SourceError(Exception):
+class SourceError(CaptureError):
     """Base class of camera-source errors."""
 
 

@@ -59,6 +59,8 @@ import usb.backend.openusb
 import usb.core
 import usb.util
 
+from capture.errors import CaptureError
+
 __all__ = [
     "VENDOR_ID",
     "PRODUCT_ID",
@@ -100,7 +102,7 @@ class Request:
     TIME = 0x07
 
 
-class TriggerError(Exception):
+class TriggerError(CaptureError):
     """Base class of trigger errors."""
 
 

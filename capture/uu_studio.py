@@ -34,6 +34,7 @@ from capture.calib_formats import read_opencv_camera
 from capture.calibrate import Intrinsics, Progress
 from capture.calibration import save_calibration
 from capture.camera import Camera
+from capture.errors import CaptureError
 from capture.floor_board import FloorCalibration, calibrate_floor, load_corner_file
 from capture.session import CALIBRATION_FILE, write_session_toml
 
@@ -44,7 +45,7 @@ UU_CAMERAS = ("cam1", "cam2", "cam3", "cam4")
 _MEDIA = ("config.xml", "checkerboard.avi", "background.avi", "video.avi")
 
 
-class UUImportError(ValueError):
+class UUImportError(CaptureError, ValueError):
     """The source folder or the calibration is unusable; the message names the file or camera."""
 
 

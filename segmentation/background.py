@@ -30,6 +30,7 @@ All per-frame work is a handful of OpenCV float32 array operations into reused b
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -37,8 +38,13 @@ import cv2
 import numpy as np
 
 from segmentation.checks import check_image_bgr, check_mask, check_roi
+from segmentation.errors import SegmentationError
 
-__all__ = ["BackgroundModel", "bgr_to_yuv", "BGR2YUV", "evenly_spaced"]
+__all__ = ["BackgroundModel", "BackgroundFileError", "bgr_to_yuv", "BGR2YUV", "evenly_spaced"]
+
+
+class BackgroundFileError(SegmentationError, ValueError):
+    """A background model file that cannot be read; the message names it."""
 
 # rows: Y, U - 128, V - 128 ; columns: B, G, R  (OpenCV's BGR2YUV without the +128 offsets)
 BGR2YUV = np.array(
@@ -427,8 +433,8 @@ class BackgroundModel:
 
         Raises
         ------
-        ValueError
-            A malformed file (named).
+        BackgroundFileError
+            A malformed file (named); a ``ValueError`` and a ``SegmentationError``.
         """
         path = Path(path)
         try:
@@ -440,5 +446,5 @@ class BackgroundModel:
                            luma_relax=float(z["luma_relax"]),
                            shadow_range=tuple(float(v) for v in z["shadow_range"]),
                            min_sigma=float(z["min_sigma"]))
-        except (KeyError, ValueError, TypeError, OSError) as exc:
-            raise ValueError(f"{path}: not a background model file ({exc})") from exc
+        except (KeyError, ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
+            raise BackgroundFileError(f"{path}: not a background model file ({exc})") from exc

@@ -34,6 +34,12 @@ from segmentation.background import BackgroundModel
 from segmentation.checks import check_image_bgr
 from segmentation.pipeline import FrameSegmentation, SegmentationParams, segment_frame
 
+from segmentation.errors import SegmentationError
+
+
+class ClutterError(SegmentationError, ValueError):
+    """A bad ignore region or clutter-model input; the message names it."""
+
 __all__ = ["StaticClutter", "parse_ignore_region", "ignore_mask", "ignore_masks", "without_clutter",
            "segment_without_clutter", "session_ignore_regions"]
 
@@ -44,10 +50,10 @@ def parse_ignore_region(text: str) -> tuple[str, tuple[int, int, int, int]]:
     """``"cam:x,y,w,h"`` (pixels) -> ``(camera name, (x, y, w, h))``; ValueError otherwise."""
     m = _REGION.match(str(text))
     if m is None:
-        raise ValueError(f"--ignore-region: expected CAMERA:x,y,w,h in pixels, got {text!r}")
+        raise ClutterError(f"--ignore-region: expected CAMERA:x,y,w,h in pixels, got {text!r}")
     x, y, w, h = (int(v) for v in m.groups()[1:])
     if w <= 0 or h <= 0:
-        raise ValueError(f"--ignore-region {text!r}: width and height must be > 0")
+        raise ClutterError(f"--ignore-region {text!r}: width and height must be > 0")
     return m.group(1), (x, y, w, h)
 
 
@@ -58,10 +64,10 @@ def ignore_mask(size: tuple[int, int], regions: Iterable[Sequence[int]]) -> np.n
     out = np.zeros((h, w), bool)
     for reg in regions:
         if len(reg) != 4:
-            raise ValueError(f"ignore region: expected [x, y, w, h], got {list(reg)!r}")
+            raise ClutterError(f"ignore region: expected [x, y, w, h], got {list(reg)!r}")
         x, y, rw, rh = (int(v) for v in reg)
         if rw <= 0 or rh <= 0:
-            raise ValueError(f"ignore region {list(reg)!r}: width and height must be > 0")
+            raise ClutterError(f"ignore region {list(reg)!r}: width and height must be > 0")
         out[max(y, 0):max(min(y + rh, h), 0), max(x, 0):max(min(x + rw, w), 0)] = True
     return out
 
@@ -84,7 +90,7 @@ class StaticClutter:
 
     def __init__(self, size: tuple[int, int], *, learn_frames: int = 25, colour_tol: float = 40.0) -> None:
         if learn_frames < 1:
-            raise ValueError(f"learn_frames: expected >= 1, got {learn_frames!r}")
+            raise ClutterError(f"learn_frames: expected >= 1, got {learn_frames!r}")
         w, h = int(size[0]), int(size[1])
         self.size = (w, h)
         self.learn_frames = int(learn_frames)
@@ -106,7 +112,7 @@ class StaticClutter:
         fg = np.asarray(foreground) > 0
         expl = np.asarray(explained, dtype=bool)
         if fg.shape != self._count.shape or expl.shape != fg.shape:
-            raise ValueError(f"foreground, explained: expected shape {self._count.shape}, got {fg.shape}, {expl.shape}")
+            raise ClutterError(f"foreground, explained: expected shape {self._count.shape}, got {fg.shape}, {expl.shape}")
         img = check_image_bgr(image_bgr, "image_bgr", size=self.size)
         # outside the foreground everything restarts: work in the box of this frame's foreground
         # and the last one's (the state is zero outside the last box)
@@ -189,7 +195,7 @@ def ignore_masks(sizes: Mapping[str, tuple[int, int]], regions: Mapping[str, Seq
     """``ignore_mask`` per camera name for the cameras of ``sizes`` that have regions."""
     unknown = sorted(set(regions) - set(sizes))
     if unknown:
-        raise ValueError(f"ignore regions for unknown camera(s) {unknown} (have {sorted(sizes)})")
+        raise ClutterError(f"ignore regions for unknown camera(s) {unknown} (have {sorted(sizes)})")
     return {n: ignore_mask(sizes[n], regs) for n, regs in regions.items() if regs}
 
 
@@ -211,8 +217,8 @@ def session_ignore_regions(session_toml) -> dict[str, list[tuple[int, int, int, 
         if not isinstance(regs, list) or not all(isinstance(r, list) and len(r) == 4 and
                                                  all(isinstance(v, int) and not isinstance(v, bool) for v in r)
                                                  for r in regs):
-            raise ValueError(f"{path} camera {name!r} key 'ignore': expected a list of [x, y, w, h] whole pixels")
+            raise ClutterError(f"{path} camera {name!r} key 'ignore': expected a list of [x, y, w, h] whole pixels")
         if any(r[2] <= 0 or r[3] <= 0 for r in regs):
-            raise ValueError(f"{path} camera {name!r} key 'ignore': width and height must be > 0")
+            raise ClutterError(f"{path} camera {name!r} key 'ignore': width and height must be > 0")
         out[str(name)] = [tuple(r) for r in regs]
     return out

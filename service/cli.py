@@ -11,6 +11,7 @@ import argparse
 import importlib
 import importlib.util
 import sys
+import traceback
 
 from service.blas import pin_blas_threads
 
@@ -51,6 +52,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="Live markerless multi-camera motion capture (extremal-contour tracking over zenoh).",
     )
     parser.add_argument("--version", action="version", version=f"contourcap {_version()}")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error (anywhere on the line)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, mod in COMMANDS.items():
         if command is not None and name != command:
@@ -81,6 +83,8 @@ def _version() -> str:
 def main(argv: list[str] | None = None) -> int:
     pin_blas_threads()  # before any command imports numpy
     argv = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in argv  # anywhere on the line: it is the CLI's, not a sub-command's
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser(_command_in(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
@@ -91,6 +95,40 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `contourcap ... | head`
+        return 0
+    except user_errors() as exc:
+        if debug:
+            traceback.print_exc()
+        print(f"contourcap {args.command}: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request
+        if debug:
+            traceback.print_exc()
+        print(f"contourcap {args.command}: unexpected {exc.__class__.__name__}: {one_line(exc)} "
+              "(a bug: please report it with the output of --debug)", file=sys.stderr)
+        return 1
+
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """The error types that mean bad input (one line, exit 2): each package's base, and OSError."""
+    from capture.errors import CaptureError
+    from segmentation.errors import SegmentationError
+    from service.errors import ServiceError
+    from tracker.errors import TrackerError
+
+    return (CaptureError, SegmentationError, TrackerError, ServiceError, OSError, UnicodeError)
+
+
+def one_line(exc: BaseException) -> str:
+    """``exc`` as one printable line: an OSError names its file, control characters are escaped."""
+    from service.text import printable
+
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}"
+    else:
+        text = str(exc) or exc.__class__.__name__
+    return printable(" ".join(text.split()), limit=2000)
 
 
 if __name__ == "__main__":

@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from capture.studio import DEFAULT_FPS, parse_studio_capture, read_studio_toml
+from service.errors import ServiceError
 from service.wire.bus import MODES, ZenohSettings
 from service.wire.messages import ENCODINGS, check_name, MessageError
 
@@ -60,7 +61,7 @@ METHODS = ("contours", "blobs")
 """``[tracker] method`` values."""
 
 
-class ConfigError(ValueError):
+class ConfigError(ServiceError, ValueError):
     """A studio configuration problem; the message names the file and key."""
 
 

@@ -31,6 +31,7 @@ from typing import Callable
 
 import numpy as np
 
+from service.atomic import write_text_atomic
 from service.wire.bus import Inbox, Keys, ZenohSettings, free_port, open_session
 from service.wire.records import PoseRecord, StatusMessage
 
@@ -68,7 +69,7 @@ class DemoOptions:
     fps: float = 30.0
     motion: str = "scaled_131_03"
     delivery: str = "lossless"
-    out_dir: Path = Path("contourcap-demo")
+    out_dir: Path | None = None  # None: <cache_dir>/last-demo (never the working directory)
     cache_dir: Path = Path.home() / ".cache" / "contourcap"
     image_every: int = 5
     timeout_s: float = 1800.0
@@ -77,6 +78,7 @@ class DemoOptions:
     live_image_cameras: int = 1
     segment_plugin: str | None = None
     fit_plugin: str | None = None
+    port: int | None = None  # the loopback hub's TCP port (None: a free one)
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,7 @@ def write_studio(session_root: Path, out_dir: Path, *, port: int, delivery: str)
                        for c in session.camera_names]}
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "studio.toml"
-    path.write_text(dumps(data))
+    write_text_atomic(path, dumps(data))
     return path
 
 
@@ -170,6 +172,13 @@ def joint_error(poses: list[PoseRecord], truth_path: Path) -> float | None:
     return float(np.concatenate(errs).mean()) if errs else None
 
 
+def _cpu_s() -> float:
+    """CPU seconds used so far by this process and its finished children."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    mine = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime + mine.ru_utime + mine.ru_stime
+
+
 def _pct(values, q) -> float | None:
     return float(np.percentile(values, q)) if len(values) else None
 
@@ -187,8 +196,8 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
 
     session_root = demo_session(opts, progress=progress)
     session = load_session(session_root)
-    out = Path(opts.out_dir)
-    port = free_port()
+    out = Path(opts.out_dir) if opts.out_dir is not None else Path(opts.cache_dir) / "last-demo"
+    port = free_port() if opts.port is None else int(opts.port)
     cfg_path = write_studio(session_root, out, port=port, delivery=opts.delivery)
     cfg = load_config(cfg_path)
     n_total = opts.frames
@@ -216,6 +225,7 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     poses: list[PoseRecord] = []
     last_status: StatusMessage | None = None
     t0 = time.monotonic()
+    cpu0 = _cpu_s()  # the rendering and set-up before t0 are not the pipeline's
     first_pose_t = last_pose_t = None
     progress(f"starting {len(specs)} worker processes ({opts.delivery}), zenoh hub tcp/127.0.0.1:{port}")
     sup.start()
@@ -257,9 +267,7 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
         rec.flush()
         rec.disconnect()
     wall = time.monotonic() - t0
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    mine = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = usage.ru_utime + usage.ru_stime + mine.ru_utime + mine.ru_stime
+    cpu = _cpu_s() - cpu0
     poses_path = out / "poses.jsonl"
     write_pose_records(poses_path, poses)
     bvh = None

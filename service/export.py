@@ -28,6 +28,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from service.atomic import write_text_atomic
 from service.wire.messages import MessageError
 from service.wire.records import PoseRecord
 from service.outputs.posefile import ExportError, fps_from_records, read_pose_records, write_pose_records  # noqa: F401 (re-exported)
@@ -136,7 +137,7 @@ def write_bvh(path, model, records: Sequence[PoseRecord], *, fps: float | None =
     lines += ["MOTION", f"Frames: {n}", f"Frame Time: {1.0 / fps:.8f}"]
     lines += [" ".join(f"{v:.6f}" for v in row) for row in motion]
     try:
-        path.write_text("\n".join(lines) + "\n")
+        write_text_atomic(path, "\n".join(lines) + "\n")
     except OSError as exc:
         raise ExportError(f"{path}: cannot write ({exc.strerror})") from None
     return BvhExport(path, n, repeated, fps, n_parts, int(tl.frames[0]), str(up).lower())

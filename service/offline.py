@@ -15,6 +15,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from capture.media import StreamCheck
 from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
@@ -51,7 +52,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   clock: Callable[[], float] = time.perf_counter, method: str = "contours",
                   blob_options=None, scene: SceneOptions | None = None,
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
-                  front_back: FrontBackOptions | None = FrontBackOptions()) -> Iterator[dict]:
+                  front_back: FrontBackOptions | None = FrontBackOptions(),
+                  stream_check: StreamCheck | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -61,8 +63,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Body model (a name is sized by the session's subject).
     sliding, solver, options, segmentation
         Contour tracker settings (``tracker.fitting.tracking.Tracker``, ``SegmentationParams``).
-    frames, cameras : range or None, sequence of str or None
-        Frame ids, camera names (None: all).
+    frames, cameras : range or None, sequence of str or None; frame ids, camera names (None: all)
     initial_params : ndarray, shape (n_params,), optional
         Start pose; else automatic initialisation on the first frame.
     backgrounds : dict, optional
@@ -76,6 +77,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Camera name -> (h, w) bool mask of pixels that are never body (with ``scene``).
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
+    stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
 
     Yields
     ------
@@ -90,7 +92,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
     if method == "blobs":
-        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock)
+        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
+                                stream_check)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
@@ -98,10 +101,14 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation)
         for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+            if stream_check is not None:
+                stream_check.see(fid, tuple(group))
             ts = next(iter(group.values())).timestamp_ns
             yield st.step(fid, ts, {n: f.image for n, f in group.items()})
         return
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+        if stream_check is not None:
+            stream_check.see(fid, tuple(group))
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
@@ -109,13 +116,16 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                            images={n: f.image for n, f in group.items()} if colour else None)
 
 
-def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock) -> Iterator[dict]:
+def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
+                 stream_check=None) -> Iterator[dict]:
     from tracker.blobs import BlobOptions, BlobTracker, initialise_from_images
 
     tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
                           initialiser=lambda cs, images: initialise_from_images(body, cs, images, backgrounds),
                           options=blob_options or BlobOptions(), clock=clock)
     for fid, group in iter_frame_sets(session, cameras=[c.name for c in cams], frames=frames):
+        if stream_check is not None:
+            stream_check.see(fid, tuple(group))
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 

@@ -10,6 +10,7 @@ a contact sheet shows a few evenly spaced frames, each camera cropped to the per
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 from dataclasses import dataclass
@@ -19,18 +20,20 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
+from capture.atomic import atomic_path
 from capture.replay import iter_frame_sets
 from capture.session import Session
-from tracker.imaging.contours import extremal_contours
+from service.errors import ServiceError
+from service.offline import session_model
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel, available_models
-from service.offline import session_model
+from tracker.imaging.contours import extremal_contours
 from tracker.imaging.overlay import draw_contours, draw_skeleton, draw_text, resize_to_width, side_colours, tile_images
 
 __all__ = ["ReviewError", "load_records", "status_lines", "FrameOverlay", "ReviewSummary", "write_review"]
 
 
-class ReviewError(ValueError):
+class ReviewError(ServiceError, ValueError):
     """A pose file or record that cannot be reviewed (the message names the file and line)."""
 
 
@@ -270,9 +273,28 @@ def write_review(session: Session, records: Sequence[dict], *, video: Path | Non
     cams = overlay.camera_names
     th = max(overlay.cameras[n].height for n in cams)
     tw = max(overlay.cameras[n].width for n in cams)
-    writer, size, n_frames, n_rec, n_ok = None, None, 0, 0, 0
     kept: dict[int, tuple[dict, dict]] = {}
     total = hi - lo
+    outputs = contextlib.ExitStack()  # the video is written to a temporary file, renamed when complete
+    if video is not None:
+        video.parent.mkdir(parents=True, exist_ok=True)
+        tmp_video = outputs.enter_context(atomic_path(video))
+    with outputs:
+        n_frames, n_rec, n_ok, size = _render(session, overlay, by_frame, picks, lo, hi, video,
+                                              tmp_video if video is not None else None, sheet, kept, th, tw,
+                                              video_width, progress, total)
+    if sheet is not None:
+        _write_sheet(sheet, overlay, kept, by_frame, sheet_width)
+    return ReviewSummary(n_frames if video is not None else len(kept), n_rec, n_ok,
+                         None if video is None else str(video), None if sheet is None else str(sheet), size)
+
+
+def _render(session, overlay, by_frame, picks, lo, hi, video, tmp_video, sheet, kept, th, tw, video_width, progress,
+            total):
+    """Draw every reviewed frame into ``tmp_video`` (and keep the sheet's picks in ``kept``);
+    returns ``(frames, records, ok records, video size)``."""
+    cams = overlay.camera_names
+    writer, size, n_frames, n_rec, n_ok = None, None, 0, 0, 0
     try:
         for fid, group in iter_frame_sets(session, frames=range(lo, hi)):
             rec = by_frame.get(fid)
@@ -295,8 +317,8 @@ def write_review(session: Session, records: Sequence[dict], *, video: Path | Non
                 if writer is None:
                     size = (img.shape[1], img.shape[0])
                     fourcc = "MJPG" if video.suffix.lower() == ".avi" else "mp4v"
-                    video.parent.mkdir(parents=True, exist_ok=True)
-                    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*fourcc), float(session.fps), size)
+                    writer = cv2.VideoWriter(str(tmp_video), cv2.VideoWriter_fourcc(*fourcc), float(session.fps),
+                                             size)
                     if not writer.isOpened():
                         raise ReviewError(f"{video}: cannot write a {fourcc} video here")
                 writer.write(img)
@@ -306,10 +328,7 @@ def write_review(session: Session, records: Sequence[dict], *, video: Path | Non
     finally:
         if writer is not None:
             writer.release()
-    if sheet is not None:
-        _write_sheet(sheet, overlay, kept, by_frame, sheet_width)
-    return ReviewSummary(n_frames if video is not None else len(kept), n_rec, n_ok,
-                         None if video is None else str(video), None if sheet is None else str(sheet), size)
+    return n_frames, n_rec, n_ok, size
 
 
 def _write_sheet(path: Path, overlay: FrameOverlay, kept: dict[int, tuple[dict, dict]], by_frame: dict,
@@ -344,5 +363,6 @@ def _write_sheet(path: Path, overlay: FrameOverlay, kept: dict[int, tuple[dict, 
     sheet = tile_images(cells, cols=n_cols)
     sheet = resize_to_width(sheet, width)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 6]):
-        raise ReviewError(f"{path}: cannot write the sheet (a .png path is expected)")
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 6]):
+            raise ReviewError(f"{path}: cannot write the sheet (a .png path is expected)")

@@ -19,9 +19,25 @@ try:
 
     settings.register_profile("ci", derandomize=True, max_examples=50, deadline=None)
     settings.register_profile("dev", max_examples=50, deadline=None)
+    # --fuzz-long: the fuzz tests (tests/*/test_fuzz_*.py) run 100x longer (CONTOURCAP_FUZZ_EXAMPLES), not
+    # derandomised
+    settings.register_profile("fuzz-long", max_examples=int(os.environ.get("CONTOURCAP_FUZZ_EXAMPLES", 5000)),
+                              deadline=None)
     settings.load_profile("ci" if os.environ.get("CI") else "dev")
 except ImportError:  # pragma: no cover
     pass
+
+
+def pytest_addoption(parser):
+    parser.addoption("--fuzz-long", action="store_true", default=False,
+                     help="run the hypothesis property/fuzz tests with 5000 examples each (default 50)")
+
+
+def pytest_configure(config):
+    if config.getoption("--fuzz-long", default=False):
+        from hypothesis import settings as _settings
+
+        _settings.load_profile("fuzz-long")
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 if str(REPO_ROOT) not in sys.path:  # tests.support is imported from the repo root however pytest starts

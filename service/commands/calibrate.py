@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from service.atomic import write_text_atomic
 from service.progress import Progress
 
 HELP = "calibrate cameras: intrinsics from board videos, extrinsics from a board lying on the floor"
@@ -254,7 +255,7 @@ def run(args) -> int:
         print(f"overall RMS reprojection error: {report['_overall']['rms_px']:.3f} px")
     try:
         if args.report:
-            args.report.write_text(json.dumps(report, indent=2))
+            write_text_atomic(args.report, json.dumps(report, indent=2))
         if cams:
             save_calibration(args.out, cams)
             print(f"wrote {args.out} ({len(cams)} camera(s))")

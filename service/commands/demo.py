@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from service.commands.argtypes import positive_float
 from service.commands.synth import image_size
 
 HELP = "run the whole live pipeline over zenoh on loopback on a synthetic studio (rendered once, cached)"
@@ -16,11 +17,12 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", type=int, default=6, help="cameras on a ring around the subject (default 6)")
     parser.add_argument("--frames", type=int, default=90, help="frames of motion at --fps (default 90: a 3 s hop)")
     parser.add_argument("--size", type=image_size, default=(320, 240), help="WIDTHxHEIGHT of the cameras")
-    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--fps", type=positive_float, default=30.0)
     parser.add_argument("--motion", default="scaled_131_03", help="bundled CMU clip (tracker/data)")
     parser.add_argument("--live", action="store_true",
                         help="live delivery (real-time replay, stale sets dropped) instead of lossless")
-    parser.add_argument("--out", default="contourcap-demo", help="folder for poses.jsonl, poses.bvh, demo.rrd")
+    parser.add_argument("--out", default=None,
+                        help="folder for poses.jsonl, poses.bvh, demo.rrd (default: <cache>/last-demo)")
     parser.add_argument("--cache", default=None, help="where the rendered session is kept (~/.cache/contourcap)")
     parser.add_argument("--timeout-s", type=float, default=1800.0)
     parser.add_argument("--duration-s", type=float, default=20.0, help="live: how long the looped replay runs")
@@ -36,7 +38,8 @@ def options_from_args(args: argparse.Namespace):
     from service.demo import DemoOptions
 
     kw = dict(cameras=args.cameras, frames=args.frames, size=tuple(args.size), fps=args.fps, motion=args.motion,
-              delivery="live" if args.live else "lossless", out_dir=Path(args.out), timeout_s=args.timeout_s,
+              delivery="live" if args.live else "lossless", out_dir=None if args.out is None else Path(args.out),
+              timeout_s=args.timeout_s,
               segment_plugin=args.segment_plugin, fit_plugin=args.fit_plugin,
               live_duration_s=args.duration_s, live_image_cameras=args.image_cameras)
     if args.cache:
@@ -50,6 +53,9 @@ def run(args: argparse.Namespace) -> int:
     if args.cameras < 1 or args.frames < 2:
         print("contourcap demo: --cameras >= 1 and --frames >= 2", file=sys.stderr)
         return 2
+    from tracker.synthetic.synth import bundled_motion
+
+    bundled_motion(args.motion)  # an unknown motion is refused before anything is rendered or started
     say = (lambda msg: print(msg, file=sys.stderr, flush=True))
     summary = run_demo(options_from_args(args), progress=say)
     if args.json:

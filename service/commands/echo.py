@@ -17,11 +17,33 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=int, default=None, help="exit after this many poses")
     parser.add_argument("--idle-exit-s", type=float, default=None, help="exit after this long without a pose")
     parser.add_argument("--out", default=None, help="also append the records to this JSONL file")
+    parser.add_argument("--stats", action="store_true",
+                        help="every second and at exit, print on stderr what was rejected (malformed) and "
+                             "evicted (too slow) here, and the rejected/evicted/dropped counters the studio's "
+                             "workers report on status/*")
+
+
+# status counters that say a worker refused or lost input (shown by --stats)
+STAT_WORDS = ("rejected", "bad", "evicted", "dropped", "overflow", "oversized", "mismatched_key", "unknown")
+
+
+def format_stats(own: dict, workers: dict[str, dict]) -> str:
+    """One line: this client's counters, then each worker's non-zero refusal/loss counters."""
+    from service.text import printable
+
+    parts = [f"echo: received {own['received']}, rejected {own['rejected']}, evicted {own['evicted']}"]
+    for comp in sorted(workers):
+        vals = {k: v for k, v in workers[comp].items() if any(w in k for w in STAT_WORDS) and v}
+        text = ", ".join(f"{printable(k, limit=40)} {v:g}" for k, v in sorted(vals.items())) or "nothing refused"
+        parts.append(f"{printable(comp, limit=40)}: {text}")
+    return "stats  " + "; ".join(parts)
 
 
 def format_pose(rec) -> str:
-    """One human-readable line for a pose record."""
-    parts = [f"frame {rec.frame:6d}", "ok  " if rec.ok else "LOST", f"cams {rec.get('cameras', '?')}"]
+    """One human-readable line for a pose record (received strings printed escaped)."""
+    from service.text import printable
+
+    parts = [f"frame {rec.frame:6d}", "ok  " if rec.ok else "LOST", f"cams {printable(rec.get('cameras', '?'))}"]
     if rec.get("rms_px") is not None:
         parts.append(f"rms {rec.get('rms_px'):.2f} px")
     if rec.get("latency_ms") is not None:
@@ -30,7 +52,7 @@ def format_pose(rec) -> str:
     if pelvis is not None:
         parts.append("pelvis ({:+.3f} {:+.3f} {:+.3f}) m".format(*pelvis))
     if not rec.ok:
-        parts.append(f"reason: {rec.get('reason')}")
+        parts.append(f"reason: {printable(rec.get('reason'))}")
     return "  ".join(parts)
 
 
@@ -39,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     from service.wire.bus import BusError, Inbox, Keys, open_session
     from service.config import ConfigError
-    from service.wire.records import PoseRecord
+    from service.wire.records import PoseRecord, StatusMessage
     from service.workers.runtime import client_settings, stop_on_signals
 
     stop = threading.Event()
@@ -55,11 +77,25 @@ def run(args: argparse.Namespace) -> int:
         what = f"--out: {exc}" if isinstance(exc, OSError) else str(exc)
         print(f"contourcap echo: {what}", file=sys.stderr)
         return 2
-    inbox = None
+    inbox = statuses = None
+    workers: dict[str, dict] = {}
     n, last = 0, time.monotonic()
+    last_stats = last
+
+    def show_stats() -> None:
+        for got in statuses.drain():
+            workers[got.message.component] = dict(got.message.stats)
+        own = {"received": inbox.received, "rejected": inbox.bad + statuses.bad, "evicted": inbox.dropped}
+        print(format_stats(own, workers), file=sys.stderr, flush=True)
+
     try:
         inbox = Inbox(session, Keys(studio).pose, PoseRecord.from_bytes, mode="live", depth=256)
+        if args.stats:
+            statuses = Inbox(session, Keys(studio).status("*"), StatusMessage.from_bytes, mode="live", depth=64)
         while not stop.is_set() and (args.count is None or n < args.count):
+            if statuses is not None and time.monotonic() - last_stats >= 1.0:
+                last_stats = time.monotonic()
+                show_stats()
             got = inbox.recv(0.1)
             if got is None:
                 if args.idle_exit_s is not None and time.monotonic() - last > args.idle_exit_s:
@@ -76,6 +112,9 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if out is not None:
             out.close()
+        if statuses is not None:
+            show_stats()
+            statuses.close()
         if inbox is not None:
             if inbox.dropped or inbox.bad:
                 print(f"contourcap echo: {inbox.dropped} poses dropped (too slow), {inbox.bad} bad messages",

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from service.commands.argtypes import positive_float
+
 HELP = "export recorded poses (JSONL) to BVH, TRC (OpenSim), C3D and CSV"
 
 UP_HELP = ("up axis of the files: 'y' writes tracker (x, y, z) as (x, z, -y), a -90 deg rotation about X; "
@@ -28,7 +30,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default=None, help="body model for BVH (default: the records' 'model')")
     parser.add_argument("--height-m", type=float, default=None, help="subject height the tracker used")
     parser.add_argument("--session", default=None, help="take height/segment lengths from this session")
-    parser.add_argument("--fps", type=float, default=None, help="frame rate (default: from the timestamps)")
+    parser.add_argument("--skip-bad", action="store_true",
+                        help="skip (and report) malformed lines instead of refusing the file; a last line cut "
+                             "short (a take interrupted by a kill or a power cut) is always skipped and reported")
+    parser.add_argument("--fps", type=positive_float, default=None, help="frame rate (default: from the timestamps)")
 
 
 def model_for_export(args, records):
@@ -38,6 +43,12 @@ def model_for_export(args, records):
 
     name = args.model or next((r.get("model") for r in records if r.get("model")), "knossow40")
     height, lengths = args.height_m, None
+    if args.height_m is None and not args.session:
+        from tracker.body.model import DEFAULT_HEIGHT_M
+
+        print(f"contourcap export: no --session or --height-m: the BVH skeleton assumes a {DEFAULT_HEIGHT_M:g} m "
+              "subject (its bone lengths scale with it; give the session the poses were tracked from)",
+              file=sys.stderr)
     if args.session:
         from capture.session import SessionError, load_session
 
@@ -53,7 +64,8 @@ def model_for_export(args, records):
 
 
 def run(args: argparse.Namespace) -> int:
-    from service.export import ExportError, read_pose_records, write_bvh
+    from service.export import ExportError, write_bvh
+    from service.outputs.posefile import read_pose_file
 
     if not (args.bvh or args.trc or args.c3d or args.csv):
         print("contourcap export: give at least one of --bvh, --trc, --c3d, --csv", file=sys.stderr)
@@ -66,7 +78,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"contourcap export: {exc}", file=sys.stderr)
         return 2
     try:
-        records = read_pose_records(args.poses)
+        pose_file = read_pose_file(args.poses, skip_bad=args.skip_bad)
+        if pose_file.skipped:
+            print(f"contourcap export: {pose_file.report()}", file=sys.stderr)
+        records = pose_file.records
         if not records:
             raise ExportError(f"{args.poses}: no pose records")
         if smooth is not None:
@@ -76,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
             fps = make_timeline(records, fps=args.fps, where=args.poses).fps
             records = smooth_records(records, *smooth, fps)
         if args.bvh:
+            if not any(r.ok and r.get("params") for r in records):
+                raise ExportError(f"{args.poses}: no ok pose with params in its {len(records)} records "
+                                  "(every frame was lost): nothing to animate")
             out = write_bvh(args.bvh, model_for_export(args, records), records, fps=args.fps, up=args.up or "y")
             print(f"wrote {out.path}: {out.frames} frames at {out.fps:.2f} fps (ids {out.first_frame}.."
                   f"{out.first_frame + out.frames - 1}), {out.joints} joints, {out.up.upper()} up "

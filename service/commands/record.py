@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 
+from service.commands.argtypes import duration_s
+
 HELP = "record the studio's cameras into a new session directory (crash-safe; png/ffv1 lossless, mjpg fast)"
 
 
@@ -23,6 +25,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment-s", type=float, default=1.0, help="video segment length: most footage a crash can lose")
     parser.add_argument("--min-free-mb", type=float, default=64.0, help="stop with an error below this much free disk")
     parser.add_argument("--pacing", choices=("realtime", "fast"), default="realtime", help="replay cameras: pacing")
+    parser.add_argument("--background", type=duration_s, default=None, metavar="DURATION",
+                        help="first record DURATION (e.g. 2s) of the empty room as the session's background plate "
+                             "(background/<camera>.avi), then the take; without it `track` must learn a "
+                             "temporal median, which fails for a subject who stays in view")
     parser.add_argument("--resync-s", type=float, default=2.0, help="trigger box: re-anchor its clock this often")
 
 
@@ -49,6 +55,22 @@ def _select(cfg, args):
     return specs
 
 
+def _background_take(args, cfg, specs, rec, frame_id_at, stop) -> None:
+    """The empty-room take before the recording (see ``capture.background_take``)."""
+    from capture.backends import open_source
+    from capture.background_take import record_background
+
+    if sys.stdin.isatty():
+        input(f"background: clear the cameras' view, then press Enter to record {args.background:g} s of the "
+              "empty room ")
+    print(f"background: recording {args.background:g} s of the empty room (keep out of view)", file=sys.stderr)
+    sources = [open_source(s, session=cfg.session, frame_id_at=frame_id_at, pacing=args.pacing, background=True)
+               for s in specs]
+    plates = record_background(sources, rec.root, seconds=args.background, fps=cfg.fps, stop=stop)
+    rec.add_backgrounds(plates)
+    print(f"background: stored {', '.join(plates.values())}; recording the take", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from capture.recorder import Recorder, RecorderError, load_capture_config, record
     from capture.backends import open_source
@@ -72,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
             args.out, name=args.name or cfg.name, fps=cfg.fps, cameras=[s.name for s in specs], codec=args.codec,
             calibration=cfg.calibration, segment_s=args.segment_s, min_free_bytes=int(args.min_free_mb * 2**20),
         )
+        if args.background is not None:
+            _background_take(args, cfg, specs, rec, frame_id_at, stop)
         timer = threading.Timer(args.duration_s, stop.set) if args.duration_s else None
         old = {}
         if threading.current_thread() is threading.main_thread():

@@ -49,6 +49,20 @@ def _replay_camera(session, name, args, out: dict) -> None:
     }
 
 
+def _dropped_against_all(results: dict) -> None:
+    """Count each camera's drops over the span of frame ids *any* camera delivered, so a camera whose
+    stream ends early (a cut or corrupt file) shows its missing tail (``missing_at_end``) as dropped."""
+    firsts = [r["first_frame_id"] for r in results.values() if r["first_frame_id"] is not None]
+    lasts = [r["last_frame_id"] for r in results.values() if r["last_frame_id"] is not None]
+    for r in results.values():
+        if not firsts or r["error"] and r["frames"] == 0:
+            r["missing_at_end"] = 0
+            continue
+        lo, hi = min(firsts), max(lasts)
+        r["dropped"] = hi - lo + 1 - r["frames"]
+        r["missing_at_end"] = hi - (r["last_frame_id"] if r["last_frame_id"] is not None else lo - 1)
+
+
 def run(args: argparse.Namespace) -> int:
     from capture.replay import parse_frame_range
     from capture.session import SessionError, load_session
@@ -72,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         t.start()
     for t in threads:
         t.join()
+    _dropped_against_all(results)
     report = {"session": str(session.root), "fps_nominal": session.fps, "pacing": args.pacing,
               "cameras": {n: results[n] for n in names}}
     if args.json:
@@ -80,5 +95,11 @@ def run(args: argparse.Namespace) -> int:
         for n in names:
             r = results[n]
             tail = f"  ERROR: {r['error']}" if r["error"] else ""
-            print(f"{n}: {r['frames']} frames ({r['dropped']} dropped) in {r['seconds']:.3f} s = {r['fps']} fps{tail}")
+            cut = f", {r['missing_at_end']} of them after its last frame: cut short?" if r["missing_at_end"] else ""
+            print(f"{n}: {r['frames']} frames ({r['dropped']} dropped{cut}) in {r['seconds']:.3f} s = {r['fps']} fps{tail}")
+    from service.text import printable
+
+    for n in names:
+        if results[n]["error"]:
+            print(f"contourcap replay: camera {n}: {printable(results[n]['error'], limit=300)}", file=sys.stderr)
     return 1 if any(r["error"] for r in results.values()) else 0

@@ -26,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from service.atomic import write_text_atomic
 from service.progress import Progress
 
 HELP = "segment a session: silhouettes, edges and distance images (PNG) plus per-camera statistics"
@@ -144,7 +145,7 @@ def segment_session(session, out: Path, *, cameras=None, frames: range | None = 
             "ms_per_frame_median": float(np.median(ms)), "ms_per_frame_mean": float(np.mean(ms)),
             "distance_resolution_px": chamfer.resolution_px, "distance_max_px": chamfer.max_distance_px,
         }
-    (out / "stats.json").write_text(json.dumps(stats, indent=1))
+    write_text_atomic(out / "stats.json", json.dumps(stats, indent=1))
     return stats
 
 

@@ -7,6 +7,8 @@ import argparse
 import sys
 import threading
 
+from service.commands.argtypes import positive_float
+
 HELP = "stream poses live (or replay a take) to VMC (OSC/UDP) or WebSocket clients and a browser page"
 
 SMOOTH_HELP = ("1-euro smoothing of joints and pose parameters for the consumer: off, one-euro (MIN_CUTOFF 1.0 Hz, "
@@ -21,7 +23,7 @@ def _source_args(p: argparse.ArgumentParser, smooth_default: str) -> None:
                    help="stream this recorded take instead of the studio's live poses")
     p.add_argument("--rate", type=float, default=1.0, help="replay speed (1.0 = the take's real time)")
     p.add_argument("--loop", action="store_true", help="replay the take over and over")
-    p.add_argument("--fps", type=float, default=None, help="the take's frame rate (default: from its timestamps)")
+    p.add_argument("--fps", type=positive_float, default=None, help="the take's frame rate (default: from its timestamps)")
     p.add_argument("--count", type=int, default=None, help="stop after this many poses (live or replay)")
     p.add_argument("--smooth", default=smooth_default, metavar="off|one-euro[:MIN_CUTOFF,BETA]",
                    help=f"{SMOOTH_HELP} (default {smooth_default})")

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from service.commands.argtypes import positive_float
+
 HELP = "render a synthetic session (videos, calibration, ground truth) from BVH motion"
 
 
@@ -26,7 +28,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=image_size, default=(800, 600), help="image size WIDTHxHEIGHT (default 800x600)")
     parser.add_argument("--frames", type=int, default=None, help="number of frames (default: the whole clip)")
     parser.add_argument("--start", type=float, default=0.0, help="start time in the BVH clip, seconds")
-    parser.add_argument("--fps", type=float, default=30.0, help="output frame rate (default 30)")
+    parser.add_argument("--fps", type=positive_float, default=30.0, help="output frame rate (default 30)")
     parser.add_argument("--model", default="knossow40", help="body model (default knossow40)")
     parser.add_argument("--noise", type=float, default=2.0, help="Gaussian pixel noise sigma, grey levels (default 2)")
     parser.add_argument("--shadow", action=argparse.BooleanOptionalAction, default=True, help="cast shadow on the floor")

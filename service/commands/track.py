@@ -10,12 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
+from capture.media import StreamCheck, check_media
 from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
-from tracker.body.model import ModelError, available_models
+from service.atomic import JsonlWriter
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from service.offline import background_models, session_model, summarise, track_session
 from tracker.fitting.scene import SceneOptions
+from tracker.body.model import available_models
 
 HELP = "track a recorded session offline and write one pose record per frame (JSONL)"
 
@@ -29,14 +31,17 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
     parser.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     parser.add_argument("--cameras", default=None, metavar="cam0,cam2", help="comma-separated camera subset")
-    parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
-                        help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
-                             "EM blobs and inverse kinematics (Caillette & Howard)")
     parser.add_argument("--ignore-region", action="append", default=[], metavar="CAM:x,y,w,h",
                         help="pixels of camera CAM that are never body (repeatable; adds to session.toml's "
                              "[[camera]] ignore lists)")
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
+    parser.add_argument("--allow-missing-cameras", action="store_true",
+                        help="track on with the cameras that have frames when a camera's video is cut short or "
+                             "corrupt (reported per camera: frames read of frames expected); default: exit 2")
+    parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
+                        help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
+                             "EM blobs and inverse kinematics (Caillette & Howard)")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -52,46 +57,65 @@ def read_initial_pose(path: Path, n_params: int) -> np.ndarray:
             else:
                 raise ValueError("no record")
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"--initial-pose {path}: cannot read the first record's params ({exc})") from None
+        raise SessionError(f"--initial-pose {path}: cannot read the first record's params ({exc})") from None
     if p.shape != (n_params,) or not np.all(np.isfinite(p)):
-        raise ValueError(f"--initial-pose {path}: params has {p.size} values, the model needs {n_params}")
+        raise SessionError(f"--initial-pose {path}: params has {p.size} values, the model needs {n_params}")
     return p
 
 
+def median_warning(how: dict[str, str]) -> str | None:
+    """One warning line when some cameras' background models are a temporal median of the take."""
+    median = [n for n, h in how.items() if h == "median"]
+    if not median:
+        return None
+    return (f"no background plate for {', '.join(median)}: their backgrounds are the temporal median of the take, "
+            "which holds a subject who stays still in view as background (then lost); record the empty room "
+            "with `contourcap record --background 2s`, or add background media to session.toml")
+
+
 def run(args: argparse.Namespace) -> int:
+    """Track; the poses go to ``OUT.partial`` (flushed per record) and replace ``OUT`` only when every
+    frame was tracked (:class:`service.atomic.JsonlWriter`): a failing or interrupted run never
+    truncates an existing ``OUT``, and its finished frames are kept (named on stderr)."""
+    session = load_session(args.session)
+    frames = parse_frame_range(args.frames)
+    cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
+    model = session_model(session, args.model)
+    init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
+    names = list(session.camera_names if cameras is None else cameras)
+    ignore = _ignore_masks(session, args.ignore_region)
+    media = check_media(session, names, frames=frames)  # unreadable, wrong size, range past the end: exit 2
+    check = StreamCheck(media, allow_missing=args.allow_missing_cameras)
+    for line in check.check_lengths():
+        print(f"contourcap track: warning: {line}; tracking on without its missing frames", file=sys.stderr)
+    t_bg = time.perf_counter()
+    backgrounds, how = background_models(session, names, frames=frames)
+    print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
+          f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
+    warning = median_warning(how)
+    if warning:
+        print(f"contourcap track: warning: {warning}", file=sys.stderr)
+    total = count_frames(session, names[0], frames) if names else None
+    records = []
+    t0 = time.perf_counter()
+    out = JsonlWriter(args.out)
     try:
-        session = load_session(args.session)
-        frames = parse_frame_range(args.frames)
-        cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
-        model = session_model(session, args.model)
-        init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
-        names = list(session.camera_names if cameras is None else cameras)
-        ignore = _ignore_masks(session, args.ignore_region)
-        t_bg = time.perf_counter()
-        backgrounds, how = background_models(session, names, frames=frames)
-        print(f"background models: {', '.join(f'{n}={h}' for n, h in how.items())} "
-              f"({time.perf_counter() - t_bg:.1f} s)", file=sys.stderr)
-        no_video = [n for n, h in how.items() if h != "video"]
-        if no_video:
-            print(f"warning: camera(s) {', '.join(no_video)} have no background video: their background is the "
-                  "temporal median of the take, which swallows a subject who stays in one place; record ~2 s "
-                  "of the empty room per camera ([[camera]] background in session.toml)", file=sys.stderr)
-        total = count_frames(session, names[0], frames) if names else None
-        records = []
-        t0 = time.perf_counter()
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.out, "w", encoding="utf-8") as out:
-            for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
-                                     frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
-                                     method=args.method,
-                                     scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
-                                     ignore=ignore):
-                out.write(json.dumps(rec) + "\n")
-                records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
-                _progress(len(records), total, time.perf_counter() - t0, rec)
-    except (SessionError, ModelError, ValueError, OSError) as exc:
-        print(f"contourcap track: error: {exc}", file=sys.stderr)
-        return 2
+        for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
+                                 frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
+                                 method=args.method, stream_check=check, ignore=ignore,
+                                 scene=None if args.no_scene or args.method != "contours" else SceneOptions()):
+            out.write(json.dumps(rec).encode())
+            records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
+            _progress(len(records), total, time.perf_counter() - t0, rec)
+    except BaseException:
+        kept = out.abandon()
+        if kept is not None:
+            print(f"\ncontourcap track: the {out.count} frames tracked before the failure are in {kept}",
+                  file=sys.stderr)
+        raise
+    out.commit()
+    for line in check.report():
+        print(f"\ncontourcap track: warning: {line}", file=sys.stderr, end="")
     summary = summarise(records, time.perf_counter() - t0).as_dict()
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)

@@ -14,9 +14,16 @@ from __future__ import annotations
 
 import collections
 import threading
+import time
 from typing import Callable
 
+from service.flow.window import FrameIdWindow, RateLimit
 from service.wire.messages import MAX_BYTES, TYPE_FRAME, MessageError, meta_int, unpack_message, check_name
+
+RING_MAX_BYTES = 32 * 1024 * 1024  # bytes one camera's FrameRing holds at most (frames as received)
+FRAME_RATE_LIMIT_HZ = 480.0  # frames a ring takes per second at most (twice the fastest trigger)
+HAVE_RATE_LIMIT_HZ = 200.0  # have notices per camera per second the planner takes at most
+RATE_BURST = 64  # messages a key may deliver back to back (a backlog after a 2 s stall at 30 fps)
 
 
 def frame_header(data: bytes) -> tuple[str, int]:
@@ -32,37 +39,60 @@ class FrameRing:
     methods are thread-safe (``cv`` may be shared to wait on several rings)."""
 
     def __init__(self, camera: str, *, size: int = 8, max_demands: int = 4,
-                 cv: threading.Condition | None = None) -> None:
+                 cv: threading.Condition | None = None, max_bytes: int = RING_MAX_BYTES,
+                 window: FrameIdWindow | None = None, rate: RateLimit | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.camera, self.size = check_name(camera), max(1, int(size))
+        self.max_bytes, self._bytes, self._clock = int(max_bytes), 0, clock
+        self.window = window if window is not None else FrameIdWindow()
+        self.rate = rate if rate is not None else RateLimit(FRAME_RATE_LIMIT_HZ, burst=RATE_BURST)
         self._frames: collections.OrderedDict[int, tuple[bytes, int | None]] = collections.OrderedDict()
         self._demands: collections.deque[tuple[int, float]] = collections.deque(maxlen=max(1, int(max_demands)))
         self.cv = cv if cv is not None else threading.Condition()
         self._changed = False
         self.received = self.bad = self.evicted = 0
+        self.rejected = 0  # far-future/far-past ids, oversized or over-rate frames, implausible demands
 
-    def put(self, data: bytes, sent_ns: int | None) -> int:
-        """Keep one received frame (its header validated); returns its id.  MessageError if the
-        header is bad or names another camera."""
+    def put(self, data: bytes, sent_ns: int | None) -> int | None:
+        """Keep one received frame (its header validated); returns its id, or None when it was
+        refused (counted in ``rejected``): larger than ``max_bytes``, over the rate limit, or an id
+        outside the camera's plausible window.  MessageError if the header is bad or names another
+        camera.  The frames held never exceed ``size`` frames nor ``max_bytes`` bytes."""
         camera, fid = frame_header(data)
         if camera != self.camera:
             raise MessageError(f"frame of camera {camera} on camera {self.camera}'s key")
+        now = self._clock()
         with self.cv:
-            self._frames.pop(fid, None)
+            if len(data) > self.max_bytes or not self.rate.allow(now) or not self.window.accept(fid, now):
+                self.rejected += 1
+                return None
+            old = self._frames.pop(fid, None)
+            if old is not None:
+                self._bytes -= len(old[0])
             self._frames[fid] = (data, sent_ns)
-            while len(self._frames) > self.size:  # arrival order: a restarted numbering ages out too
-                self._frames.popitem(last=False)
+            self._bytes += len(data)
+            while len(self._frames) > self.size or self._bytes > self.max_bytes:  # arrival order
+                _, (gone, _) = self._frames.popitem(last=False)
+                self._bytes -= len(gone)
                 self.evicted += 1
             self.received += 1
             self._changed = True
             self.cv.notify_all()
         return fid
 
-    def demand(self, frame_id: int, now_s: float) -> None:
-        """The tracker wants ``frame_id`` (kept until taken, skipped or expired)."""
+    def demand(self, frame_id: int, now_s: float) -> bool:
+        """The tracker wants ``frame_id`` (kept until taken, skipped or expired).  A demand for an id
+        this camera cannot have yet (beyond its window: no frame received, or far ahead of the
+        newest) is refused (False, counted in ``rejected``) so it cannot push real demands out."""
         with self.cv:
+            upper = self.window.upper(self._clock())
+            if upper is None or not 0 <= frame_id <= upper:
+                self.rejected += 1
+                return False
             if all(f != frame_id for f, _ in self._demands):
                 self._demands.append((int(frame_id), now_s))
             self.cv.notify_all()
+        return True
 
     def busy(self) -> bool:
         """Whether there is work now: a new frame to announce, or a demand that can be resolved
@@ -102,7 +132,9 @@ class FrameRing:
                 fid, since = self._demands[0]
                 if fid in self._frames:
                     self._demands.popleft()
-                    return missed, (fid,) + self._frames.pop(fid)
+                    data, sent_ns = self._frames.pop(fid)
+                    self._bytes -= len(data)
+                    return missed, (fid, data, sent_ns)
                 if any(f > fid for f in self._frames) or now_s - since > wait_s:
                     self._demands.popleft()
                     missed.append(fid)
@@ -131,11 +163,16 @@ class DemandPlanner:
       of those, is demanded (the set goes on without the camera that lacks it).
     - A camera whose ids go back by more than ``restart_gap`` restarted its numbering: ids above its
       new ones count as new again (``restarts``).
+    - The wire is not trusted: each camera's ids are checked against its :class:`FrameIdWindow`
+      (ids beyond what a trigger at ``rate_hz`` can have produced are dropped, counted in
+      ``rejected``; a camera's first notice may not run ahead of the cameras already heard), and a
+      camera's notices are rate-limited (``HAVE_RATE_LIMIT_HZ``), so a peer announcing frame 10^12
+      or flooding notices cannot redirect the demands.
     """
 
     def __init__(self, cameras: tuple[str, ...], *, absent_after_s: float = 0.5, startup_grace_s: float = 0.5,
                  demand_timeout_s: float = 0.25, partial_wait_s: float = 0.1, restart_gap: int = 8,
-                 remember: int = 16) -> None:
+                 remember: int = 16, rate_hz: float = 240.0) -> None:
         if not cameras:
             raise ValueError("cameras: at least one camera name is needed")
         self.cameras = tuple(cameras)
@@ -151,12 +188,34 @@ class DemandPlanner:
         self.outstanding: tuple[int, float] | None = None
         self.last_demanded = -1
         self.demands = self.timeouts = self.restarts = self.unknown = 0
+        self.rate_hz = float(rate_hz)
+        self._windows: dict[str, FrameIdWindow] = {}
+        self._limits: dict[str, RateLimit] = {}
+        self.limited = 0  # notices over a camera's rate limit
+        self.early_rejected = 0  # ids of a camera's first notice beyond every other camera's window
 
     def have(self, camera: str, frame_ids: tuple[int, ...], now_s: float) -> bool:
         """Record a have notice; False (counted in ``unknown``) for a camera not configured."""
         if camera not in self.cameras:
             self.unknown += 1
             return False
+        limit = self._limits.setdefault(camera, RateLimit(HAVE_RATE_LIMIT_HZ, burst=RATE_BURST))
+        if not limit.allow(now_s):
+            self.limited += 1
+            return False
+        if frame_ids:
+            if camera not in self._windows:  # a camera's first notice: no further ahead than the others allow
+                uppers = [u for w in self._windows.values() if (u := w.upper(now_s)) is not None]
+                if uppers:
+                    kept = tuple(f for f in frame_ids if f <= max(uppers))
+                    self.early_rejected += len(frame_ids) - len(kept)
+                    frame_ids = kept
+                    if not frame_ids:
+                        return False
+            window = self._windows.setdefault(camera, FrameIdWindow(rate_hz=self.rate_hz))
+            frame_ids = window.filter(frame_ids, now_s)
+            if not frame_ids:  # nothing plausible: not a sign of life either
+                return False
         self._heard[camera] = now_s
         if self._first_heard is None:
             self._first_heard = now_s
@@ -168,6 +227,12 @@ class DemandPlanner:
                 self.last_demanded = min(self.last_demanded, newest - 1)
             self._newest[camera] = newest
         return True
+
+    @property
+    def rejected(self) -> int:
+        """Frame ids of have notices refused as implausible (beyond a camera's window), and notices
+        over the rate limit."""
+        return sum(w.rejected for w in self._windows.values()) + self.limited + self.early_rejected
 
     def live(self, now_s: float) -> tuple[str, ...]:
         """Cameras heard from within ``absent_after_s``."""

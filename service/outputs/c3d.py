@@ -18,6 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
+from service.atomic import atomic_open
 from service.export import ExportError
 from service.outputs.timeline import Timeline
 
@@ -45,7 +46,7 @@ def write_c3d(path, tl: Timeline, names: Sequence[str], markers: np.ndarray, *, 
     no_analog = np.zeros((0, 0), dtype=np.float32)
     writer.add_frames([(pts[k], no_analog) for k in range(n_rows)])
     try:
-        with open(path, "wb") as f, warnings.catch_warnings():
+        with atomic_open(path, "wb") as f, warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="No analog data")
             writer.write(f)
     except OSError as exc:

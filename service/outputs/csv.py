@@ -13,6 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
+from service.atomic import atomic_open
 from service.export import ExportError
 from service.outputs.timeline import Timeline
 
@@ -23,7 +24,7 @@ def write_csv(path, tl: Timeline, names: Sequence[str], markers: np.ndarray) -> 
     header = ["frame", "time_s", "ok"] + [f"{n}_{a}" for n in names for a in "xyz"]
     rows = np.flatnonzero(tl.record >= 0)
     try:
-        with open(path, "w", newline="") as f:
+        with atomic_open(path, "w", newline="") as f:
             w = _csv.writer(f)
             w.writerow(header)
             times = tl.times_s

@@ -21,6 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
+from service.atomic import write_text_atomic
 from service.export import ExportError
 from service.outputs.timeline import Timeline
 
@@ -56,7 +57,7 @@ def write_trc(path, tl: Timeline, names: Sequence[str], markers: np.ndarray, *, 
     for k in range(n_rows):
         lines.append(f"{int(tl.frames[k])}\t{times[k]:.6f}\t" + "".join(c + "\t" for c in cells[k]))
     try:
-        path.write_text("\n".join(lines) + "\n")
+        write_text_atomic(path, "\n".join(lines) + "\n")
     except OSError as exc:
         raise ExportError(f"{path}: cannot write ({exc.strerror})") from None
     return path

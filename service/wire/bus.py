@@ -31,6 +31,8 @@ from typing import Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
+from service.errors import ServiceError
+from service.text import printable
 from service.wire.messages import MessageError, check_name
 from service.wire.records import CreditMessage, StatusMessage
 
@@ -39,7 +41,7 @@ T = TypeVar("T")
 MODES = ("live", "lossless")
 
 
-class BusError(RuntimeError):
+class BusError(ServiceError, RuntimeError):
     """The zenoh session could not be opened or reached no peer/router (wrong address, TLS, credentials)."""
 
 
@@ -250,16 +252,21 @@ class Inbox(Generic[T]):
     ``dropped``).  ``mode="lossless"``: FIFO up to ``depth`` (producers keep under it via credits;
     overflow is still counted, never blocking zenoh's thread).  ``recv(timeout_s)`` returns
     :class:`Received` ``(key, message, sent_ns)`` or None.  Inboxes given the same ``cv`` (a
-    ``threading.Condition``) can be waited on together with :func:`wait_any`.
+    ``threading.Condition``) can be waited on together with :func:`wait_any`.  ``latest_per_key``: only
+    the newest item of each key is kept (for state notices such as ``have``: a flood on one key then
+    never pushes another key's notice out; a superseded item is not counted as dropped).
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], T], *,
-                 mode: str = "live", depth: int = 4, cv: threading.Condition | None = None) -> None:
+                 mode: str = "live", depth: int = 4, cv: threading.Condition | None = None,
+                 latest_per_key: bool = False) -> None:
         if mode not in MODES:
             raise ValueError(f"delivery mode must be one of {MODES}, got {mode!r}")
         self.key, self.mode, self.depth = key, mode, int(depth)
         self._decode = decode
-        self._items: collections.deque = collections.deque()
+        self.latest_per_key = bool(latest_per_key)
+        self._items: collections.deque | collections.OrderedDict = (
+            collections.OrderedDict() if self.latest_per_key else collections.deque())
         self._cv = cv if cv is not None else threading.Condition()
         self.received = self.dropped = self.bad = 0
         self._last_log = 0.0
@@ -276,27 +283,35 @@ class Inbox(Generic[T]):
             now = time.monotonic()
             if now - self._last_log > 1.0:
                 self._last_log = now
-                log.warning("bad message on %s (%d so far): %s", key, self.bad, exc)
+                log.warning("bad message on %s (%d so far): %s", printable(key), self.bad, printable(exc))
             return
         with self._cv:
             self.received += 1
+            if self.latest_per_key:
+                self._items.pop(key, None)
             if len(self._items) >= self.depth:
-                self._items.popleft()
+                self._pop()
                 self.dropped += 1
-            self._items.append(Received(key, msg, sent_ns))
+            if self.latest_per_key:
+                self._items[key] = Received(key, msg, sent_ns)
+            else:
+                self._items.append(Received(key, msg, sent_ns))
             self._cv.notify_all()
+
+    def _pop(self) -> Received:
+        return self._items.popitem(last=False)[1] if self.latest_per_key else self._items.popleft()
 
     def recv(self, timeout_s: float | None = None) -> Received | None:
         """The oldest item, waiting up to ``timeout_s`` seconds (None: forever); None on timeout."""
         with self._cv:
             if not self._items and not self._cv.wait_for(lambda: bool(self._items), timeout_s):
                 return None
-            return self._items.popleft()
+            return self._pop()
 
     def drain(self) -> list[Received]:
         """Every item held, oldest first, without waiting."""
         with self._cv:
-            out = list(self._items)
+            out = list(self._items.values() if self.latest_per_key else self._items)
             self._items.clear()
             return out
 

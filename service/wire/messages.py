@@ -33,6 +33,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from service.errors import ServiceError
+
 MAGIC = b"CCAP"
 HEADER = struct.Struct("<4sBBHII")
 TYPE_FRAME = 1
@@ -46,7 +48,7 @@ DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "float32": np.float32}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
 
-class MessageError(ValueError):
+class MessageError(ServiceError, ValueError):
     """A message that cannot be decoded or fails validation (the text names the field)."""
 
 

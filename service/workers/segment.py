@@ -91,6 +91,7 @@ class SegmentWorker:
         """Queue gauges for the status messages and the returned counters."""
         if self.live:
             return {"evicted": sum(r.evicted for r in self.rings.values()),
+                    "rejected": sum(r.rejected for r in self.rings.values()),
                     "queue_depth": sum(len(r) for r in self.rings.values())}
         return {"bad": sum(i.bad for i in self.inboxes.values()),
                 "dropped": sum(i.dropped for i in self.inboxes.values()),

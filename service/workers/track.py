@@ -12,6 +12,7 @@ before fitting it.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -31,6 +32,9 @@ __all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
 log = logging.getLogger("contourcap.worker")
 
 LOSSLESS_SET_TIMEOUT_S = 60.0
+# the largest chamfer message taken (a 1920x1200 camera's two uint16 images are ~9 MB): with the inbox
+# depths below, a live track worker holds at most 2 x cameras x 16 MiB of received chamfers
+CHAMFER_MAX_BYTES = 16 * 1024 * 1024
 """Lossless delivery: how long a frame set waits for a camera (CPU load, not loss, delays it), in seconds."""
 
 
@@ -77,10 +81,11 @@ class TrackWorker:
         cv = threading.Condition()
         frames = inputs == "frames"  # the fitter reads the camera frames itself: no segment worker, no demand
         self.inbox = Inbox(session, keys.frame("*") if frames else keys.chamfer("*"),
-                           FrameMessage.from_bytes if frames else ChamferMessage.from_bytes, mode=mode,
-                           depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
+                           FrameMessage.from_bytes if frames else functools.partial(ChamferMessage.from_bytes,
+                                                                                    max_bytes=CHAMFER_MAX_BYTES),
+                           mode=mode, depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
         self.haves = None if lossless or frames else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
-                                                           depth=64 * len(cameras), cv=cv)
+                                                           depth=64 * len(cameras), cv=cv, latest_per_key=True)
         self.planner = None if lossless or frames else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
@@ -104,7 +109,8 @@ class TrackWorker:
                "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
                "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
-            out.update(bad=inbox.bad + self.haves.bad, demands=self.planner.demands,
+            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected,
+                       have_dropped=self.haves.dropped, demands=self.planner.demands,
                        demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
         return out
 

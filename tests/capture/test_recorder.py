@@ -245,8 +245,9 @@ def test_real_footage_round_trip_png(shared_data, tmp_path):
     if not video.is_file():
         pytest.skip(f"{video} absent")
     (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "cam2.avi").symlink_to(video)  # session paths stay inside the folder
     (tmp_path / "src" / "session.toml").write_text(
-        f'[session]\nname = "uu"\nfps = 50.0\n\n[[camera]]\nname = "cam2"\nvideo = "{video}"\n'
+        '[session]\nname = "uu"\nfps = 50.0\n\n[[camera]]\nname = "cam2"\nvideo = "cam2.avi"\n'
     )
     src = load_session(tmp_path / "src", require_calibration=False)
     rec = Recorder(tmp_path / "out", name="uu", fps=50.0, cameras=["cam2"], codec="png")

@@ -55,4 +55,4 @@ def test_a_take_without_background_videos_says_once_what_to_record(session, tmp_
                str(session / "ground_truth.jsonl")])
     err = capsys.readouterr().err
     assert rc == 0, err
-    assert err.count("no background video") == 1 and "empty room" in err
+    assert err.count("no background plate") == 1 and "empty room" in err and "stays still" in err

@@ -39,6 +39,7 @@ from typing import Mapping
 import numpy as np
 
 from capture.tomlio import load_file
+from tracker.errors import TrackerError
 
 __all__ = ["BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"]
 
@@ -61,7 +62,7 @@ _AXES = {
 ROOT_TRANSLATION, ROOT_ROTATION, JOINT_ROTATION = 0, 1, 2
 
 
-class ModelError(ValueError):
+class ModelError(TrackerError, ValueError):
     """A body-model file is invalid; the message names the file and the part."""
 
 

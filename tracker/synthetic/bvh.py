@@ -37,13 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
+from tracker.errors import TrackerError
+
 __all__ = ["Bvh", "BvhError", "load_bvh", "parse_bvh", "bvh_forward", "euler_channels_to_matrix"]
 
 _ROT = {"Xrotation": 0, "Yrotation": 1, "Zrotation": 2}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
 
-class BvhError(ValueError):
+class BvhError(TrackerError, ValueError):
     """A BVH file is malformed; the message names the file and the line."""
 
 
