@@ -54,7 +54,7 @@ class EffortLevel:
                 "reverse_samples": self.reverse_samples}
 
 
-EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 100), EffortLevel(2, 4, 5, 60))
+EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLevel(2, 5, 6, 100))
 """Full effort first (the ``TrackerOptions`` defaults), then cheaper settings."""
 
 
@@ -63,7 +63,8 @@ class EffortController:
 
     The mean fit time of the last ``window`` fits above ``high`` × the frame period steps down one
     level (cheaper); below ``low`` × the period steps back up; after a change, ``window`` fits are
-    waited for before the next.
+    waited for before the next.  A bad fit steps back up at once (accuracy before speed: a cheap
+    fit that loses the track costs a search).
 
     Parameters
     ----------
@@ -86,8 +87,11 @@ class EffortController:
         self.level = 0
         self._times: list[float] = []
 
-    def update(self, fit_s: float) -> int:
-        """Take one fit's duration (seconds); returns the level for the next fit."""
+    def update(self, fit_s: float, ok: bool = True) -> int:
+        """Take one fit's duration (seconds) and whether it was good; returns the level for the next fit."""
+        if not ok:
+            self.level, self._times = max(0, self.level - 1), []
+            return self.level
         self._times.append(float(fit_s))
         if len(self._times) < self.window:
             return self.level
@@ -233,14 +237,13 @@ class LiveTrackerFitter(TrackerFitter):
                 self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
             else:  # tracking goes on beside a recovery search: it may come back by itself
-                # a search beside: the cheapest fit, so that the search gets the CPU
-                level = EFFORT_LEVELS[-1 if self.searching else self.effort.level]
+                level = EFFORT_LEVELS[self.effort.level]
                 tr.options = replace(self.base_options, n_samples=level.n_samples,
                                      max_iterations=level.max_iterations, reverse_samples=level.reverse_samples)
                 record = tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
                 record["effort"] = level.as_record()
                 if not self.searching:
-                    self.effort.update(self.clock() - t0)
+                    self.effort.update(self.clock() - t0, bool(record.get("ok")))
                 if not record.get("ok"):
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"

@@ -43,6 +43,10 @@ def test_effort_steps_down_when_behind_and_back_up():
     assert levels[-1] == len(EFFORT_LEVELS) - 1 and levels == sorted(levels)
     levels = [ctl.update(0.005) for _ in range(9)]
     assert levels[-1] == 0 and levels == sorted(levels, reverse=True)
+    for _ in range(9):
+        ctl.update(0.050)
+    assert ctl.level == len(EFFORT_LEVELS) - 1
+    assert ctl.update(0.050, ok=False) == len(EFFORT_LEVELS) - 2  # a bad fit: more effort at once
     assert all(a.n_samples >= b.n_samples and a.max_iterations >= b.max_iterations
                for a, b in zip(EFFORT_LEVELS, EFFORT_LEVELS[1:]))
 
