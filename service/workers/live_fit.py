@@ -8,8 +8,9 @@
   loop.  While it searches, every set still gets its record at once: during the initialisation
   ``ok: false`` with ``reason`` ``"searching: ..."``; during a recovery the tracker goes on
   fitting from its prediction (a bad fit is ``ok: false``, its reason saying a search runs).
-  When the search ends and the track has not come back by itself, the pose found becomes the
-  tracker's and the next set is fitted from it (the track rejoins); a failed search is retried.
+  When the search ends, the tracker's prediction and the pose found are both fitted to the next
+  set; the one with the higher silhouette IoU is the tracker's pose from there (a track that came
+  back by itself is kept, a drifted one rejoins the search's); a failed search is retried.
 - **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
   tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
   fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
@@ -194,15 +195,37 @@ class LiveTrackerFitter(TrackerFitter):
         self._search = threading.Thread(target=run, name=f"search-{what}", daemon=True)
         self._search.start()
 
-    def _take_found(self) -> None:
-        """A finished search's pose becomes the tracker's (no velocity across it), unless the
-        track came back by itself meanwhile (the last set was fitted ok)."""
+    def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
+        """A finished search's pose (no velocity across it) when it fits this set better.
+
+        The search's pose is of the set it started on; the track went on meanwhile.  Both the
+        tracker's prediction and the search's pose are fitted to this set and the one whose fit
+        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
+        the search's pose, there is no other)."""
+        from tracker.fitting.tracking import fit_frame
+        from tracker.search.scoring import ScoreViews
+
         with self._lock:
             found, self._found = self._found, None
-        if found is None or found[1] is None or (self._last_ok and self.tracker.params is not None):
+        if found is None or found[1] is None:
             return
         tr = self.tracker
-        tr.params, tr.previous, tr._frames = found[1], None, (None, int(found[0]))
+        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        current = tr.predict(frame_id)
+        start, start_frame = found[1], int(found[0])
+        if current is not None and names:
+            cams = [tr.cameras[n] for n in names]
+            chs = {n: images[n] for n in names}
+            views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
+            fitted = []
+            for start in (current, found[1]):
+                res, _ = fit_frame(tr.model, cams, chs, start, sliding=tr.sliding, solver=tr.solver,
+                                   options=tr.options)
+                fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
+            if fitted[0][0] >= fitted[1][0]:
+                return  # the track is as good: it came back by itself
+            start, start_frame = fitted[1][1], int(frame_id)
+        tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
 
@@ -225,14 +248,14 @@ class LiveTrackerFitter(TrackerFitter):
         """The pose record of one frame set (``chamfer``: camera name -> ChamferMessage)."""
         t0 = self.clock()
         self._clipped = any(msg.attrs.get("roi_clipped", 0.0) > 0 for msg in chamfer.values())
-        if not self.searching:
-            self._take_found()
         tr = self.tracker
         if tr.params is None and self.searching:  # initialising: nothing to fit from yet
             record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
         else:
             images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
             silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
+            if not self.searching:
+                self._take_found(frame_id, images, silhouettes)
             if tr.params is None:
                 self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
