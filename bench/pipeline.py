@@ -9,7 +9,10 @@ over the run, per worker role — camera, segment, track — and ``hub``: this p
 the poses and bridges frames and chamfers to rerun) (``--json``) or a table.  ``--live`` replays in
 real time (the tracker demands the frames it can take); the default is lossless (every frame,
 back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plugins:fitter_factory``
-measures the transport and segmentation without the tracker.  ``--preload``: replay cameras decode
+measures the transport and segmentation without the tracker.  ``cpu_ms_per_pose``: CPU of the
+whole pipeline (workers and this process) per pose, and ``fit_ms_p50``: the median fit time (pose
+records' ``fit_ms``) — figures that a machine shared with other work changes less than the
+wall-clock ones.  ``--preload``: replay cameras decode
 the session into memory before streaming (``cpu_by_component.camera`` is then the cost of
 publishing frames, not of decoding the session's videos).
 """
@@ -27,10 +30,13 @@ pin_blas_threads()
 import argparse
 import json
 import os
+
+import numpy as np
 import sys
 import tempfile
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -71,10 +77,17 @@ class CpuSampler:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
+    def _children(self) -> list[Path]:
+        """This process's children (``/proc/PID/task/*/children``; every process when unavailable)."""
+        try:
+            pids = {p for task in Path(f"/proc/{self.parent}/task").iterdir()
+                    for p in (task / "children").read_text().split()}
+            return [Path("/proc") / p for p in sorted(pids)]
+        except OSError:
+            return [p for p in Path("/proc").iterdir() if p.name.isdigit()]
+
     def _sample(self) -> None:
-        for proc in Path("/proc").iterdir():
-            if not proc.name.isdigit():
-                continue
+        for proc in self._children():
             try:
                 stat = (proc / "stat").read_text()
                 ppid = int(stat[stat.rindex(")") + 2:].split()[1])
@@ -101,6 +114,10 @@ class CpuSampler:
         self.wall = time.monotonic() - self.t0
         self.self_s = _cpu_s(os.getpid()) - self.self0
 
+    def total_s(self) -> float:
+        """CPU seconds of the workers and this process over the run."""
+        return sum(cpu for _, cpu in self.last.values()) + self.self_s
+
     def percent(self) -> dict[str, float]:
         out: dict[str, float] = {}
         for role, cpu in self.last.values():
@@ -115,6 +132,9 @@ def main(argv=None) -> int:
     parser.add_argument("--preload", action="store_true",
                         help="live: camera workers decode the session into memory before streaming it (a camera "
                              "that delivers decoded frames; without it the replay's FFV1 decoding is measured too)")
+    parser.add_argument("--start-delay-s", type=float, default=None,
+                        help="live: seconds from starting the workers to session time 0 (default the demo's); "
+                             "a loaded machine needs longer to start large studios")
     opts = parser.parse_args(argv)
     ref_ms = machine_ref_ms()
     if opts.preload:  # inherited by the worker processes (service/commands/worker.py --preload)
@@ -123,12 +143,22 @@ def main(argv=None) -> int:
         if opts.out is None:
             opts.out = tmp
         with CpuSampler() as cpu:
-            summary = run_demo(demo_cmd.options_from_args(opts), progress=lambda m: print(m, file=sys.stderr))
+            demo_opts = demo_cmd.options_from_args(opts)
+            if opts.start_delay_s is not None:
+                demo_opts = replace(demo_opts, live_start_delay_s=opts.start_delay_s)
+            summary = run_demo(demo_opts, progress=lambda m: print(m, file=sys.stderr))
+        fits = [r["fit_ms"] for r in map(json.loads, Path(summary.poses).read_text().splitlines())
+                if r.get("fit_ms") is not None]
     result = {k: summary.as_dict()[k] for k in KEYS}
     # fps_out is the rate between the first and the last pose (a burst after a long start-up looks fast):
     # live, also poses over the whole replay window
     result["poses_per_s"] = round(summary.frames / opts.duration_s, 2) if opts.live else None
     result["cpu_by_component"] = cpu.percent()
+    # CPU per pose of the whole pipeline: comparable across runs on a loaded machine, where the wall-clock
+    # figures follow the share of the cores the pipeline gets
+    result["cpu_ms_per_pose"] = round(1e3 * cpu.total_s() / summary.frames, 1) if summary.frames else None
+    result["fit_ms_p50"] = round(float(np.percentile(fits, 50)), 2) if fits else None
+    result["wall_s"] = round(summary.wall_s, 1)
     result["machine_ref_ms"] = round(ref_ms, 2)
     if opts.json:
         print(json.dumps(result))

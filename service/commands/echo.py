@@ -18,9 +18,11 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--idle-exit-s", type=float, default=None, help="exit after this long without a pose")
     parser.add_argument("--out", default=None, help="also append the records to this JSONL file")
     parser.add_argument("--stats", action="store_true",
-                        help="every second and at exit, print on stderr what was rejected (malformed) and "
-                             "evicted (too slow) here, and the rejected/evicted/dropped counters the studio's "
-                             "workers report on status/*")
+                        help="every --stats-every seconds and at exit, print on stderr poses/s, ok, latency (capture to publish) and fit time p50/p99, what was rejected (malformed) and evicted (too slow) here, and "
+                             "the rejected/evicted/dropped counters the studio's workers report on status/*; "
+                             "no line per pose")
+    parser.add_argument("--stats-every", type=float, default=5.0, help="seconds between --stats lines")
+
 
 
 # status counters that say a worker refused or lost input (shown by --stats)
@@ -37,6 +39,53 @@ def format_stats(own: dict, workers: dict[str, dict]) -> str:
         text = ", ".join(f"{printable(k, limit=40)} {v:g}" for k, v in sorted(vals.items())) or "nothing refused"
         parts.append(f"{printable(comp, limit=40)}: {text}")
     return "stats  " + "; ".join(parts)
+
+
+class PoseStats:
+    """Running figures of received poses: rate, ok fraction, ``latency_ms`` and ``fit_ms`` percentiles.
+
+    Parameters
+    ----------
+    clock : callable () -> float
+        Seconds (the rate is poses over the time since the first pose).
+    window : int
+        Percentiles over the last ``window`` poses.
+    """
+
+    def __init__(self, clock, *, window: int = 10_000) -> None:
+        import collections
+
+        self.clock, self.n, self.ok, self.first = clock, 0, 0, None
+        self.latency = collections.deque(maxlen=window)
+        self.fit = collections.deque(maxlen=window)
+
+    def add(self, rec) -> None:
+        """Count one pose record."""
+        now = self.clock()
+        self.first = now if self.first is None else self.first
+        self.n += 1
+        self.ok += bool(rec.ok)
+        for key, values in (("latency_ms", self.latency), ("fit_ms", self.fit)):
+            v = rec.get(key)
+            if v is not None:
+                values.append(float(v))
+
+    def line(self) -> str:
+        """One summary line."""
+        import numpy as np
+
+        span = self.clock() - self.first if self.first is not None else 0.0
+        rate = (self.n - 1) / span if self.n > 1 and span > 0 else 0.0
+
+        def pct(values) -> str:
+            if not values:
+                return "n/a"
+            p50, p99 = np.percentile(np.asarray(values), [50, 99])
+            return f"p50 {p50:.1f} ms, p99 {p99:.1f} ms"
+
+        ok = f"{100.0 * self.ok / self.n:.0f} %" if self.n else "n/a"
+        return (f"{self.n} poses, {rate:.1f} poses/s, {ok} ok; latency {pct(self.latency)}; "
+                f"fit {pct(self.fit)}")
 
 
 def format_pose(rec) -> str:
@@ -88,22 +137,30 @@ def run(args: argparse.Namespace) -> int:
         own = {"received": inbox.received, "rejected": inbox.bad + statuses.bad, "evicted": inbox.dropped}
         print(format_stats(own, workers), file=sys.stderr, flush=True)
 
+    stats = PoseStats(time.monotonic) if args.stats else None
+    stats_at = time.monotonic() + args.stats_every
     try:
         inbox = Inbox(session, Keys(studio).pose, PoseRecord.from_bytes, mode="live", depth=256)
         if args.stats:
             statuses = Inbox(session, Keys(studio).status("*"), StatusMessage.from_bytes, mode="live", depth=64)
         while not stop.is_set() and (args.count is None or n < args.count):
-            if statuses is not None and time.monotonic() - last_stats >= 1.0:
+            if statuses is not None and time.monotonic() - last_stats >= args.stats_every:
                 last_stats = time.monotonic()
                 show_stats()
             got = inbox.recv(0.1)
+            if stats is not None and stats.n and time.monotonic() >= stats_at:
+                stats_at = time.monotonic() + args.stats_every
+                print(stats.line(), file=sys.stderr, flush=True)
             if got is None:
                 if args.idle_exit_s is not None and time.monotonic() - last > args.idle_exit_s:
                     break
                 continue
             last = time.monotonic()
             rec = got.message
-            print(rec.to_bytes().decode() if args.json else format_pose(rec), flush=True)
+            if stats is not None:
+                stats.add(rec)
+            else:
+                print(rec.to_bytes().decode() if args.json else format_pose(rec), flush=True)
             if out is not None:
                 out.write(rec.to_bytes() + b"\n")
             n += 1
@@ -115,6 +172,8 @@ def run(args: argparse.Namespace) -> int:
         if statuses is not None:
             show_stats()
             statuses.close()
+        if stats is not None:
+            print(stats.line(), file=sys.stderr, flush=True)
         if inbox is not None:
             if inbox.dropped or inbox.bad:
                 print(f"contourcap echo: {inbox.dropped} poses dropped (too slow), {inbox.bad} bad messages",

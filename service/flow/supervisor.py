@@ -7,14 +7,16 @@ SIGTERM to every child, waits ``grace_s``, then SIGKILLs what is left.
 
 Processes of a host (:func:`plan_host`): the router (if ``[router] host`` is this host), one camera
 worker per camera (a crashed camera does not take the others down) — or one for all the host's
-cameras when they take frame ids from the USB trigger box, which a single process must own — one
-segment worker for all the host's cameras (none with ``[tracker] method = "blobs"``: that tracker reads the
-frames itself), and the tracker (if ``[tracker] host`` is this host).
+cameras when they take frame ids from the USB trigger box, which a single process must own, or
+when the host is small (:data:`SMALL_HOST_CPUS`) — one segment worker for all the host's cameras (none with
+``[tracker] method = "blobs"``: that tracker reads the frames itself), and the tracker (if ``[tracker] host``
+is this host).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -27,6 +29,9 @@ from service.config import StudioConfig
 from service.workers.runtime import needs_trigger
 
 log = logging.getLogger("contourcap.supervisor")
+
+SMALL_HOST_CPUS = 2
+"""A host with at most this many CPUs runs one camera process for all its cameras (``plan_host``)."""
 
 
 @dataclass(frozen=True)
@@ -51,7 +56,7 @@ class _Child:
 
 def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None = None,
               epoch_ns: int | None = None, idle_exit_s: float | None = None, segment_plugin: str | None = None,
-              fit_plugin: str | None = None, loop_replay: bool = False,
+              fit_plugin: str | None = None, loop_replay: bool = False, camera_processes: str | None = None,
               python: str = sys.executable) -> list[ProcessSpec]:
     """The processes ``contourcap run`` starts on ``host`` (see the module docstring).
 
@@ -71,6 +76,10 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         ``module:callable`` replacing the segmenter / the tracker.
     loop_replay : bool
         Replay cameras loop the session.
+    camera_processes : {"per-camera", "one"}, optional
+        One camera process per camera, or one for all the host's cameras; default: one on a host
+        of at most :data:`SMALL_HOST_CPUS` CPUs (each process costs its start-up and scheduling
+        there), else one per camera.  A trigger box always gets one.
     python : str
         Interpreter of the children.
 
@@ -85,7 +94,9 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         specs.append(ProcessSpec("router", (python, "-m", "service.commands.router", "--config", str(config_path))))
     cams = [c.name for c in cfg.cameras_on(host)]
     extra = (("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()) + (("--loop",) if loop_replay else ())
-    if needs_trigger(cfg, cams):  # one process owns the USB trigger box and all the host's cameras
+    one = needs_trigger(cfg, cams) or (camera_processes == "one" or camera_processes is None
+                                       and (os.cpu_count() or 1) <= SMALL_HOST_CPUS)
+    if one:  # a USB trigger box (one process owns it) or a small host: all the host's cameras in one
         specs.append(ProcessSpec("camera", worker + ("camera", "--cameras", ",".join(cams)) + common + extra))
     else:
         for cam in cams:

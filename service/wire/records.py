@@ -4,7 +4,7 @@ have/demand notices.
 All of them are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
-``latency_ms``; ``reason`` when ``ok`` is false).  Status, credit, have and demand records carry
+``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``effort``).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -73,7 +73,7 @@ class PoseRecord:
                 raise MessageError(f"joints: expected an object of at most {_MAX_JOINTS} joints")
             obj["joints"] = {check_name(k, "joint name"): _finite_list(v, f"joints.{k}", length=3)
                              for k, v in joints.items()}
-        for key in ("rms_px", "latency_ms"):
+        for key in ("rms_px", "latency_ms", "fit_ms"):
             if obj.get(key) is not None:
                 obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):
@@ -166,12 +166,60 @@ class CreditMessage(_ConsumerFrame):
     WHAT = "credit"
 
 
+DEMAND_MAX_ROIS = 64
+"""At most this many cameras' regions of interest in one demand."""
+_MAX_IMAGE_PX = 65536
+
+
+def _check_rois(value: Any) -> dict[str, tuple[int, int, int, int]]:
+    """``{camera: [x0, y0, x1, y1]}`` validated: names, at most :data:`DEMAND_MAX_ROIS`, integer
+    half-open boxes with ``0 <= x0 < x1`` and ``0 <= y0 < y1`` within 65536 pixels."""
+    if not isinstance(value, dict) or len(value) > DEMAND_MAX_ROIS:
+        raise MessageError(f"rois: expected an object of at most {DEMAND_MAX_ROIS} cameras")
+    out = {}
+    for cam, box in value.items():
+        name = check_name(cam, "rois camera")
+        if (not isinstance(box, list) or len(box) != 4
+                or any(isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= _MAX_IMAGE_PX for v in box)
+                or not (box[0] < box[2] and box[1] < box[3])):
+            raise MessageError(f"rois.{name}: expected [x0, y0, x1, y1] integers, 0 <= x0 < x1, 0 <= y0 < y1")
+        out[name] = tuple(box)
+    return out
+
+
 @dataclass(frozen=True)
 class DemandMessage(_ConsumerFrame):
     """Live mode: ``consumer`` (the tracker) wants frame ``frame_id`` of every camera segmented now
-    (``contourcap/<studio>/demand/<consumer>``); segment workers segment nothing else."""
+    (``contourcap/<studio>/demand/<consumer>``); segment workers segment nothing else.
+
+    ``rois`` (optional, v1): camera name -> ``(x0, y0, x1, y1)``, the half-open pixel box where the
+    body can be in that camera's frame (the tracker's predicted pose); a camera not named is
+    segmented whole.  Wire: ``"rois": {camera: [x0, y0, x1, y1]}``, at most
+    :data:`DEMAND_MAX_ROIS` cameras."""
+
+    rois: Mapping[str, tuple[int, int, int, int]] | None = None
 
     WHAT = "demand"
+
+    def __post_init__(self) -> None:
+        if self.rois is not None:
+            object.__setattr__(self, "rois", MappingProxyType(
+                _check_rois({k: [int(v) for v in b] for k, b in self.rois.items()})))
+
+    def to_bytes(self) -> bytes:
+        """The wire bytes (see the class docstring)."""
+        obj = {"v": RECORD_VERSION, "consumer": self.consumer, "frame_id": self.frame_id}
+        if self.rois is not None:
+            obj["rois"] = {k: list(b) for k, b in self.rois.items()}
+        return dumps_json(obj)
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, max_bytes: int = 8192) -> "DemandMessage":
+        """Decode and validate untrusted wire bytes; MessageError names the field at fault."""
+        obj = loads_json(data, max_bytes=max_bytes, what=cls.WHAT)
+        _check_version(obj, cls.WHAT)
+        rois = _check_rois(obj["rois"]) if obj.get("rois") is not None else None
+        return cls(check_name(obj.get("consumer"), "consumer"), meta_int(obj, "frame_id"), rois)
 
 
 HAVE_MAX_FRAMES = 64

@@ -50,9 +50,16 @@ class BackgroundSegmenter:
         self.on_result = on_result
         self._learning: list[np.ndarray] = []
 
-    def __call__(self, frame: FrameMessage, image: np.ndarray) -> ChamferMessage | None:
+    takes_roi = True
+
+    def __call__(self, frame: FrameMessage, image: np.ndarray, *,
+                 roi: tuple[int, int, int, int] | None = None) -> ChamferMessage | None:
         """Chamfer images of ``image`` (h, w, 3) uint8 BGR, or None while learning; MessageError if
-        the image is not BGR or not the background model's size."""
+        the image is not BGR or not the background model's size.
+
+        ``roi`` ``(x0, y0, x1, y1)``: only that box is segmented (clipped to the image); the message's
+        ``roi_clipped`` attribute is 1 when the silhouette touches a side of the box that is not an
+        image border (the body may reach beyond it)."""
         from segmentation.background import BackgroundModel
         from segmentation.pipeline import segment_frame
 
@@ -68,11 +75,28 @@ class BackgroundSegmenter:
         if tuple(self.model.size) != (image.shape[1], image.shape[0]):
             raise MessageError(f"camera {frame.camera}: frame {image.shape[1]}x{image.shape[0]} does not match "
                                f"the background model {self.model.size[0]}x{self.model.size[1]}")
-        seg = segment_frame(self.model, image, params=self.params)
+        attrs = {}
+        if roi is not None:
+            w, h = self.model.size
+            x0, y0 = min(max(int(roi[0]), 0), w - 1), min(max(int(roi[1]), 0), h - 1)
+            roi = (x0, y0, min(max(int(roi[2]), x0 + 1), w), min(max(int(roi[3]), y0 + 1), h))
+        seg = segment_frame(self.model, image, roi=roi, params=self.params)
+        if roi is not None:
+            attrs["roi_clipped"] = float(roi_clipped(seg.silhouette, roi, self.model.size))
         if self.on_result is not None:
             self.on_result(frame, seg)
         return chamfer_to_message(frame.camera, frame.frame_id, frame.timestamp_ns, seg.chamfer,
-                                  attrs={"foreground_fraction": seg.foreground_fraction})
+                                  attrs={"foreground_fraction": seg.foreground_fraction, **attrs})
+
+
+def roi_clipped(silhouette: np.ndarray, roi: tuple[int, int, int, int], size: tuple[int, int]) -> bool:
+    """Whether the silhouette ``(h, w)`` touches a side of ``roi`` ``(x0, y0, x1, y1)`` that is not a
+    border of the image of ``size`` ``(w, h)``."""
+    x0, y0, x1, y1 = roi
+    w, h = size
+    sides = ((x0 > 0, silhouette[y0:y1, x0]), (x1 < w, silhouette[y0:y1, x1 - 1]),
+             (y0 > 0, silhouette[y0, x0:x1]), (y1 < h, silhouette[y1 - 1, x0:x1]))
+    return any(inner and bool(line.any()) for inner, line in sides)
 
 
 def silhouette_mask(chamfer) -> np.ndarray:

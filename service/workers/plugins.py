@@ -56,7 +56,8 @@ def build_segmenters(cfg: StudioConfig, cameras: tuple[str, ...], *, plugin: str
 
 def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
     """The track worker's ``Fitter``: a plug-in factory ``f(cfg) -> Fitter``, else the tracker
-    (:class:`~service.workers.components.TrackerFitter`) on the session's subject and calibration
+    (:class:`~service.workers.components.TrackerFitter`; live delivery:
+    :class:`~service.workers.live_fit.LiveTrackerFitter`) on the session's subject and calibration
     (``[studio] calibration`` replaces the session's)."""
     if plugin:
         return load_plugin(plugin)(cfg)
@@ -69,6 +70,10 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
         from capture.calibration import load_calibration
 
         session = replace(session, calibration=tuple(load_calibration(cfg.calibration)))
+    if cfg.delivery == "live":
+        from service.workers.live_fit import LiveTrackerFitter
+
+        return LiveTrackerFitter.from_session(session, model=cfg.model)
     return TrackerFitter.from_session(session, model=cfg.model)
 
 

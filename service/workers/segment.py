@@ -34,7 +34,8 @@ class SegmentWorker:
     are kept undecoded (:class:`~service.flow.demand.FrameRing`), their ids announced on
     ``cam/<cam>/have``, and only the frames the tracker demands on ``demand/track`` are decoded and
     segmented (:mod:`service.flow.demand`); a demanded frame not held is skipped (or waited for up to
-    ``demand_wait_s`` if it has not arrived yet) and counted in ``missed``.  A segmenter still
+    ``demand_wait_s`` if it has not arrived yet) and counted in ``missed``; a demand naming a
+    camera's region of interest has that frame segmented only there (segmenters with ``takes_roi``).  A segmenter still
     learning its background (it returned None) is given every new frame until it has learnt.
 
     A frame the segmenter rejects with MessageError is counted (``bad``); any other exception ends
@@ -74,6 +75,7 @@ class SegmentWorker:
         self.rings = ({name: FrameRing(name, size=min(ring_size, HAVE_MAX_FRAMES)) for name in names}
                       if self.live else {})
         self.have_pubs = {name: declare_publisher(session, keys.have(name)) for name in self.rings}
+        self.demand_rois: dict[int, dict] = {}  # frame id -> camera -> region of interest (live demands)
         self.subs = []
         self.status = StatusReporter(session, keys, component)
         if self.live:  # subscribed before the liveliness tokens below announce this worker
@@ -115,14 +117,23 @@ class SegmentWorker:
             return
         if demand.consumer == TRACK_CONSUMER:
             now = time.monotonic()
+            with self.lock:  # the demanded frame's regions of interest, the newest few kept
+                self.demand_rois[demand.frame_id] = demand.rois or {}
+                while len(self.demand_rois) > 16:
+                    del self.demand_rois[next(iter(self.demand_rois))]
             for ring in self.rings.values():
                 ring.demand(demand.frame_id, now)
 
-    def _segment_one(self, name: str, segment: Segmenter, msg: FrameMessage | bytes) -> ChamferMessage | None | bool:
-        """The segmenter's output for one frame; False if the frame was bad (counted)."""
+    def _segment_one(self, name: str, segment: Segmenter, msg: FrameMessage | bytes,
+                     roi: tuple[int, int, int, int] | None = None) -> ChamferMessage | None | bool:
+        """The segmenter's output for one frame (within ``roi`` if given and the segmenter takes one:
+        ``takes_roi``); False if the frame was bad (counted)."""
         try:
             if not isinstance(msg, FrameMessage):
                 msg = FrameMessage.from_bytes(msg)
+            if roi is not None and getattr(segment, "takes_roi", False):
+                self.count("roi")
+                return segment(msg, msg.image(), roi=roi)
             return segment(msg, msg.image())
         except MessageError as exc:
             log.warning("camera %s: %s", name, exc)
@@ -165,7 +176,9 @@ class SegmentWorker:
             if got is None:
                 continue
             fid, data, sent_ns = got
-            out = self._segment_one(name, segment, data)
+            with self.lock:
+                roi = self.demand_rois.get(fid, {}).get(name)
+            out = self._segment_one(name, segment, data, roi)
             if out is None:
                 learning = True
                 self.count("learning")

@@ -7,7 +7,10 @@ incomplete would not give the offline poses); only a camera silent for
 Live mode demands the frames it fits (:class:`~service.flow.demand.DemandPlanner`: the newest
 frame id the live cameras' segment workers hold, by their have notices; a camera silent for
 ``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
-before fitting it.
+before fitting it, naming where the body can be in each camera when the fitter predicts it
+(``rois``).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture to publish: the
+camera worker's publish time, forwarded by the segment worker, to this worker's publish).  A
+fitter with ``warm_up()`` is warmed up before the first frame.
 """
 
 from __future__ import annotations
@@ -116,8 +119,9 @@ class TrackWorker:
 
     def _demand(self) -> None:
         fid = self.planner.next_demand(self.clock(), hold=self.asm.is_pending) if self.planner is not None else None
-        if fid is not None:
-            self.demand_pub.put(DemandMessage(TRACK_CONSUMER, fid).to_bytes())
+        if fid is not None:  # a fitter that predicts where the body is names each camera's region of interest
+            rois = self.fit.rois(fid) if hasattr(self.fit, "rois") else None
+            self.demand_pub.put(DemandMessage(TRACK_CONSUMER, fid, rois).to_bytes())
 
     def _take_haves(self) -> None:
         for got in self.haves.drain():
@@ -143,6 +147,7 @@ class TrackWorker:
     def _finish(self, fs) -> None:
         """Fit one released set and publish its pose (and its credit, lossless)."""
         first = next(iter(fs.items.values()))
+        t_fit = self.clock()
         try:
             record = dict(self.fit(fs.frame_id, first.timestamp_ns, fs.items))
         except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
@@ -150,6 +155,7 @@ class TrackWorker:
             record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
                       "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
         record.setdefault("cameras", len(fs.items))
+        record.setdefault("fit_ms", 1e3 * (self.clock() - t_fit))
         t0 = self.sent.pop(fs.frame_id, None)
         if t0 is not None:
             record["latency_ms"] = (self.wall_ns() - t0) / 1e6
@@ -178,6 +184,9 @@ class TrackWorker:
         """Fit until ``max_frames`` poses, ``idle_exit_s`` without input, or ``stop``; returns the counters."""
         done, last_input = 0, None  # idle time counts from the first input
         try:
+            if hasattr(self.fit, "warm_up"):  # compile the fitter's kernels before the first frame, not on it
+                self.status.tick(state="warming_up", force=True)
+                log.info("fitter warmed up in %.1f s", self.fit.warm_up())
             while not self.stop.is_set() and (self.max_frames is None or done < self.max_frames):
                 if self._idle(last_input):
                     break

@@ -55,8 +55,12 @@ def test_trigger_box_numbers_opencv_frames(tmp_path, rng):
 def test_without_trigger_one_process_per_camera(tmp_path, rng):
     cfg = _studio(tmp_path, rng, trigger="none")
     assert not needs_trigger(cfg, ("cam0", "cam1"))
-    assert [s.name for s in plan_host(cfg, "studio.toml", "h")] == ["camera-cam0", "camera-cam1", "segment",
-                                                                      "track"]
+    names = [s.name for s in plan_host(cfg, "studio.toml", "h", camera_processes="per-camera")]
+    assert names == ["camera-cam0", "camera-cam1", "segment", "track"]
+    # a small host (or asked for): one camera process for all the host's cameras
+    one = plan_host(cfg, "studio.toml", "h", camera_processes="one")
+    assert [s.name for s in one] == ["camera", "segment", "track"]
+    assert "cam0,cam1" in one[0].argv
 
 
 def test_missing_trigger_box_is_a_config_error(tmp_path, rng):

@@ -36,7 +36,10 @@ from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
 
-__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights"]
+__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights", "MAX_EXTRAPOLATION"]
+
+MAX_EXTRAPOLATION = 3.0
+"""The constant-velocity prediction extrapolates at most this many times the last step."""
 
 
 @dataclass(frozen=True)
@@ -263,6 +266,7 @@ class Tracker:
         self._last_bad = False
         self.params: np.ndarray | None = None
         self.previous: np.ndarray | None = None
+        self._frames: tuple[int | None, int | None] = (None, None)  # frame ids of ``previous`` and ``params``
         self.last_good: np.ndarray | None = None
         if initial_params is not None:
             p = np.asarray(initial_params, dtype=float)
@@ -275,12 +279,24 @@ class Tracker:
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
-    def predict(self) -> np.ndarray | None:
-        """Start pose for the next frame (constant velocity when enabled), shape (n_params,); None before initialisation."""
+    def predict(self, frame_id: int | None = None) -> np.ndarray | None:
+        """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
+        before initialisation.
+
+        Constant velocity when enabled: ``p + (p - p_prev)``, scaled by the ratio of the frame-id gaps
+        (to ``frame_id`` over between the last two fits, at most :data:`MAX_EXTRAPOLATION`) when both
+        are known, so a live tracker that fits every n-th frame extrapolates by the frames elapsed.
+        """
         if self.params is None:
             return None
         if self.options.constant_velocity and self.previous is not None:
-            return self.model.clamp(2.0 * self.params - self.previous)
+            scale = 1.0
+            f_prev, f_last = self._frames
+            if frame_id is not None and f_prev is not None and f_last is not None and f_last > f_prev:
+                scale = min(MAX_EXTRAPOLATION, max(0.0, (int(frame_id) - f_last) / (f_last - f_prev)))
+            if scale == 1.0:
+                return self.model.clamp(2.0 * self.params - self.previous)
+            return self.model.clamp(self.params + scale * (self.params - self.previous))
         return self.params
 
     def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
@@ -426,7 +442,7 @@ class Tracker:
         cams = [self.cameras[n] for n in names]
         chs = {n: chamfer[n] for n in names}
         can_search = silhouettes is not None and all(n in silhouettes for n in names)
-        start = self.predict()
+        start = self.predict(frame_id)
         if start is None:
             if not can_search:
                 return fail("no initial pose: pass initial_params, or silhouettes for automatic initialisation")
@@ -499,11 +515,13 @@ class Tracker:
         if bad:
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
+            self._frames = (self._frames[1], int(frame_id))
         else:
             # no velocity across a re-initialisation or out of a suspect fit (hop: 3 frames of 120
             # after the landing; extrapolating from them drifted 15-20 mm for ~20 frames)
             self.previous = None if restarted or self._suspect(terms) else self.params
             self.params = np.array(res.params)
+            self._frames = (self._frames[1], int(frame_id))
             self.last_good = self.params
             if np.isfinite(rms):
                 self._good_rms = (self._good_rms + [float(rms)])[-self.options.rms_window:]

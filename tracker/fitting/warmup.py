@@ -13,7 +13,9 @@ def warm_up() -> float:
     """Compile every kernel (or load it from numba's on-disk cache) by fitting one small rendered
     frame through the tracker's own code path (``tracker.fitting.tracking.fit_frame`` with the reverse
     term and its ray test); returns the seconds it took.  A live worker calls it before its first
-    frame so that frame is not delayed by the compilation."""
+    frame so that frame is not delayed by the compilation.  Read-only inputs are distinct numba
+    signatures, so the fit runs twice: on writable chamfer arrays (offline) and on read-only ones
+    with a read-only pose (what a live worker decodes from the wire)."""
     from segmentation.distance import chamfer_images
     from tracker.body.kinematics import forward as forward_pose
     from tracker.body.model import load_model
@@ -29,4 +31,11 @@ def warm_up() -> float:
     chamfer = {cam.name: chamfer_images(np.where(lab >= 0, 255, 0).astype(np.uint8), internal_edges(lab))
                for cam, lab in zip(cams, labels)}
     fit_frame(model, cams, chamfer, p, options=TrackerOptions(max_iterations=2))
+    for ci in chamfer.values():
+        ci.silhouette_q.setflags(write=False)
+        ci.edges_q.setflags(write=False)
+    frozen = p.copy()
+    frozen.setflags(write=False)
+    forward_pose(model, frozen)
+    fit_frame(model, cams, chamfer, frozen, options=TrackerOptions(max_iterations=2))
     return time.perf_counter() - t0

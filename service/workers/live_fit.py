@@ -1,0 +1,298 @@
+"""The live track worker's fitter: searches beside tracking, adaptive effort, the next set's ROIs.
+
+:class:`LiveTrackerFitter` wraps :class:`~tracker.fitting.tracking.Tracker` for live delivery
+(lossless keeps :class:`~service.workers.components.TrackerFitter`: the same poses as offline):
+
+- **Never stall the stream.**  A search from the silhouettes (the first frame's initialisation,
+  the recovery once ``patience`` frames in a row were bad) runs in a thread beside the worker's
+  loop.  While it searches, every set still gets its record at once: during the initialisation
+  ``ok: false`` with ``reason`` ``"searching: ..."``; during a recovery the tracker goes on
+  fitting from its prediction (a bad fit is ``ok: false``, its reason saying a search runs).
+  When the search ends, the tracker's prediction and the pose found are both fitted to the next
+  set; the one with the higher silhouette IoU is the tracker's pose from there (a track that came
+  back by itself is kept, a drifted one rejoins the search's); a failed search is retried.
+- **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
+  tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
+  fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
+  The level used is the record's optional ``"effort"`` field (DESIGN.md).
+- **Where to segment.**  :meth:`LiveTrackerFitter.rois` gives, for a frame about to be demanded,
+  each camera's rectangle around the last fitted and the predicted pose
+  (``tracker.imaging.roi.pose_rois``), its margin growing with the frames since the last fit; None (whole frames) before the first pose, while
+  searching, after a bad frame or when a silhouette touched its ROI's border (``roi_clipped``).
+- ``fit_ms``: the time this set's fit took, milliseconds (``latency_ms`` is set by the worker:
+  capture to publish).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from service.workers.components import TrackerFitter, message_to_chamfer, silhouette_mask
+
+__all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter"]
+
+log = logging.getLogger("contourcap.worker")
+
+
+@dataclass(frozen=True)
+class EffortLevel:
+    """One adaptive setting of the fit (``TrackerOptions`` fields it overrides)."""
+
+    level: int
+    n_samples: int
+    max_iterations: int
+    reverse_samples: int
+
+    def as_record(self) -> dict:
+        """The pose record's ``effort`` object."""
+        return {"level": self.level, "n_samples": self.n_samples, "max_iterations": self.max_iterations,
+                "reverse_samples": self.reverse_samples}
+
+
+EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLevel(2, 5, 6, 100))
+"""Full effort first (the ``TrackerOptions`` defaults), then cheaper settings."""
+
+
+class EffortController:
+    """Chooses the effort level from recent fit times.
+
+    The mean fit time of the last ``window`` fits above ``high`` × the frame period steps down one
+    level (cheaper); below ``low`` × the period steps back up; after a change, ``window`` fits are
+    waited for before the next.  A bad fit steps back up at once (accuracy before speed: a cheap
+    fit that loses the track costs a search).
+
+    Parameters
+    ----------
+    period_s : float
+        The cameras' frame period, seconds.
+    levels : int
+        Number of levels (0 = full effort).
+    high, low : float
+        Thresholds as fractions of the period.
+    window : int
+        Fits averaged (and waited for after a change).
+    """
+
+    def __init__(self, period_s: float, *, levels: int = len(EFFORT_LEVELS), high: float = 1.0, low: float = 0.5,
+                 window: int = 5) -> None:
+        if not period_s > 0:
+            raise ValueError(f"period_s: expected > 0, got {period_s!r}")
+        self.period_s, self.levels, self.high, self.low = float(period_s), int(levels), float(high), float(low)
+        self.window = max(1, int(window))
+        self.level = 0
+        self._times: list[float] = []
+
+    def update(self, fit_s: float, ok: bool = True) -> int:
+        """Take one fit's duration (seconds) and whether it was good; returns the level for the next fit."""
+        if not ok:
+            self.level, self._times = max(0, self.level - 1), []
+            return self.level
+        self._times.append(float(fit_s))
+        if len(self._times) < self.window:
+            return self.level
+        mean = float(np.mean(self._times[-self.window:]))
+        if mean > self.high * self.period_s and self.level < self.levels - 1:
+            self.level += 1
+            self._times = []
+        elif mean < self.low * self.period_s and self.level > 0:
+            self.level -= 1
+            self._times = []
+        else:
+            self._times = self._times[-self.window:]
+        return self.level
+
+
+class LiveTrackerFitter(TrackerFitter):
+    """``(frame_id, timestamp_ns, {camera: ChamferMessage}) -> pose record`` for live delivery
+    (module docstring).
+
+    Parameters
+    ----------
+    tracker : Tracker
+        Its own recovery is turned off (``recover = False``): searches run here, in a thread.
+    period_s : float
+        The cameras' frame period (adaptive effort), seconds.
+    adaptive : bool
+        Adapt the effort (else always full effort).
+    roi_margin_m, roi_margin_per_frame_m, roi_max_margin_m, roi_margin_px : float, float, float, int
+        ROI margins: ``roi_margin_m`` + ``roi_margin_per_frame_m`` per frame since the last fit
+        (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
+    clock : callable () -> float
+        Seconds (fit times).
+    """
+
+    def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
+                 roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        super().__init__(tracker)
+        tracker.recover = False
+        self.base_options = tracker.options
+        self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
+        self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)
+        self.roi_max_margin_m, self.roi_margin_px = float(roi_max_margin_m), int(roi_margin_px)
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._search: threading.Thread | None = None
+        self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
+        self._last_frame: int | None = None
+        self._clipped = False
+        self._last_ok = False
+        self.searches = self.rejoined = 0
+
+    @classmethod
+    def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
+        """A live fitter on ``session``'s calibration and subject (see ``TrackerFitter.from_session``)."""
+        base = TrackerFitter.from_session(session, model=model, initial_params=initial_params)
+        return cls(base.tracker, period_s=1.0 / float(session.fps or 30.0), **options)
+
+    def warm_up(self) -> float:
+        """Compile the tracker's kernels before the first frame (``tracker.fitting.warmup``); seconds."""
+        from tracker.fitting.warmup import warm_up
+
+        return warm_up()
+
+    @property
+    def searching(self) -> bool:
+        """Whether a search runs in the background."""
+        return self._search is not None and self._search.is_alive()
+
+    def _start_search(self, frame_id: int, hint, images: dict, silhouettes: dict) -> None:
+        """Search from ``silhouettes`` in a thread (``hint`` None: initialisation, else the last good pose)."""
+        from tracker.search.initialise import initialise
+        from tracker.search.recovery import recover
+
+        tr = self.tracker
+        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        if not names:
+            return
+        cams = [tr.cameras[n] for n in names]
+        sils = {n: silhouettes[n] for n in names}
+        chs = {n: images[n] for n in names}
+        hint = None if hint is None else np.array(hint)
+        what = "initialisation" if hint is None else "recovery"
+
+        def run() -> None:
+            try:
+                if hint is None:
+                    res = initialise(tr.model, cams, sils, chs, options=tr.options.initialise_search)
+                else:
+                    res = recover(tr.model, cams, sils, chs, hint, options=tr.options.recover_search)
+                found = tr.model.clamp(np.asarray(res.params, dtype=float))
+            except Exception as exc:  # a failed search is retried on the next set
+                log.info("%s failed: %s", what, exc)
+                found = None
+            with self._lock:
+                self._found = (frame_id, found)
+
+        self.searches += 1
+        tr.n_initialisations += 1
+        self._search = threading.Thread(target=run, name=f"search-{what}", daemon=True)
+        self._search.start()
+
+    def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
+        """A finished search's pose (no velocity across it) when it fits this set better.
+
+        The search's pose is of the set it started on; the track went on meanwhile.  Both the
+        tracker's prediction and the search's pose are fitted to this set and the one whose fit
+        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
+        the search's pose, there is no other)."""
+        from tracker.fitting.tracking import fit_frame
+        from tracker.search.scoring import ScoreViews
+
+        with self._lock:
+            found, self._found = self._found, None
+        if found is None or found[1] is None:
+            return
+        tr = self.tracker
+        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        current = tr.predict(frame_id)
+        start, start_frame = found[1], int(found[0])
+        if current is not None and names:
+            cams = [tr.cameras[n] for n in names]
+            chs = {n: images[n] for n in names}
+            views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
+            fitted = []
+            for start in (current, found[1]):
+                res, _ = fit_frame(tr.model, cams, chs, start, sliding=tr.sliding, solver=tr.solver,
+                                   options=tr.options)
+                fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
+            if fitted[0][0] >= fitted[1][0]:
+                return  # the track is as good: it came back by itself
+            start, start_frame = fitted[1][1], int(frame_id)
+        tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
+        tr.monitor.reset()
+        self.rejoined += 1
+
+    def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:
+        """The record of a set that arrives while a search runs: not ok, the prediction if any."""
+        from tracker.body.kinematics import forward, joint_centre_array
+
+        tr = self.tracker
+        what = "initialisation" if tr.last_good is None else "recovery"
+        record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": tr.model.name, "ok": False,
+                  "cameras": n_cameras, "reason": f"searching: {what} running beside the stream"}
+        pred = tr.predict(frame_id)
+        if pred is not None:
+            joints = joint_centre_array(tr.model, forward(tr.model, pred))
+            record.update(params=[float(v) for v in pred],
+                          joints={n: [float(v) for v in joints[i]] for i, n in enumerate(tr.model.joint_names)})
+        return record
+
+    def __call__(self, frame_id: int, timestamp_ns: int, chamfer: dict) -> dict:
+        """The pose record of one frame set (``chamfer``: camera name -> ChamferMessage)."""
+        t0 = self.clock()
+        self._clipped = any(msg.attrs.get("roi_clipped", 0.0) > 0 for msg in chamfer.values())
+        tr = self.tracker
+        if tr.params is None and self.searching:  # initialising: nothing to fit from yet
+            record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+        else:
+            images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
+            silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
+            if not self.searching:
+                self._take_found(frame_id, images, silhouettes)
+            if tr.params is None:
+                self._start_search(frame_id, None, images, silhouettes)
+                record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+            else:  # tracking goes on beside a recovery search: it may come back by itself
+                level = EFFORT_LEVELS[self.effort.level]
+                tr.options = replace(self.base_options, n_samples=level.n_samples,
+                                     max_iterations=level.max_iterations, reverse_samples=level.reverse_samples)
+                record = tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
+                record["effort"] = level.as_record()
+                if not self.searching:
+                    self.effort.update(self.clock() - t0, bool(record.get("ok")))
+                if not record.get("ok"):
+                    if self.searching:
+                        record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
+                    elif tr.monitor.bad_frames >= tr.monitor.patience:
+                        self._start_search(frame_id, tr.last_good, images, silhouettes)
+            self._last_frame = int(frame_id)
+        self._last_ok = bool(record.get("ok"))
+        record["fit_ms"] = 1e3 * (self.clock() - t0)
+        return record
+
+    def rois(self, frame_id: int) -> dict[str, tuple[int, int, int, int]] | None:
+        """Camera name -> ``(x0, y0, x1, y1)`` to segment for ``frame_id``, or None (whole frames:
+        see the module docstring)."""
+        from tracker.imaging.roi import pose_rois
+
+        tr = self.tracker
+        if self.searching or tr.params is None or not self._last_ok or self._clipped or self._last_frame is None:
+            return None
+        pred = tr.predict(frame_id)
+        gap = max(1, int(frame_id) - self._last_frame)
+        margin = min(self.roi_max_margin_m, self.roi_margin_m + self.roi_margin_per_frame_m * (gap - 1))
+        cams = list(tr.cameras.values())
+        out = {}
+        # the last fitted pose and the prediction: the body moves between them, the union covers the path
+        for cam, now, then in zip(cams, pose_rois(tr.model, pred, cams, margin_m=margin, margin_px=self.roi_margin_px),
+                                  pose_rois(tr.model, tr.params, cams, margin_m=margin, margin_px=self.roi_margin_px)):
+            if now is not None and then is not None:
+                out[cam.name] = (min(now[0], then[0]), min(now[1], then[1]), max(now[2], then[2]), max(now[3], then[3]))
+        return out
