@@ -66,6 +66,16 @@ def nominal_segment_lengths(model: BodyModel) -> dict[str, float]:
     return out
 
 
+def _segment_parts(model: BodyModel) -> dict[str, set]:
+    """Segment name -> indices of the parts that carry it (both sides)."""
+    data = load_file(MODELS_DIR / f"{model.name}.toml", what="model file")
+    out: dict[str, set] = {}
+    for part in data.get("part", []):
+        if part.get("segment") is not None:
+            out.setdefault(str(part["segment"]), set()).add(model.part_index(str(part["name"])))
+    return out
+
+
 def _pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
     steps = {}
     for name, kind in zip(model.param_names, model.param_kind):
@@ -119,12 +129,20 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     iou_before = float(np.mean([v.score(p) for v, p in zip(views, params)]))
     steps = _pose_steps(model, pose_step)
 
-    root = {n: 0.01 for n in model.param_names[:3]}
+    seg_parts = _segment_parts(model)
 
-    def total(m: BodyModel) -> float:
+    def local_steps(seg: str) -> dict[str, float]:
+        """The root translation and the rotations of the segment's own joints."""
+        parts = seg_parts.get(seg, set())
+        steps = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
+        steps.update({n: 0.04 for n, k, i in zip(model.param_names, model.param_kind, model.param_part)
+                      if k == 2 and i in parts})
+        return steps
+
+    def total(m: BodyModel, local: dict[str, float]) -> float:
         if not root_rounds:
             return float(sum(v.with_model(m).score(p) for v, p in zip(views, params)))
-        return float(sum(polish_iou(m, v.with_model(m), p, steps=root, rounds=root_rounds)[1]
+        return float(sum(polish_iou(m, v.with_model(m), p, steps=local, rounds=root_rounds)[1]
                          for v, p in zip(views, params)))
 
     for r in range(int(rounds)):
@@ -136,8 +154,9 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
             cands = lengths[seg] * (1.0 + grid)
             ok = (cands > 0.5 * nominal[seg]) & (cands < 1.8 * nominal[seg])
             cands = cands[ok]
+            local = local_steps(seg)
             scores = np.array([total(load_model(model.name, height_m=model.height_m,
-                                                segment_lengths={**lengths, seg: c})) for c in cands])
+                                                segment_lengths={**lengths, seg: c}), local) for c in cands])
             # Gaussian prior on log(length / nominal), in units of the IoU summed over frames
             scores -= 0.5 * len(params) * 0.01 * (np.log(cands / nominal[seg]) / prior_sigma) ** 2
             i = int(np.argmax(scores))
