@@ -6,7 +6,8 @@ proportions) and each camera's silhouette, :func:`estimate_segment_lengths` alte
 1. each frame's pose polished by coordinate ascent of the silhouette IoU
    (``tracker.search.seated.polish_iou`` over every parameter) on the current model;
 2. each segment's length (the model file's ``segment`` names; left and right share one) set to the
-   value maximising the IoU summed over the frames, searched on a grid of scale factors around the
+   value maximising the IoU summed over the frames (each frame's root translation re-polished for every candidate:
+   a longer trunk or leg moves the whole body), searched on a grid of scale factors around the
    current value and refined by a parabola through the best grid point and its neighbours; each
    candidate is scored under a prior that keeps it near the anthropometric ratio of the model
    (``prior_sigma``, a Gaussian on the log scale factor).
@@ -66,16 +67,6 @@ def nominal_segment_lengths(model: BodyModel) -> dict[str, float]:
     return out
 
 
-def _segment_parts(model: BodyModel) -> dict[str, set]:
-    """Segment name -> indices of the parts that carry it (both sides)."""
-    data = load_file(MODELS_DIR / f"{model.name}.toml", what="model file")
-    out: dict[str, set] = {}
-    for part in data.get("part", []):
-        if part.get("segment") is not None:
-            out.setdefault(str(part["segment"]), set()).add(model.part_index(str(part["name"])))
-    return out
-
-
 def _pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
     steps = {}
     for name, kind in zip(model.param_names, model.param_kind):
@@ -84,9 +75,9 @@ def _pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
 
 
 def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses: Sequence[np.ndarray],
-                             silhouettes: Sequence[Mapping[str, np.ndarray]], *, rounds: int = 2,
-                             span: float = 0.25, step: float = 0.025, prior_sigma: float = 0.15,
-                             polish_rounds: int = 4, pose_step: float = 1.0, root_rounds: int = 0, scale: float = 0.5,
+                             silhouettes: Sequence[Mapping[str, np.ndarray]], *, rounds: int = 3,
+                             span: float = 0.25, step: float = 0.025, prior_sigma: float = 0.3,
+                             polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
                              segments: Sequence[str] = SEGMENT_ORDER) -> SubjectFit:
     """Fit segment lengths to silhouettes, jointly with the frames' poses.
 
@@ -129,20 +120,12 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     iou_before = float(np.mean([v.score(p) for v, p in zip(views, params)]))
     steps = _pose_steps(model, pose_step)
 
-    seg_parts = _segment_parts(model)
+    root = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
 
-    def local_steps(seg: str) -> dict[str, float]:
-        """The root translation and the rotations of the segment's own joints."""
-        parts = seg_parts.get(seg, set())
-        steps = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
-        steps.update({n: 0.04 for n, k, i in zip(model.param_names, model.param_kind, model.param_part)
-                      if k == 2 and i in parts})
-        return steps
-
-    def total(m: BodyModel, local: dict[str, float]) -> float:
+    def total(m: BodyModel) -> float:
         if not root_rounds:
             return float(sum(v.with_model(m).score(p) for v, p in zip(views, params)))
-        return float(sum(polish_iou(m, v.with_model(m), p, steps=local, rounds=root_rounds)[1]
+        return float(sum(polish_iou(m, v.with_model(m), p, steps=root, rounds=root_rounds)[1]
                          for v, p in zip(views, params)))
 
     for r in range(int(rounds)):
@@ -154,9 +137,8 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
             cands = lengths[seg] * (1.0 + grid)
             ok = (cands > 0.5 * nominal[seg]) & (cands < 1.8 * nominal[seg])
             cands = cands[ok]
-            local = local_steps(seg)
             scores = np.array([total(load_model(model.name, height_m=model.height_m,
-                                                segment_lengths={**lengths, seg: c}), local) for c in cands])
+                                                segment_lengths={**lengths, seg: c})) for c in cands])
             # Gaussian prior on log(length / nominal), in units of the IoU summed over frames
             scores -= 0.5 * len(params) * 0.01 * (np.log(cands / nominal[seg]) / prior_sigma) ** 2
             i = int(np.argmax(scores))
