@@ -16,6 +16,7 @@ Layout (the DESIGN.md contract)::
 
     [subject]                     # optional
     height_m = 1.75
+    file = "subject.toml"         # optional: a fitted subject (contourcap calibrate subject), wins
     [subject.segment_lengths]     # optional, metres, keyed by segment name
     upper_arm = 0.29
 
@@ -117,6 +118,7 @@ class Session:
     segment_lengths: dict[str, float] | None
     cameras: tuple[SessionCamera, ...]
     calibration: tuple[Camera, ...]
+    subject_file: Path | None = None
 
     @property
     def camera_names(self) -> tuple[str, ...]:
@@ -332,7 +334,8 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
         if missing:
             raise SessionError(f"{calib_path}: no calibration for camera(s) {missing} (has {sorted(by_name)})")
         calibration = tuple(by_name[n] for n in names)
-    return Session(root, name, float(fps), height, lengths, cameras, calibration)
+    subject_file = _optional_path(root, data.get("subject", {}), "file", f"{toml_path} [subject]")
+    return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file)
 
 
 def write_session_toml(

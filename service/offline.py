@@ -30,7 +30,14 @@ __all__ = ["background_models", "session_model", "track_session", "summarise", "
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
-    """The body model sized by the session's ``[subject]`` (height, segment lengths)."""
+    """The body model sized by the session's ``[subject]`` (its subject file when it names one and
+    the model is the file's, else height and segment lengths)."""
+    if session.subject_file is not None:
+        from tracker.body.subject import read_subject
+
+        subject = read_subject(session.subject_file)
+        if subject.model == name:
+            return subject.body()
     return load_model(name, height_m=session.height_m, segment_lengths=session.segment_lengths)
 
 

@@ -60,6 +60,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
             p.add_argument("--origin", action="append", default=[], metavar="CAM=X,Y",
                            help="pixel near the board corner that is the world origin, in a camera")
             p.add_argument("--frames", type=int, default=3, help="frames sampled per video (default 3; the board is static)")
+    from service.commands.calibrate_subject import add_subject_args
+
+    add_subject_args(sub.add_parser("subject", help="the subject's segment lengths from the first frames of a session",
+                                    description="the subject's segment lengths from the first frames of a session"))
 
 
 def _pairs(items, option: str) -> dict[str, str]:
@@ -223,6 +227,11 @@ def _check_output(path: Path | None, option: str) -> None:
 
 def run(args) -> int:
     from capture.calibration import save_calibration
+
+    if args.calib_step == "subject":
+        from service.commands.calibrate_subject import run_subject
+
+        return run_subject(args)
 
     bar = Progress(unit="steps", enabled=not args.quiet)
     try:

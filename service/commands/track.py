@@ -14,6 +14,7 @@ from capture.media import StreamCheck, check_media
 from capture.replay import count_frames, parse_frame_range
 from capture.session import SessionError, load_session
 from service.atomic import JsonlWriter
+from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from service.offline import background_models, session_model, summarise, track_session
 from tracker.fitting.scene import SceneOptions
@@ -26,6 +27,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("session", type=Path, help="session directory (session.toml + calibration.toml)")
     parser.add_argument("--out", type=Path, required=True, help="output pose records, JSON lines")
     parser.add_argument("--model", default="knossow40", choices=available_models(), help="body model")
+    parser.add_argument("--subject", type=Path, default=None, metavar="SUBJECT.toml",
+                        help="the subject's body (contourcap calibrate subject); overrides session.toml's [subject]")
     parser.add_argument("--no-sliding", action="store_true", help="drop the sliding term of the contour Jacobian")
     parser.add_argument("--solver", choices=("lm", "lsq"), default="lm",
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     session = load_session(args.session)
     frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
-    model = session_model(session, args.model)
+    model = session_model(session, args.model) if args.subject is None else read_subject(args.subject).body()
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
     names = list(session.camera_names if cameras is None else cameras)
     ignore = _ignore_masks(session, args.ignore_region)

@@ -204,6 +204,10 @@ class SceneTracker:
         tr.params = tr.model.clamp(np.asarray(res.params, dtype=float))
         tr.n_initialisations += 1
 
+    def trusted(self, rec: dict) -> bool:
+        """Whether the fit of pose record ``rec`` is one the clutter learner would learn from."""
+        return self._trusted(rec)
+
     def _trusted(self, rec: dict) -> bool:
         """The fit's model → image figures are within the tracker's limits (the IoU may not be:
         it counts the clutter still to learn)."""

@@ -10,6 +10,7 @@ perfect segmentation of a rendered pose, for tests and benchmarks).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -63,6 +64,12 @@ class ScoreViews:
             self.masks.append(small >= 0.5)
         self._local = cone_points(model, n_theta=12, n_z=2)  # (n_parts, 24, 3) part frames
         self.n_scored = 0
+
+    def with_model(self, model: BodyModel) -> "ScoreViews":
+        """The same views and silhouettes scoring another model (e.g. resized): a shallow copy."""
+        out = copy.copy(self)
+        out.model, out._local = model, cone_points(model, n_theta=12, n_z=2)
+        return out
 
     def render(self, params: np.ndarray, parts: np.ndarray | None = None,
                base: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:

@@ -1,0 +1,81 @@
+"""``contourcap calibrate subject SESSION --frames A:B --out subject.toml``: the subject's body.
+
+The frames are tracked as ``contourcap track`` does (clutter learned, seated or standing start);
+``--samples`` frame sets spread over the range's second half (after the clutter has been learned),
+whose fits the scene tracker trusts, are handed with their body silhouettes to
+``tracker.fitting.subject_size.estimate_segment_lengths``; the lengths are written as a subject
+file (``tracker.body.subject``), which ``contourcap track --subject`` and session.toml's
+``[subject] file`` use.  Exit status 0 when written, 1 when no frame could be used, 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from capture.replay import iter_frame_sets, parse_frame_range
+from capture.session import SessionError, load_session
+from service.offline import background_models, session_model
+from tracker.body.model import ModelError, available_models
+from tracker.body.subject import Subject, write_subject
+from tracker.fitting.scene import SceneOptions, SceneTracker
+from tracker.fitting.subject_size import estimate_segment_lengths
+from tracker.fitting.tracking import Tracker
+
+
+def add_subject_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("session", type=Path, help="session directory")
+    p.add_argument("--frames", default="0:100", metavar="A:B", help="frame ids to calibrate on (default 0:100)")
+    p.add_argument("--out", type=Path, required=True, help="subject file to write (TOML)")
+    p.add_argument("--model", default="knossow40", choices=available_models(), help="body model")
+    p.add_argument("--samples", type=int, default=6, help="frame sets the lengths are fitted to (default 6)")
+    p.add_argument("--quiet", action="store_true", help="no progress")
+
+
+def run_subject(args: argparse.Namespace) -> int:
+    try:
+        session = load_session(args.session)
+        frames = parse_frame_range(args.frames)
+        if frames is None or len(frames) < 2:
+            raise ValueError(f"--frames {args.frames!r}: expected a range A:B of at least 2 frames")
+        if args.samples < 1:
+            raise ValueError(f"--samples: expected >= 1, got {args.samples}")
+        model = session_model(session, args.model)
+        names = list(session.camera_names)
+        backgrounds, _ = background_models(session, names, frames=frames)
+        tracker = Tracker(model, [session.camera_model(n) for n in names])
+        st = SceneTracker(tracker, backgrounds)
+        half = frames.start + len(frames) // 2
+        want = set(np.linspace(half, frames.stop - 1, args.samples).round().astype(int).tolist())
+        poses, sils = [], []
+        for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+            rec = st.step(fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
+            if fid >= half and rec.get("params") is not None and st.trusted(rec) and (fid in want or len(poses) < 1):
+                poses.append(np.asarray(rec["params"], float))
+                sils.append({n: s.silhouette.copy() for n, s in st.last_segmentation.items()})
+            if not args.quiet:
+                print(f"\rtracking frame {fid} ({len(poses)} sampled)", end="", file=sys.stderr, flush=True)
+        if not args.quiet:
+            print(file=sys.stderr)
+        if not poses:
+            print(f"contourcap calibrate subject: no trusted fit in frames {args.frames}; try other frames",
+                  file=sys.stderr)
+            return 1
+        fitted_model = st.tracker.model
+        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils)
+        subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,
+                          f"contourcap calibrate subject, frames {args.frames}, {len(poses)} frame sets, "
+                          f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}")
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_subject(args.out, subject)
+    except (SessionError, ModelError, ValueError, OSError) as exc:
+        print(f"contourcap calibrate subject: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps({"out": str(args.out), "frames_used": len(poses), "iou_before": round(fit.iou_before, 4),
+                      "iou_after": round(fit.iou_after, 4),
+                      "segment_lengths_m": {k: round(v, 4) for k, v in fit.segment_lengths.items()}}))
+    return 0

@@ -1,0 +1,70 @@
+"""Subject files: a fitted subject's body, written by ``contourcap calibrate subject``.
+
+A subject file (DESIGN.md, ``subject.toml``) is TOML::
+
+    [subject]
+    model = "knossow40"            # the body model the lengths apply to
+    height_m = 1.75                # the height the model's other sizes follow
+    fitted = "..."                 # how it was fitted (free text)
+    [subject.segment_lengths]      # metres, the model's ``segment`` names
+    thigh = 0.46
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+from capture.tomlio import dumps, load_file
+from tracker.body.model import BodyModel, ModelError, load_model
+
+__all__ = ["Subject", "read_subject", "write_subject"]
+
+
+@dataclass(frozen=True)
+class Subject:
+    """A subject's body: model name, height (metres), segment lengths (metres) and provenance."""
+
+    model: str = "knossow40"
+    height_m: float = 1.75
+    segment_lengths: Mapping[str, float] = field(default_factory=dict)
+    fitted: str = ""
+
+    def body(self) -> BodyModel:
+        """The sized body model (``load_model``)."""
+        return load_model(self.model, height_m=self.height_m, segment_lengths=dict(self.segment_lengths))
+
+
+def read_subject(path) -> Subject:
+    """Read and validate a subject file; ModelError naming the file and the key on bad content."""
+    path = Path(path)
+    data = load_file(path, error=ModelError, what="subject file")
+    sub = data.get("subject")
+    if not isinstance(sub, dict):
+        raise ModelError(f"{path}: no [subject] table")
+    name = sub.get("model", "knossow40")
+    height = sub.get("height_m", 1.75)
+    lengths = sub.get("segment_lengths", {})
+    if not isinstance(name, str) or not name:
+        raise ModelError(f"{path}: [subject] model must be a model name")
+    if isinstance(height, bool) or not isinstance(height, (int, float)) or not 0.5 <= height <= 2.6:
+        raise ModelError(f"{path}: [subject] height_m must be metres in [0.5, 2.6], got {height!r}")
+    if not isinstance(lengths, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 for v in lengths.values()):
+        raise ModelError(f"{path}: [subject.segment_lengths] must map segment names to positive metres")
+    subject = Subject(name, float(height), {str(k): float(v) for k, v in lengths.items()},
+                      str(sub.get("fitted", "")))
+    try:
+        subject.body()
+    except ModelError as exc:
+        raise ModelError(f"{path}: {exc}") from None
+    return subject
+
+
+def write_subject(path, subject: Subject) -> None:
+    """Write ``subject`` as a subject file at ``path``."""
+    data = {"subject": {"model": subject.model, "height_m": round(float(subject.height_m), 4),
+                        "fitted": subject.fitted,
+                        "segment_lengths": {k: round(float(v), 4) for k, v in subject.segment_lengths.items()}}}
+    Path(path).write_text(dumps(data), encoding="utf-8")

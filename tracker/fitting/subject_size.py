@@ -1,0 +1,154 @@
+"""The subject's segment lengths from fitted poses and silhouettes (subject calibration).
+
+Given a few frame sets with a pose already fitted (by the tracker, on a model of default
+proportions) and each camera's silhouette, :func:`estimate_segment_lengths` alternates
+
+1. each frame's pose polished by coordinate ascent of the silhouette IoU
+   (``tracker.search.seated.polish_iou`` over every parameter) on the current model;
+2. each segment's length (the model file's ``segment`` names; left and right share one) set to the
+   value maximising the IoU summed over the frames (each frame's root translation re-polished for every candidate:
+   a longer trunk or leg moves the whole body), searched on a grid of scale factors around the
+   current value and refined by a parabola through the best grid point and its neighbours; each
+   candidate is scored under a prior that keeps it near the anthropometric ratio of the model
+   (``prior_sigma``, a Gaussian on the log scale factor).
+
+Segments are searched from the trunk outwards (a thigh's length moves the shank's silhouette, not
+the reverse).  The silhouettes should hold the body only (clutter cut, ``tracker.fitting.scene``):
+the IoU counts a prop the body does not cover, and a limb lengthened onto it would score.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from capture.camera import Camera
+from capture.tomlio import load_file
+from tracker.body.model import MODELS_DIR, BodyModel, load_model
+from tracker.search.scoring import ScoreViews
+from tracker.search.seated import polish_iou
+
+__all__ = ["SubjectFit", "nominal_segment_lengths", "estimate_segment_lengths", "SEGMENT_ORDER"]
+
+#: Search order, trunk first.
+SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
+
+
+@dataclass(frozen=True)
+class SubjectFit:
+    """Result of :func:`estimate_segment_lengths`.
+
+    Attributes
+    ----------
+    segment_lengths : dict str -> float, metres
+    model : BodyModel sized with them
+    params : list of ndarray, shape (n_params,), the polished pose per frame
+    iou_before, iou_after : float, mean silhouette IoU over frames and cameras at the start and end
+    """
+
+    segment_lengths: dict
+    model: BodyModel
+    params: list
+    iou_before: float
+    iou_after: float
+
+
+def nominal_segment_lengths(model: BodyModel) -> dict[str, float]:
+    """Segment name -> the model file's anthropometric length at ``model.height_m`` (metres)."""
+    path = MODELS_DIR / f"{model.name}.toml"
+    data = load_file(path, what="model file")
+    out = {}
+    for part in data.get("part", []):
+        seg = part.get("segment")
+        if seg is not None and seg not in out:
+            out[str(seg)] = float(part.get("length", part["cone"]["z2"])) * model.height_m
+    return out
+
+
+def _pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
+    steps = {}
+    for name, kind in zip(model.param_names, model.param_kind):
+        steps[name] = factor * (0.03 if kind == 0 else (0.08 if kind == 1 else 0.12))
+    return steps
+
+
+def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses: Sequence[np.ndarray],
+                             silhouettes: Sequence[Mapping[str, np.ndarray]], *, rounds: int = 3,
+                             span: float = 0.25, step: float = 0.025, prior_sigma: float = 0.3,
+                             polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
+                             segments: Sequence[str] = SEGMENT_ORDER) -> SubjectFit:
+    """Fit segment lengths to silhouettes, jointly with the frames' poses.
+
+    Parameters
+    ----------
+    model : BodyModel
+        The model the poses were fitted with (its height sets the anthropometric prior).
+    cameras : sequence of Camera; poses : sequence of ndarray, each shape (n_params,), one per frame set
+    silhouettes : sequence of mapping camera name -> ndarray (h, w)
+        Per frame set, each camera's body silhouette (non-zero = body).
+    rounds, polish_rounds : int
+        Pose-polish / length-search alternations (later ones search half the span); ``polish_iou``
+        rounds per frame in each.
+    span, step : float
+        Scale factors searched: current × (1 ± span) in steps of ``step`` (first round).
+    prior_sigma : float
+        Standard deviation of the log scale factor against the anthropometric length.
+    pose_step : float
+        Factor on ``polish_iou``'s first steps (0.03 m root, 0.08 rad root rotation, 0.12 rad joints).
+    root_rounds : int
+        ``polish_iou`` rounds of the root translation (1 cm steps) for every candidate (0: none).
+    scale : float
+        Image scale of the scoring views.
+    segments : sequence of str
+        Segments to fit (those the model has).
+
+    Returns
+    -------
+    SubjectFit
+    """
+    if len(poses) != len(silhouettes) or not poses:
+        raise ValueError("estimate_segment_lengths: need one silhouette set per pose, at least one")
+    names = [c.name for c in cameras]
+    views = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale) for s in silhouettes]
+    nominal = nominal_segment_lengths(model)
+    segs = [s for s in segments if s in model.segments and s in nominal]
+    lengths = {s: nominal[s] for s in segs}
+    params = [model.clamp(np.asarray(p, dtype=float)) for p in poses]
+    current = model
+    iou_before = float(np.mean([v.score(p) for v, p in zip(views, params)]))
+    steps = _pose_steps(model, pose_step)
+
+    root = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
+
+    def total(m: BodyModel) -> float:
+        if not root_rounds:
+            return float(sum(v.with_model(m).score(p) for v, p in zip(views, params)))
+        return float(sum(polish_iou(m, v.with_model(m), p, steps=root, rounds=root_rounds)[1]
+                         for v, p in zip(views, params)))
+
+    for r in range(int(rounds)):
+        params = [polish_iou(current, v.with_model(current), p, steps=steps, rounds=polish_rounds)[0]
+                  for v, p in zip(views, params)]
+        half = span / (2 ** r)
+        grid = np.arange(-half, half + 1e-9, step / (2 ** r))
+        for seg in segs:
+            cands = lengths[seg] * (1.0 + grid)
+            ok = (cands > 0.5 * nominal[seg]) & (cands < 1.8 * nominal[seg])
+            cands = cands[ok]
+            scores = np.array([total(load_model(model.name, height_m=model.height_m,
+                                                segment_lengths={**lengths, seg: c})) for c in cands])
+            # Gaussian prior on log(length / nominal), in units of the IoU summed over frames
+            scores -= 0.5 * len(params) * 0.01 * (np.log(cands / nominal[seg]) / prior_sigma) ** 2
+            i = int(np.argmax(scores))
+            best = float(cands[i])
+            if 0 < i < len(cands) - 1:
+                y0, y1, y2 = scores[i - 1:i + 2]
+                den = y0 - 2 * y1 + y2
+                if den < 0:
+                    best += 0.5 * (y0 - y2) / den * float(cands[i + 1] - cands[i])
+            lengths[seg] = best
+            current = load_model(model.name, height_m=model.height_m, segment_lengths=lengths)
+    iou_after = float(np.mean([v.with_model(current).score(p) for v, p in zip(views, params)]))
+    return SubjectFit(dict(lengths), current, params, iou_before, iou_after)
