@@ -12,7 +12,7 @@ The package face (names resolve lazily, so ``import tracker.body.model`` stays l
 
 from __future__ import annotations
 
-import importlib
+from tracker.lazy import lazy_face
 
 _EXPORTS = {
     "tracker.body.model": ("BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"),
@@ -35,19 +35,4 @@ _EXPORTS = {
     "tracker.synthetic.retarget": ("retarget_bvh",),
     "tracker.synthetic.synth": ("bundled_motion",),
 }
-_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
-
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module 'tracker' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__all__, __getattr__, __dir__ = lazy_face(__name__, _EXPORTS)

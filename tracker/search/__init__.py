@@ -8,7 +8,7 @@ search from the last good pose).
 
 from __future__ import annotations
 
-import importlib
+from tracker.lazy import lazy_face
 
 _EXPORTS = {
     "tracker.search.hull": ('VoxelHull', 'visual_hull', 'common_view_bounds', 'render_hull', 'silhouette_iou'),
@@ -22,19 +22,4 @@ _EXPORTS = {
     "tracker.search.initialise": ('SearchOptions', 'initialise', 'search_candidates'),
     "tracker.search.recovery": ('LossMonitor', 'LossState', 'recover', 'local_search'),
 }
-_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
-
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module 'tracker.search' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__all__, __getattr__, __dir__ = lazy_face(__name__, _EXPORTS)

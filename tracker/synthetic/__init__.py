@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-import importlib
+from tracker.lazy import lazy_face
 
 _EXPORTS = {
     "tracker.synthetic.scene": ('ring_cameras', 'fit_ring_cameras', 'make_room_texture', 'render_background', 'pixel_rays'),
@@ -12,19 +12,4 @@ _EXPORTS = {
     "tracker.synthetic.synth": ('bundled_motion', 'render_frame', 'make_palette', 'synthetic_studio',
                                 'SyntheticStudio', 'ground_truth_record', 'add_noise'),
 }
-_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
-
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module 'tracker.synthetic' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__all__, __getattr__, __dir__ = lazy_face(__name__, _EXPORTS)
