@@ -225,14 +225,25 @@ def test_segment_worker_fails_loudly_when_its_segmenter_crashes(rng, studio):
     demand = declare_publisher(sender, keys.demand("track"))
     frame = FrameMessage.from_image("cam0", 1, 0, rng.integers(0, 256, (30, 40, 3), dtype=np.uint8))
 
+    stop, done = threading.Event(), threading.Event()
+
     def send():  # live: the frame is segmented only once the tracker demands it
-        if wait_until_matched([pub, demand], timeout_s=10.0):
-            pub.put(frame.to_bytes())
+        if not wait_until_matched([pub, demand], timeout_s=10.0):
+            return stop.set()
+        deadline = time.monotonic() + 20.0
+        while not done.is_set() and time.monotonic() < deadline:  # again until it lands: a demand that
+            pub.put(frame.to_bytes())  # overtakes its frame is dropped as not held
+            time.sleep(0.05)
             demand.put(DemandMessage("track", 1).to_bytes())
+            done.wait(0.5)
+        stop.set()  # never hang: the worker then returns and pytest.raises fails
 
     threading.Thread(target=send, daemon=True).start()
-    with pytest.raises(WorkerError, match="cam0.*RuntimeError: segmenter bug"):
-        run_segment_worker(studio.session(), keys, {"cam0": broken}, mode="live", stop=threading.Event())
+    try:
+        with pytest.raises(WorkerError, match="cam0.*RuntimeError: segmenter bug"):
+            run_segment_worker(studio.session(), keys, {"cam0": broken}, mode="live", stop=stop)
+    finally:
+        done.set()
 
 
 def test_worker_command_missing_camera_is_one_clear_error(tmp_path, capsys):
