@@ -141,7 +141,7 @@ def _bilinear_setup(uv: np.ndarray, offset_xy, shape):
     return idx, valid, fx, fy
 
 
-def _bilinear_eval(flat: np.ndarray, idx, valid, fx, fy, fill: float):
+def _bilinear_sample(flat: np.ndarray, idx, valid, fx, fy, fill: float):
     """Values ``(n,)`` and gradients ``(n, 2)`` in the units of ``flat``."""
     v = np.where(valid, flat[idx], fill)  # (4, n): v00, v10, v01, v11  (x varies fastest)
     v00, v10, v01, v11 = v
@@ -188,7 +188,7 @@ def sample_bilinear(image: np.ndarray, uv, *, offset_xy=(0, 0), fill: float) -> 
     if image.size == 0:
         return np.full(len(uv), float(fill)), np.zeros((len(uv), 2))
     idx, valid, fx, fy = _bilinear_setup(uv, offset_xy, image.shape)
-    return _bilinear_eval(image.ravel(), idx, valid, fx, fy, float(fill))
+    return _bilinear_sample(image.ravel(), idx, valid, fx, fy, float(fill))
 
 
 @dataclass(frozen=True)
@@ -268,8 +268,8 @@ class ChamferImages:
         idx, valid, fx, fy = _bilinear_setup(uv, self.offset_xy, self.silhouette_q.shape)
         fill = float(self.max_code)
         r = float(self.resolution_px)
-        ds, gs = _bilinear_eval(self.silhouette_q.ravel(), idx, valid, fx, fy, fill)
-        de, ge = _bilinear_eval(self.edges_q.ravel(), idx, valid, fx, fy, fill)
+        ds, gs = _bilinear_sample(self.silhouette_q.ravel(), idx, valid, fx, fy, fill)
+        de, ge = _bilinear_sample(self.edges_q.ravel(), idx, valid, fx, fy, fill)
         return ChamferSample(ds * r, gs * r, de * r, ge * r)
 
 

@@ -7,14 +7,9 @@ calibration.  Imported by the other capture test modules.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numpy as np
 
-from capture.calibration import save_calibration
-from capture.camera import Camera
-from capture.session import Session, load_session, write_session_toml
 from tests.support.sessions import SIZE, make_images, make_session, write_video  # noqa: F401
 
 

@@ -8,8 +8,6 @@ control transfer so the tests can assert the bytes on the wire.
 from __future__ import annotations
 
 import errno
-import struct
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,8 +18,6 @@ import usb.backend.openusb
 import usb.core
 
 from capture.trigger import (
-    PRODUCT_ID,
-    VENDOR_ID,
     SoftwareTrigger,
     TriggerBox,
     TriggerDisconnectedError,

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-import struct
 
 import numpy as np
 import pytest
 
-from service.wire.messages import (HEADER, MAX_BYTES, ChamferMessage, FrameMessage, MessageError, peek_type)
+from service.wire.messages import HEADER, MAX_BYTES, ChamferMessage, FrameMessage, MessageError, peek_type
 from service.wire.records import CreditMessage, PoseRecord, StatusMessage
 from tests.support.messages import mutations as _mutations
 

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.wire.messages import ChamferMessage, FrameMessage
+from service.wire.messages import FrameMessage
 from tests.support.plugins import fitter, segmenter
-
 
 
 def test_plugins_are_functions_of_the_data(rng):

@@ -9,15 +9,16 @@ import time
 import numpy as np
 import pytest
 
-from capture.calibration import save_calibration
-from capture.camera import Camera
 from capture.replay import ReplaySource, iter_frame_sets
-from capture.sources import EndOfStream, Frame, StreamLostError
-from capture.session import load_session, write_session_toml
+from capture.sources import Frame, StreamLostError
 from capture.sync import FrameSetAssembler
-from service.wire.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
-                         wait_until_matched)
-from service.wire.messages import ChamferMessage, FrameMessage
+from service.wire.bus import (
+    Inbox,
+    declare_publisher,
+    free_port,
+    wait_until_matched,
+)
+from service.wire.messages import FrameMessage
 from service.wire.records import DemandMessage, PoseRecord
 from service.workers.loops import WorkerError, run_camera_worker, run_segment_worker, run_track_worker
 from tests.support.workers import CAMS, Studio, fitter, make_session, segmenter, wait_for  # noqa: F401

@@ -1,12 +1,13 @@
 """Byte-level mutations of a valid wire message, for the fuzz tests of every decoder."""
 
 from __future__ import annotations
-import json
+
 import struct
+
 import numpy as np
-import pytest
-from service.wire.messages import (HEADER, MAX_BYTES, ChamferMessage, FrameMessage, MessageError, peek_type)
-from service.wire.records import CreditMessage, PoseRecord, StatusMessage
+
+from service.wire.messages import HEADER
+
 
 def mutations(data: bytes, rng: np.random.Generator):
     n = len(data)

@@ -5,8 +5,11 @@ They are deliberately simple, deterministic functions of the data that crossed t
 compare what the pipeline published with what the data says."""
 
 from __future__ import annotations
+
 import numpy as np
+
 from service.wire.messages import ChamferMessage, FrameMessage
+
 
 def segmenter(frame: FrameMessage, image) -> ChamferMessage:
     """The grey image, quantised, as one 'edges' array."""

@@ -5,9 +5,12 @@ timestamp CSVs with dropped frames, and a look-at calibration.
 """
 
 from __future__ import annotations
+
 from pathlib import Path
+
 import cv2
 import numpy as np
+
 from capture.calibration import save_calibration
 from capture.camera import Camera
 from capture.session import Session, load_session, write_session_toml

@@ -5,26 +5,20 @@ injected device clock, and logs every control transfer so the tests can assert t
 """
 
 from __future__ import annotations
+
 import errno
 import struct
 from types import SimpleNamespace
-import numpy as np
-import pytest
+
 import usb.backend
 import usb.backend.libusb0
 import usb.backend.libusb1
 import usb.backend.openusb
 import usb.core
+
 from capture.trigger import (
     PRODUCT_ID,
     VENDOR_ID,
-    SoftwareTrigger,
-    TriggerBox,
-    TriggerDisconnectedError,
-    TriggerError,
-    TriggerNotFoundError,
-    TriggerProtocolError,
-    UsbUnavailableError,
 )
 
 HOST_OFFSET_NS = 7_000_000_123  # host_ns = device_us * 1000 + HOST_OFFSET_NS in these tests

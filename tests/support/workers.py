@@ -1,21 +1,25 @@
 """Workers as threads on loopback zenoh, with stand-in segmenter and fitter (deterministic functions of the data)."""
 
 from __future__ import annotations
+
 import threading
 import time
+
 import numpy as np
-import pytest
+
 from capture.calibration import save_calibration
 from capture.camera import Camera
-from capture.replay import ReplaySource, iter_frame_sets
-from capture.sources import EndOfStream, Frame, StreamLostError
+from capture.replay import ReplaySource
 from capture.session import load_session, write_session_toml
-from capture.sync import FrameSetAssembler
-from service.wire.bus import (Inbox, Keys, ZenohSettings, declare_publisher, free_port, open_session, wait_until_alive,
-                         wait_until_matched)
+from service.wire.bus import (
+    Keys,
+    ZenohSettings,
+    free_port,
+    open_session,
+    wait_until_alive,
+)
 from service.wire.messages import ChamferMessage, FrameMessage
-from service.wire.records import DemandMessage, PoseRecord
-from service.workers.loops import WorkerError, run_camera_worker, run_segment_worker, run_track_worker
+from service.workers.loops import run_camera_worker, run_segment_worker, run_track_worker
 
 CAMS = ("cam0", "cam1", "cam2")
 

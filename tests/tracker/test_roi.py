@@ -76,7 +76,25 @@ def test_rejects_bad_arguments(model):
         pose_rois(model, model.zero(), cams, margin_px=2.5)
 
 
-def test_warm_up_fits_a_frame_through_the_tracker():
-    from tracker.fitting.warmup import warm_up
+FIT_KERNELS = ("hidden_mask", "sample_chamfer", "forward_kinematics", "image_motion", "contour_points",
+               "projection_jacobians", "assemble", "reverse_terms")
 
-    assert warm_up() > 0.0
+
+def test_warm_up_compiles_the_kernels_a_fit_uses():
+    # in a fresh process (this one may have compiled them in other tests): before warm_up none of the
+    # kernels has a compiled signature, after it every kernel of the fit path has one
+    import subprocess
+    import sys
+
+    code = ("import json, tracker.kernels as k\n"
+            f"names = {FIT_KERNELS!r}\n"
+            "before = {n: len(getattr(k, n).signatures) for n in names}\n"
+            "from tracker.fitting.warmup import warm_up\n"
+            "warm_up()\n"
+            "print(json.dumps([before, {n: len(getattr(k, n).signatures) for n in names}]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    import json
+
+    before, after = json.loads(out.stdout.strip().splitlines()[-1])
+    assert all(v == 0 for v in before.values()), before
+    assert all(v >= 1 for v in after.values()), after
