@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
@@ -20,6 +19,7 @@ from service.workers.blob_track import BlobFitter, run_blob_track_worker
 from service.workers.loops import run_camera_worker
 from tracker.synthetic.synth import bundled_motion
 from tests.support.workers import wait_for
+from tests.support.files import read_jsonl
 
 N_FRAMES = 8
 
@@ -50,7 +50,7 @@ def hop(tmp_path_factory):
 
 
 def _truth(root):
-    return [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+    return read_jsonl(root / "ground_truth.jsonl")
 
 
 def test_blob_fitter_learns_its_backgrounds_first(hop):

@@ -18,6 +18,7 @@ from tracker.imaging.overlay import CENTRE, LEFT, RIGHT, side_of
 from tracker.synthetic.synth import bundled_motion
 
 from service.synthetic_session import make_synthetic_session
+from tests.support.files import read_jsonl, read_video
 
 N_FRAMES = 5
 SIZE = (200, 150)
@@ -32,19 +33,7 @@ def session_dir(tmp_path_factory):
 
 
 def _truth(session_dir):
-    return [json.loads(line) for line in (session_dir / "ground_truth.jsonl").read_text().splitlines() if line.strip()]
-
-
-def _read_video(path):
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while True:
-        ok, img = cap.read()
-        if not ok:
-            break
-        frames.append(img)
-    cap.release()
-    return frames
+    return read_jsonl(session_dir / "ground_truth.jsonl")
 
 
 def test_video_and_sheet_from_the_cli(session_dir, tmp_path, capsys):
@@ -52,7 +41,7 @@ def test_video_and_sheet_from_the_cli(session_dir, tmp_path, capsys):
     rc = main(["review", str(session_dir), str(session_dir / "ground_truth.jsonl"), "--out", str(video),
                "--sheet", str(sheet), "--sheet-frames", "3", "--names", "--quiet"])
     assert rc == 0, capsys.readouterr().err
-    frames = _read_video(video)
+    frames = read_video(video)
     assert len(frames) == N_FRAMES
     h, w = frames[0].shape[:2]
     assert w == 2 * SIZE[0] and SIZE[1] < h < SIZE[1] + 80  # two cameras side by side under a status band
@@ -63,7 +52,7 @@ def test_video_and_sheet_from_the_cli(session_dir, tmp_path, capsys):
     part = tmp_path / "part.avi"
     assert main(["review", str(session_dir), str(session_dir / "ground_truth.jsonl"), "--out", str(part),
                  "--frames", "1:3", "--quiet"]) == 0
-    assert len(_read_video(part)) == 2 and _read_video(part)[0].shape == frames[0].shape
+    assert len(read_video(part)) == 2 and read_video(part)[0].shape == frames[0].shape
 
 
 def test_frames_without_a_record_are_kept_and_marked(session_dir, tmp_path):
@@ -71,7 +60,7 @@ def test_frames_without_a_record_are_kept_and_marked(session_dir, tmp_path):
     summary = write_review(load_session(session_dir), recs, video=tmp_path / "gap.avi", sheet=tmp_path / "gap.png",
                            sheet_frames=2)
     assert (summary.frames, summary.with_record) == (N_FRAMES, N_FRAMES - 1)
-    assert len(_read_video(tmp_path / "gap.avi")) == N_FRAMES
+    assert len(read_video(tmp_path / "gap.avi")) == N_FRAMES
     assert cv2.imread(str(tmp_path / "gap.png")) is not None
 
 
@@ -123,7 +112,7 @@ def test_a_not_ok_record_shows_its_reason(session_dir, tmp_path):
     video = tmp_path / "r.avi"
     summary = write_review(session, load_records(path), video=video)
     assert (summary.frames, summary.with_record, summary.ok) == (N_FRAMES, N_FRAMES, N_FRAMES - 1)
-    frames = _read_video(video)
+    frames = read_video(video)
     band = 30  # the status band above the cameras
 
     def reddish(img):

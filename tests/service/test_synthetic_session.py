@@ -18,20 +18,9 @@ from tracker.body.model import load_model
 from tracker.imaging.render import render_silhouettes
 from service.synthetic_session import make_synthetic_session
 from tracker.synthetic.synth import bundled_motion
+from tests.support.files import read_video
 
 N_FRAMES, N_CAMS, SIZE, N_BG = 5, 3, (320, 240), 10
-
-
-def read_video(path):
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while True:
-        ok, img = cap.read()
-        if not ok:
-            break
-        frames.append(img)
-    cap.release()
-    return frames
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ import pytest
 from service.cli import main
 from service.synthetic_session import make_synthetic_session
 from tracker.synthetic.synth import bundled_motion
+from tests.support.files import read_jsonl
 
 N_FRAMES = 8
 
@@ -20,10 +21,6 @@ def session(tmp_path_factory):
     make_synthetic_session(bundled_motion("scaled_131_03"), out, cameras=4, size=(640, 480), frames=N_FRAMES,
                            n_background=10, seed=3)
     return out
-
-
-def _records(path):
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
 def _mpjpe_mm(records, truth):
@@ -38,8 +35,8 @@ def test_track_session_from_known_start(session, tmp_path, capsys):
     out = tmp_path / "poses.jsonl"
     rc = main(["track", str(session), "--out", str(out), "--initial-pose", str(session / "ground_truth.jsonl")])
     assert rc == 0
-    recs = _records(out)
-    truth = _records(session / "ground_truth.jsonl")
+    recs = read_jsonl(out)
+    truth = read_jsonl(session / "ground_truth.jsonl")
     assert [r["frame"] for r in recs] == list(range(N_FRAMES))
     assert all(r["ok"] for r in recs), [r.get("reason") for r in recs if not r["ok"]]
     assert all(r["model"] == "knossow40" and r["cameras"] == 4 for r in recs)
@@ -58,10 +55,10 @@ def test_track_options_frames_cameras_solver(session, tmp_path, capsys):
     rc = main(["track", str(session), "--out", str(out), "--initial-pose", gt, "--frames", "0:3",
                "--cameras", "cam0,cam1,cam3", "--no-sliding", "--solver", "lsq"])
     assert rc == 0
-    recs = _records(out)
+    recs = read_jsonl(out)
     assert [r["frame"] for r in recs] == [0, 1, 2]
     assert all(r["cameras"] == 3 for r in recs)
-    assert _mpjpe_mm(recs, _records(session / "ground_truth.jsonl")) < 40.0
+    assert _mpjpe_mm(recs, read_jsonl(session / "ground_truth.jsonl")) < 40.0
 
 
 def test_track_bad_input_is_one_clear_error(session, tmp_path, capsys):

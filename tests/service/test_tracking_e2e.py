@@ -7,7 +7,6 @@ forearms of the first frame hide in the silhouettes and were initialised straigh
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
@@ -16,10 +15,11 @@ from capture.session import load_session
 from service.offline import track_session
 from service.synthetic_session import make_synthetic_session
 from tracker.synthetic.synth import bundled_motion
+from tests.support.files import read_jsonl
 
 
 def _truth(root):
-    return [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+    return read_jsonl(root / "ground_truth.jsonl")
 
 
 def _mean_error_m(record, truth) -> float:

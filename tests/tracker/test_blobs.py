@@ -21,6 +21,7 @@ from tracker.synthetic.synth import bundled_motion
 
 # ----------------------------------------------------------------------------- sampled background test
 from service.synthetic_session import make_synthetic_session
+from tests.support.files import read_jsonl
 
 
 # ----------------------------------------------------------------------------- sampled background test
@@ -230,17 +231,13 @@ def hop(tmp_path_factory):
     return out
 
 
-def _records(path):
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-
-
 @pytest.mark.slow
 def test_track_method_blobs_on_a_short_hop(hop, tmp_path, capsys):
     out = tmp_path / "poses.jsonl"
     gt = hop / "ground_truth.jsonl"
     rc = main(["track", str(hop), "--out", str(out), "--method", "blobs", "--initial-pose", str(gt)])
     assert rc == 0
-    recs, truth = _records(out), _records(gt)
+    recs, truth = read_jsonl(out), read_jsonl(gt)
     assert [r["frame"] for r in recs] == list(range(N_FRAMES))
     assert all(r["method"] == "blobs" and r["model"] == "knossow40" and r["cameras"] == 4 for r in recs)
     errs = [np.mean([np.linalg.norm(np.subtract(r["joints"][k], truth[r["frame"]]["joints"][k]))

@@ -9,7 +9,6 @@ fit stays on the body; before it is learned the box lowers the silhouette IoU be
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
@@ -22,12 +21,13 @@ from tracker.fitting.scene import SceneOptions
 from tracker.synthetic.synth import bundled_motion
 
 from service.synthetic_session import make_synthetic_session
+from tests.support.files import read_jsonl
 
 FRAMES = 60
 
 
-def _truth(root: Path) -> list[dict]:
-    return [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+def _truth(root):
+    return read_jsonl(root / "ground_truth.jsonl")
 
 
 def _mean_error_mm(record: dict, truth: list[dict]) -> float:
