@@ -39,7 +39,7 @@ import numpy as np
 from tracker.kernels import forward_kinematics
 from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 
-__all__ = ["Pose", "forward", "body_jacobian", "point_jacobian", "joint_centres", "so3_exp", "so3_left_jacobian"]
+__all__ = ["Pose", "forward", "parameter_screws", "body_jacobian", "point_jacobian", "joint_centres", "so3_exp", "so3_left_jacobian"]
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -198,6 +198,20 @@ def forward(model: BodyModel, params: np.ndarray) -> Pose:
     return Pose(params, R, t, w, v)
 
 
+def parameter_screws(pose: Pose) -> np.ndarray:
+    """Every parameter's spatial screw (ω; v) as columns: J_H before the per-part mask.
+
+    Parameters
+    ----------
+    pose : Pose
+
+    Returns
+    -------
+    ndarray, shape (6, n_params)
+    """
+    return np.concatenate([pose.screw_w, pose.screw_v], axis=1).T
+
+
 def body_jacobian(model: BodyModel, pose: Pose) -> np.ndarray:
     """J_H for every part: the kinematic screws (ω; v) of the parameters that move it.
 
@@ -210,8 +224,7 @@ def body_jacobian(model: BodyModel, pose: Pose) -> np.ndarray:
     -------
     ndarray, shape (n_parts, 6, n_params)
     """
-    screws = np.concatenate([pose.screw_w, pose.screw_v], axis=1).T  # (6, n_params)
-    return screws[None, :, :] * model.affects[:, None, :]
+    return parameter_screws(pose)[None, :, :] * model.affects[:, None, :]
 
 
 def point_jacobian(model: BodyModel, pose: Pose, part: np.ndarray, points_world: np.ndarray) -> np.ndarray:

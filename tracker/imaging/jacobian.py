@@ -43,7 +43,7 @@ import numpy as np
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours
 from tracker.kernels import image_motion, projection_jacobians, screw_rows
-from tracker.body.kinematics import Pose
+from tracker.body.kinematics import Pose, parameter_screws
 from tracker.body.model import BodyModel
 
 __all__ = ["contour_jacobian", "contour_image_motion", "apply_screws", "contour_point_jacobian", "contour_motion"]
@@ -106,11 +106,6 @@ def contour_motion(
     _check(model, pose, cameras, contours)
     r = _select(contours, rows)
     return _motion(model, pose, cameras, contours, r, np.broadcast_to(np.eye(3), (r.size, 3, 3)), sliding)
-
-
-def _screws(model: BodyModel, pose: Pose) -> np.ndarray:
-    """All parameters' spatial screws, shape (6, n_params) (J_H before the per-part mask)."""
-    return np.concatenate([pose.screw_w, pose.screw_v], axis=1).T
 
 
 def contour_point_jacobian(
@@ -191,7 +186,7 @@ def apply_screws(model: BodyModel, pose: Pose, motion: np.ndarray, part: np.ndar
     ndarray, shape (n, n_params)
     """
     return screw_rows(np.ascontiguousarray(motion, dtype=float), np.asarray(part, dtype=np.intp),
-                      np.ascontiguousarray(_screws(model, pose)), model.affects)
+                      np.ascontiguousarray(parameter_screws(pose)), model.affects)
 
 
 def contour_jacobian(
