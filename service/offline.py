@@ -41,6 +41,14 @@ def session_model(session: Session, name: str = "knossow40") -> BodyModel:
     return load_model(name, height_m=session.height_m, segment_lengths=session.segment_lengths)
 
 
+def _frame_sets(session: Session, cameras, frames, stream_check) -> Iterator[tuple[int, dict]]:
+    """``iter_frame_sets`` with every set shown to ``stream_check`` (when given) first."""
+    for fid, group in iter_frame_sets(session, cameras=cameras, frames=frames):
+        if stream_check is not None:
+            stream_check.see(fid, tuple(group))
+        yield fid, group
+
+
 def _check_cameras(session: Session, cameras: Sequence[str] | None) -> list[str]:
     names = list(session.camera_names if cameras is None else cameras)
     unknown = [n for n in names if n not in session.camera_names]
@@ -107,15 +115,11 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation)
-        for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
-            if stream_check is not None:
-                stream_check.see(fid, tuple(group))
+        for fid, group in _frame_sets(session, names, frames, stream_check):
             ts = next(iter(group.values())).timestamp_ns
             yield st.step(fid, ts, {n: f.image for n, f in group.items()})
         return
-    for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
-        if stream_check is not None:
-            stream_check.see(fid, tuple(group))
+    for fid, group in _frame_sets(session, names, frames, stream_check):
         segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
@@ -130,9 +134,7 @@ def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_
     tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
                           initialiser=lambda cs, images: initialise_from_images(body, cs, images, backgrounds),
                           options=blob_options or BlobOptions(), clock=clock)
-    for fid, group in iter_frame_sets(session, cameras=[c.name for c in cams], frames=frames):
-        if stream_check is not None:
-            stream_check.see(fid, tuple(group))
+    for fid, group in _frame_sets(session, [c.name for c in cams], frames, stream_check):
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 
