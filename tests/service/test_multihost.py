@@ -173,6 +173,7 @@ def netns(tmp_path):
     net = Netns(f"cc{os.getpid() % 100000}")
     try:
         net.build()
+        _ip("netns", "exec", net.router, "true")  # exec needs its own mount namespace too
     except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as exc:
         net.close()
         pytest.skip(f"cannot make network namespaces / veth links / a bridge here: "
