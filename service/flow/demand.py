@@ -51,6 +51,7 @@ class FrameRing:
         self.cv = cv if cv is not None else threading.Condition()
         self._changed = False
         self.received = self.bad = self.evicted = 0
+        self.skipped = 0  # frames older than a demand: the tracker went past them
         self.rejected = 0  # far-future/far-past ids, oversized or over-rate frames, implausible demands
 
     def put(self, data: bytes, sent_ns: int | None) -> int | None:
@@ -125,7 +126,9 @@ class FrameRing:
 
         A demanded frame that is held is taken out of the ring; one that is not held while a newer
         frame is (skipped or evicted), or that has not arrived within ``wait_s``, is missed; one not
-        arrived yet is kept waiting (None)."""
+        arrived yet is kept waiting (None).  Frames older than a demand taken or missed are dropped
+        (counted in ``skipped``): the tracker demands ever newer ids, so they would only sit in the
+        ring and in its have notices."""
         missed: list[int] = []
         with self.cv:
             while self._demands:
@@ -134,13 +137,21 @@ class FrameRing:
                     self._demands.popleft()
                     data, sent_ns = self._frames.pop(fid)
                     self._bytes -= len(data)
+                    self._drop_older(fid)
                     return missed, (fid, data, sent_ns)
                 if any(f > fid for f in self._frames) or now_s - since > wait_s:
                     self._demands.popleft()
                     missed.append(fid)
+                    self._drop_older(fid)
                     continue
                 break
         return missed, None
+
+    def _drop_older(self, frame_id: int) -> None:
+        """Drop the frames held with ids below ``frame_id`` (call with ``cv`` held)."""
+        for f in [f for f in self._frames if f < frame_id]:
+            self._bytes -= len(self._frames.pop(f)[0])
+            self.skipped += 1
 
     def __len__(self) -> int:
         return len(self._frames)

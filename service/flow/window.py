@@ -42,7 +42,7 @@ class FrameIdWindow:
         self.restart_holdoff_s = float(restart_holdoff_s)
         self._ref: tuple[int, float] | None = None
         self._last_restart = float("-inf")
-        self.accepted = self.rejected = self.restarts = 0
+        self.accepted = self.rejected = self.restarts = self.stale = 0
 
     def upper(self, now_s: float) -> int | None:
         """The highest id accepted at ``now_s`` (None before the first id)."""
@@ -75,9 +75,17 @@ class FrameIdWindow:
         return True
 
     def filter(self, frame_ids, now_s: float) -> tuple[int, ...]:
-        """The plausible ids of one notice (its newest sets the reference; the others judged against it)."""
-        ids = sorted({int(f) for f in frame_ids}, reverse=True)
-        kept = [f for f in ids if self.accept(f, now_s)]
+        """The plausible ids of one notice (its newest sets the reference; the others judged against it).
+
+        An id more than ``behind`` below the newest id accepted from the same notice is stale (an old
+        frame still held), not a renumbering: it is left out (counted in ``stale``) and never moves
+        the reference back."""
+        kept: list[int] = []
+        for f in sorted({int(f) for f in frame_ids}, reverse=True):
+            if kept and f < kept[0] - self.behind:
+                self.stale += 1
+            elif self.accept(f, now_s):
+                kept.append(f)
         return tuple(sorted(kept))
 
 
