@@ -57,16 +57,20 @@ class FrameRing:
     def put(self, data: bytes, sent_ns: int | None) -> int | None:
         """Keep one received frame (its header validated); returns its id, or None when it was
         refused (counted in ``rejected``): larger than ``max_bytes``, over the rate limit, or an id
-        outside the camera's plausible window.  MessageError if the header is bad or names another
+        outside the camera's plausible window.  A renumbering (see ``FrameIdWindow``) drops the frames
+        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is bad or names another
         camera.  The frames held never exceed ``size`` frames nor ``max_bytes`` bytes."""
         camera, fid = frame_header(data)
         if camera != self.camera:
             raise MessageError(f"frame of camera {camera} on camera {self.camera}'s key")
         now = self._clock()
         with self.cv:
+            restarts = self.window.restarts
             if len(data) > self.max_bytes or not self.rate.allow(now) or not self.window.accept(fid, now):
                 self.rejected += 1
                 return None
+            if self.window.restarts != restarts:  # renumbered: the frames held are of the old numbering
+                self._drop_older(float("inf"))
             old = self._frames.pop(fid, None)
             if old is not None:
                 self._bytes -= len(old[0])
@@ -147,7 +151,7 @@ class FrameRing:
                 break
         return missed, None
 
-    def _drop_older(self, frame_id: int) -> None:
+    def _drop_older(self, frame_id: float) -> None:
         """Drop the frames held with ids below ``frame_id`` (call with ``cv`` held)."""
         for f in [f for f in self._frames if f < frame_id]:
             self._bytes -= len(self._frames.pop(f)[0])

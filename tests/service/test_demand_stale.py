@@ -64,3 +64,49 @@ def test_camera_keeping_up_stays_live_with_nothing_refused():
         assert planner.live(now) == ("cam0",), k
     assert planner.rejected == 0
     assert len(demanded) >= 90 * 30 - 2 and demanded == sorted(set(demanded))
+
+
+def test_a_forged_low_id_cannot_blind_a_running_camera():
+    """A peer announcing frame 0 (or sending a frame numbered 0) on a running camera's key: taken for
+    a renumbering, it moved the camera's reference back and its real ids (wall-clock, ~5e10) were
+    refused as far ahead for good.  A confirmed numbering that is still running is not replaced."""
+    planner = DemandPlanner(("cam0",))
+    ring = FrameRing("cam0", size=8, clock=lambda: now)
+    for k in range(300):
+        now = k / 30
+        assert planner.have("cam0", (WALL_IDS + k,), now)
+        assert ring.put(_frame(WALL_IDS + k), None) == WALL_IDS + k
+        if k % 30 == 29:  # once a second, forged
+            assert not planner.have("cam0", (0,), now + 0.001)
+            assert ring.put(_frame(0), None) is None
+    assert planner.live(now) == ("cam0",) and planner.rejected == 10 and ring.rejected == 10
+    assert planner.next_demand(now) == WALL_IDS + 299
+
+
+def test_a_stopped_numbering_is_replaced_and_a_first_forged_id_overruled():
+    w = FrameIdWindow(rate_hz=30, ahead_s=1.0, behind=10, slack=5, restart_holdoff_s=1.0)
+    for k in range(5):
+        assert w.accept(500 + k, k / 30)
+    assert not w.accept(0, 0.5)  # the numbering runs on: not a renumbering
+    assert not w.accept(0, 1.1) and w.accept(0, 1.2)  # stopped for 1 s (last id at 0.13 s): renumbered
+    assert w.restarts == 1 and w.accept(1, 1.3)
+    v = FrameIdWindow(rate_hz=30, ahead_s=1.0, behind=10, slack=5, restart_holdoff_s=1.0)
+    assert v.accept(10**12, 0.0)  # a hostile first id, never confirmed
+    assert v.accept(7, 0.01) and v.accept(8, 0.04) and not v.accept(10**12, 0.05)
+
+
+def test_a_hostile_first_frame_does_not_stay_in_the_ring():
+    """A peer's frame numbered 10^12 reached the ring before the camera's first: the camera's own
+    numbering overrules it and it is dropped, so a demanded frame that has not arrived yet is waited
+    for (a far-ahead frame held made every such demand 'missed' at once: sets without that camera)."""
+    t = [0.0]
+    ring = FrameRing("cam0", size=8, clock=lambda: t[0])
+    assert ring.put(_frame(10**12), None) == 10**12
+    for k in range(3):
+        t[0] = 0.1 + k / 30
+        assert ring.put(_frame(k), None) == k
+    assert ring.take_news() == (0, 1, 2) and ring.skipped == 1
+    assert ring.demand(3, t[0])
+    assert ring.next_demanded(t[0], wait_s=0.5) == ([], None)  # not arrived yet: waited for
+    ring.put(_frame(3), None)
+    assert ring.next_demanded(t[0], wait_s=0.5)[1][0] == 3
