@@ -17,6 +17,7 @@ named missing, they rejoin, no set mixes frame ids, the tracker resumes, no proc
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import shutil
@@ -109,6 +110,13 @@ class Procs:
             text = (self.logs / f"{name}.log").read_text(errors="replace").strip().splitlines()
             out.append(f"--- {name}: " + "\n".join(text[-8:]))
         return "\n".join(out)
+
+    def finished_stats(self, name: str) -> dict:
+        """The counters a worker logs when it stops cleanly (``finished: {...}``)."""
+        for line in (self.logs / f"{name}.log").read_text(errors="replace").splitlines()[::-1]:
+            if " finished: {" in line:
+                return ast.literal_eval(line.split(" finished: ", 1)[1])
+        raise AssertionError(f"{name} logged no 'finished' line:\n{self.tails()}")
 
     def stop(self) -> None:
         for p in self.procs.values():
@@ -247,6 +255,12 @@ def test_link_cuts_between_hosts(netns, tmp_path):
         assert not procs.dead(), procs.tails()
     finally:
         procs.stop()
+    assert {n: p.returncode for n, p in procs.procs.items()} == dict.fromkeys(procs.procs, 0), procs.tails()
+    # genuine notices and chamfers, across the cuts too: the tracker refused none (the segment workers
+    # may refuse frames over their rate limit: what a cut queued arrives at once after the restore)
+    track = procs.finished_stats("track")
+    assert track["rejected"] == 0 and track["bad"] == 0, track
+    assert all(procs.finished_stats(f"segment-{h}").get("bad", 0) == 0 for h in ("cam-a", "cam-b"))
     poses.poll()
     records = [p for _, p in poses.poses]
     frames = [p["frame"] for p in records]
