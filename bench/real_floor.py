@@ -1,6 +1,6 @@
 """How near can the body model come to the real-footage reference, and does the fit prefer that pose?
 
-    python bench/real_floor.py SESSION REFERENCE.jsonl [--frames A:B] [--every K] [--height H] [--json]
+    python bench/real_floor.py SESSION REFERENCE.jsonl [--frames A:B] [--every K] [--height H] [--model M] [--json]
 
 Splits contourcap's error against ``bench/real_reference.py`` into what the tracker could fix and
 what it cannot.  ``contourcap track``'s scene tracker (``tracker.fitting.scene``: clutter learned,
@@ -122,9 +122,11 @@ def _means(rows: list[dict[str, float]]) -> dict:
 
 
 def run(session_dir: Path, reference_path: Path, *, frames: range | None, every: int,
-        height_m: float | None) -> dict:
-    """Track ``frames`` with the scene tracker; floor, objective and basin at every ``every``-th."""
+        height_m: float | None, model_name: str | None = None) -> dict:
+    """Track ``frames`` with the scene tracker; floor, objective and basin at every ``every``-th.
+    ``model_name``: a bundled model or a model TOML file (default: the session's knossow40)."""
     from service.offline import background_models, session_model
+    from tracker.body.model import load_model
     from tracker.fitting.cost import ChamferCost
     from tracker.fitting.scene import SceneOptions, SceneTracker
     from tracker.fitting.tracking import Tracker, TrackerOptions, fit_frame
@@ -133,7 +135,7 @@ def run(session_dir: Path, reference_path: Path, *, frames: range | None, every:
     session = load_session(session_dir)
     names = list(session.camera_names)
     reference = {r["frame"]: r["joints"] for r in read_jsonl(reference_path, "reference")}
-    model = session_model(session)
+    model = session_model(session) if model_name is None else load_model(model_name, height_m=session.height_m)
     if height_m is not None:
         model = model.with_height(height_m)
     cams = [session.camera_model(n) for n in names]
@@ -178,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--frames", default=None, metavar="A:B")
     ap.add_argument("--every", type=int, default=25, help="sample every K-th tracked frame (default 25)")
     ap.add_argument("--height", type=float, default=None, help="subject height in metres (default: the session's)")
+    ap.add_argument("--model", default=None, help="body model name or TOML file (default: the session's knossow40)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.every < 1:
@@ -186,7 +189,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     ref_ms = machine_ref_ms()
     frames = parse_frame_range(args.frames)
-    out = run(args.session, args.reference, frames=frames, every=args.every, height_m=args.height)
+    out = run(args.session, args.reference, frames=frames, every=args.every, height_m=args.height, model_name=args.model)
     out["machine_ref_ms"] = round(ref_ms, 2)
     if args.json:
         print(json.dumps(out))
