@@ -58,8 +58,9 @@ class FrameRing:
         """Keep one received frame (its header validated); returns its id, or None when it was
         refused (counted in ``rejected``): larger than ``max_bytes``, over the rate limit, or an id
         outside the camera's plausible window.  A renumbering (see ``FrameIdWindow``) drops the frames
-        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is bad or names another
-        camera.  The frames held never exceed ``size`` frames nor ``max_bytes`` bytes."""
+        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is
+        bad or names another camera.  The frames held never exceed ``size`` frames nor ``max_bytes``
+        bytes."""
         camera, fid = frame_header(data)
         if camera != self.camera:
             raise MessageError(f"frame of camera {camera} on camera {self.camera}'s key")
