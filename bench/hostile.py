@@ -286,14 +286,17 @@ def file_sweep(seed: int = 16) -> list[CaseResult]:
 
 @dataclass
 class Attack:
-    """A hostile peer on the demo's loopback hub (bounded: ``duration_s`` and ``max_messages``)."""
+    """A hostile peer on the demo's loopback hub (bounded: ``duration_s`` and ``max_messages``), paced
+    at ``rate_hz`` rounds a second so that it lasts the whole run: start-up and replay window."""
 
     port: int
     cameras: tuple[str, ...]
     duration_s: float
-    max_messages: int = 20_000
+    max_messages: int = 200_000
+    rate_hz: float = 50.0
     hostile: bool = True  # False: only listen to the workers' status (the clean run)
     sent: int = 0
+    seconds: float = 0.0  # how long it attacked
     status: dict = field(default_factory=dict)
 
     def run(self, stop: threading.Event) -> None:
@@ -326,10 +329,12 @@ class Attack:
         sub = session.declare_subscriber(keys.status("*"), on_status)
         big = FrameMessage.from_image(self.cameras[0], FAR, 0, rng.integers(0, 256, (1200, 1400, 3), np.uint8))
         big_bytes = big.to_bytes()  # ~5 MB, far-future id
-        t_end = time.monotonic() + self.duration_s
+        t0 = time.monotonic()
+        t_end = t0 + self.duration_s
         try:
             while not self.hostile and not stop.is_set() and time.monotonic() < t_end:
                 time.sleep(0.1)
+            rounds = 0
             while self.hostile and not stop.is_set() and time.monotonic() < t_end and self.sent < self.max_messages:
                 for cam in self.cameras:
                     session.put(keys.frame(cam), rng.bytes(int(rng.integers(1, 2000))))  # malformed
@@ -346,7 +351,9 @@ class Attack:
                 for _ in range(20):  # a flood of notices
                     session.put(keys.have(self.cameras[-1]), HaveMessage(self.cameras[-1], (FAR + 1,)).to_bytes())
                 self.sent += 20
-                time.sleep(0.01)
+                rounds += 1
+                time.sleep(max(0.0, t0 + rounds / self.rate_hz - time.monotonic()))
+            self.seconds = time.monotonic() - t0 if self.hostile else 0.0
             # linger to read the workers' last status
             time.sleep(1.5)
         finally:
@@ -368,7 +375,8 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
     parser = argparse.ArgumentParser()
     demo_cmd.add_args(parser)
     result: dict = {"poses_per_s_clean_runs": [], "poses_per_s_under_attack_runs": [], "ok_clean_runs": [],
-                    "ok_under_attack_runs": [], "machine_ref_ms_runs": [], "loadavg_1min_runs": []}
+                    "ok_under_attack_runs": [], "machine_ref_ms_runs": [], "loadavg_1min_runs": [],
+                    "hub_and_attacker_cpu_s_clean_runs": [], "hub_and_attacker_cpu_s_under_attack_runs": []}
     if not stub_fitter:  # numba's disk cache filled first: else the first run pays for compiling
         from tracker.fitting.warmup import warm_up
 
@@ -387,10 +395,14 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
                                 duration_s=opts.live_start_delay_s + duration_s + 5, hostile=label == "under_attack")
                 thread = threading.Thread(target=attack.run, args=(stop,), daemon=True)
                 thread.start()
+                self_cpu = resource.getrusage(resource.RUSAGE_SELF)
                 try:
                     summary = run_demo(opts, progress=lambda m: print(m, file=sys.stderr))
                 finally:
                     stop.set()
+                used = resource.getrusage(resource.RUSAGE_SELF)  # this process: the demo's hub, taps and the attacker
+                result[f"hub_and_attacker_cpu_s_{label}_runs"].append(
+                    round(used.ru_utime + used.ru_stime - self_cpu.ru_utime - self_cpu.ru_stime, 2))
                 result[f"poses_per_s_{label}_runs"].append(summary.poses_per_s)
                 result[f"ok_{label}_runs"].append(summary.ok)
                 thread.join(10)
@@ -398,6 +410,7 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
                                   if k in ("rejected", "bad", "mismatched_key", "unknown")))
                 if label == "under_attack":
                     result["attack_messages"] = attack.sent
+                    result["attack_s"] = round(attack.seconds, 1)
                     result["worker_status"] = attack.status
                     result["rejected_messages"] = refused
                 else:

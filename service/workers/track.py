@@ -24,7 +24,8 @@ from typing import Callable
 import zenoh
 
 from capture.sync import FrameSetAssembler
-from service.flow.demand import DemandPlanner
+from service.flow.demand import HAVE_RATE_LIMIT_HZ, RATE_BURST, DemandPlanner
+from service.flow.window import KeyedRateLimit
 from service.wire.bus import Inbox, Keys, StatusReporter, declare_publisher, wait_any
 from service.wire.messages import ChamferMessage, FrameMessage, MessageError
 from service.wire.records import CreditMessage, DemandMessage, HaveMessage, PoseRecord
@@ -87,8 +88,11 @@ class TrackWorker:
                            FrameMessage.from_bytes if frames else functools.partial(ChamferMessage.from_bytes,
                                                                                     max_bytes=CHAMFER_MAX_BYTES),
                            mode=mode, depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
-        self.haves = None if lossless or frames else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
-                                                           depth=64 * len(cameras), cv=cv, latest_per_key=True)
+        # have notices over a camera's rate limit are dropped before they are decoded (a flood costs little)
+        limits = KeyedRateLimit(HAVE_RATE_LIMIT_HZ, RATE_BURST, [keys.have(c) for c in cameras])
+        self.haves = None if lossless or frames else Inbox(
+            session, keys.have("*"), HaveMessage.from_bytes, depth=64 * len(cameras), cv=cv, latest_per_key=True,
+            admit=lambda key: limits.allow(key, self.clock()))
         self.planner = None if lossless or frames else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
@@ -112,7 +116,7 @@ class TrackWorker:
                "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
                "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
-            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected,
+            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected + self.haves.limited,
                        have_dropped=self.haves.dropped, demands=self.planner.demands,
                        demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
         return out
