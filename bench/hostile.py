@@ -361,11 +361,28 @@ class Attack:
             session.close()
 
 
-def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: int = 1) -> dict:
+def attacker_main(port: int, cameras: int, duration_s: float, niceness: int) -> int:
+    """``--attacker``: the hostile peer alone, in its own process (niced by ``niceness``); prints
+    ``{"sent", "seconds"}`` when it ends (``duration_s`` or SIGTERM)."""
+    import signal
+
+    os.nice(niceness)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    attack = Attack(port, tuple(f"cam{i}" for i in range(cameras)), duration_s=duration_s)
+    attack.run(stop)
+    print(json.dumps({"sent": attack.sent, "seconds": round(attack.seconds, 1)}), flush=True)
+    return 0
+
+
+def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: int = 1,
+         attacker_nice: int | None = None) -> dict:
     """Poses per second of the live demo, clean and under attack, and the workers' rejected counts.
 
     ``runs`` pairs back to back, the order alternating (clean first, then attack first) so that
-    neither side always runs first; the figures are the medians, each run's in ``*_runs``."""
+    neither side always runs first; the figures are the medians, each run's in ``*_runs``.
+    ``attacker_nice``: the attacker runs in its own process at this niceness (on a machine as small
+    as the studio's, its own CPU is otherwise taken from the studio); None: in this process."""
     from dataclasses import replace
 
     from service.commands import demo as demo_cmd
@@ -391,15 +408,28 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
                                                            if stub_fitter else []))
                 opts = replace(demo_cmd.options_from_args(args), port=free_port())
                 stop = threading.Event()
-                attack = Attack(opts.port, tuple(f"cam{i}" for i in range(cameras)),
-                                duration_s=opts.live_start_delay_s + duration_s + 5, hostile=label == "under_attack")
+                attack_s = opts.live_start_delay_s + duration_s + 5
+                separate = attacker_nice is not None and label == "under_attack"
+                attack = Attack(opts.port, tuple(f"cam{i}" for i in range(cameras)), duration_s=attack_s,
+                                hostile=label == "under_attack" and not separate)
                 thread = threading.Thread(target=attack.run, args=(stop,), daemon=True)
                 thread.start()
+                attacker = subprocess.Popen(
+                    [sys.executable, __file__, "--attacker", str(opts.port), "--cameras", str(cameras),
+                     "--duration-s", str(attack_s), "--attacker-nice", str(attacker_nice)],
+                    stdout=subprocess.PIPE, text=True,
+                    env={**os.environ, "PYTHONPATH": str(REPO)}) if separate else None
                 self_cpu = resource.getrusage(resource.RUSAGE_SELF)
                 try:
                     summary = run_demo(opts, progress=lambda m: print(m, file=sys.stderr))
                 finally:
                     stop.set()
+                    if attacker is not None:
+                        attacker.terminate()
+                        out, _ = attacker.communicate(timeout=30)
+                        lines = out.strip().splitlines()
+                        got = json.loads(lines[-1]) if lines else {}
+                        attack.sent, attack.seconds = got.get("sent", 0), got.get("seconds", 0.0)
                 used = resource.getrusage(resource.RUSAGE_SELF)  # this process: the demo's hub, taps and the attacker
                 result[f"hub_and_attacker_cpu_s_{label}_runs"].append(
                     round(used.ru_utime + used.ru_stime - self_cpu.ru_utime - self_cpu.ru_stime, 2))
@@ -435,7 +465,13 @@ def main(argv=None) -> int:
     ap.add_argument("--stub-fitter", action="store_true",
                     help="live: a trivial fitter plug-in (tests.support.plugins) instead of the tracker, so the "
                          "figure is the transport and segmentation under attack, not the tracker's luck")
+    ap.add_argument("--attacker-nice", type=int, default=None,
+                    help="live: run the attacker in its own process at this niceness (0-19); default: in this "
+                         "process, where its own CPU is taken from the studio's share of the machine")
+    ap.add_argument("--attacker", type=int, default=None, metavar="PORT", help=argparse.SUPPRESS)
     opts = ap.parse_args(argv)
+    if opts.attacker is not None:
+        return attacker_main(opts.attacker, opts.cameras, opts.duration_s, opts.attacker_nice or 0)
     ref = machine_ref_ms()
     t0 = time.perf_counter()
     results = [] if opts.no_sweep else file_sweep()
@@ -446,7 +482,8 @@ def main(argv=None) -> int:
            "rejected_messages": None, "machine_ref_ms": round(ref, 2), "sweep_s": round(sweep_s, 1),
            "unclean": [f"{r.name}: rc {r.rc}: {r.last_line}" for r in results if not r.clean]}
     if not opts.no_live:
-        out.update(live(opts.duration_s, opts.cameras, stub_fitter=opts.stub_fitter, runs=opts.runs))
+        out.update(live(opts.duration_s, opts.cameras, stub_fitter=opts.stub_fitter, runs=opts.runs,
+                        attacker_nice=opts.attacker_nice))
     out["max_rss_mb"] = round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, 1)
     if opts.json:
         print(json.dumps(out))

@@ -244,6 +244,15 @@ class DemandPlanner:
             self._newest[camera] = newest
         return True
 
+    def plausible(self, camera: str, frame_ids: tuple[int, ...], now_s: float) -> bool:
+        """Whether :meth:`have` could take a notice (a configured camera, an id within its window);
+        read-only, so that a receiving thread can drop a notice that cannot be taken before it
+        displaces one that can."""
+        if camera not in self.cameras:
+            return False
+        window = self._windows.get(camera)
+        return window is None or not frame_ids or any(window.plausible(f, now_s) for f in frame_ids)
+
     @property
     def rejected(self) -> int:
         """Frame ids of have notices refused as implausible (beyond a camera's window), and notices

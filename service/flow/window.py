@@ -16,7 +16,7 @@ Everything refused is counted (``rejected``).  No I/O, clocks injected.
 
 from __future__ import annotations
 
-__all__ = ["FrameIdWindow", "RateLimit", "KeyedRateLimit"]
+__all__ = ["FrameIdWindow", "RateLimit"]
 
 
 class FrameIdWindow:
@@ -128,31 +128,3 @@ class RateLimit:
             return True
         self.limited += 1
         return False
-
-
-class KeyedRateLimit:
-    """A :class:`RateLimit` per key for the keys named up front, one shared by every other key (so a
-    peer inventing keys cannot grow it, nor take the named keys' budget).
-
-    Parameters
-    ----------
-    rate_hz : float
-        Sustained events per second, per bucket.
-    burst : int
-        Events allowed back to back, per bucket.
-    keys : iterable of str
-        The keys with a bucket of their own.
-    """
-
-    def __init__(self, rate_hz: float, burst: int, keys) -> None:
-        self._limits = {str(k): RateLimit(rate_hz, burst) for k in keys}
-        self._other = RateLimit(rate_hz, burst)
-
-    def allow(self, key: str, now_s: float) -> bool:
-        """Take one token of ``key``'s bucket at ``now_s``; False when it is empty."""
-        return self._limits.get(key, self._other).allow(now_s)
-
-    @property
-    def limited(self) -> int:
-        """Events refused so far, all buckets."""
-        return sum(r.limited for r in self._limits.values()) + self._other.limited

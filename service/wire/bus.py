@@ -254,32 +254,28 @@ class Inbox(Generic[T]):
     :class:`Received` ``(key, message, sent_ns)`` or None.  Inboxes given the same ``cv`` (a
     ``threading.Condition``) can be waited on together with :func:`wait_any`.  ``latest_per_key``: only
     the newest item of each key is kept (for state notices such as ``have``: a flood on one key then
-    never pushes another key's notice out; a superseded item is not counted as dropped).  ``admit``:
-    called with a sample's key before it is decoded; False drops it undecoded (counted in ``limited``:
-    a flood costs no decoding beyond what ``admit`` lets through).
+    never pushes another key's notice out; a superseded item is not counted as dropped).  ``keep``:
+    called with a decoded message's key and message; False drops it before it takes a place or wakes
+    a reader (counted in ``refused``).
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], T], *,
                  mode: str = "live", depth: int = 4, cv: threading.Condition | None = None,
-                 latest_per_key: bool = False, admit: Callable[[str], bool] | None = None) -> None:
+                 latest_per_key: bool = False, keep: Callable[[str, T], bool] | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"delivery mode must be one of {MODES}, got {mode!r}")
         self.key, self.mode, self.depth = key, mode, int(depth)
-        self._decode, self._admit = decode, admit
+        self._decode, self._keep = decode, keep
         self.latest_per_key = bool(latest_per_key)
         self._items: collections.deque | collections.OrderedDict = (
             collections.OrderedDict() if self.latest_per_key else collections.deque())
         self._cv = cv if cv is not None else threading.Condition()
-        self.received = self.dropped = self.bad = self.limited = 0
+        self.received = self.dropped = self.bad = self.refused = 0
         self._last_log = 0.0
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        if self._admit is not None and not self._admit(key):
-            with self._cv:
-                self.limited += 1
-            return
         sent_ns = sent_ns_of(sample)
         try:
             msg = self._decode(sample.payload.to_bytes())
@@ -290,6 +286,10 @@ class Inbox(Generic[T]):
             if now - self._last_log > 1.0:
                 self._last_log = now
                 log.warning("bad message on %s (%d so far): %s", printable(key), self.bad, printable(exc))
+            return
+        if self._keep is not None and not self._keep(key, msg):
+            with self._cv:
+                self.refused += 1
             return
         with self._cv:
             self.received += 1
