@@ -86,13 +86,21 @@ class FrameRing:
             self.cv.notify_all()
         return fid
 
+    def demandable(self, frame_id: int) -> bool:
+        """Whether :meth:`demand` would take ``frame_id`` now (read-only)."""
+        with self.cv:
+            return self._demandable(frame_id)
+
+    def _demandable(self, frame_id: int) -> bool:
+        upper = self.window.upper(self._clock())
+        return upper is not None and 0 <= frame_id <= upper
+
     def demand(self, frame_id: int, now_s: float) -> bool:
         """The tracker wants ``frame_id`` (kept until taken, skipped or expired).  A demand for an id
         this camera cannot have yet (beyond its window: no frame received, or far ahead of the
         newest) is refused (False, counted in ``rejected``) so it cannot push real demands out."""
         with self.cv:
-            upper = self.window.upper(self._clock())
-            if upper is None or not 0 <= frame_id <= upper:
+            if not self._demandable(frame_id):
                 self.rejected += 1
                 return False
             if all(f != frame_id for f, _ in self._demands):

@@ -59,3 +59,32 @@ def test_implausible_flood_does_not_displace_real_notices(pair):
     got = inbox.drain()
     assert [(r.key, r.message.frame_ids) for r in got] == [(keys.have("cam0"), (501,))]
     inbox.close()
+
+
+def test_far_future_demands_do_not_push_out_the_real_demands_regions(pair, rng):
+    """The segment worker keeps the regions of interest of the newest 16 demands: a flood of
+    demands for frame 10^12 (which no camera takes) pushed the real ones out, and demanded frames
+    were segmented whole."""
+    from service.wire.records import DemandMessage
+    from service.workers.segment import SegmentWorker
+    from tests.support.plugins import segmenter
+
+    a, b = pair
+    keys = Keys("rois")
+    worker = SegmentWorker(b, keys, {"cam0": segmenter}, mode="live", stop=threading.Event())
+    try:
+        from service.wire.messages import FrameMessage
+
+        image = rng.integers(0, 256, (6, 8, 3), dtype="uint8")
+        worker.rings["cam0"].put(FrameMessage.from_image("cam0", 7, 0, image).to_bytes(), None)
+        time.sleep(0.3)
+        a.put(keys.demand("track"), DemandMessage("track", 7, {"cam0": (0, 0, 4, 4)}).to_bytes())
+        for _ in range(100):
+            a.put(keys.demand("track"), DemandMessage("track", FAR).to_bytes())
+        deadline = time.monotonic() + 5.0
+        while worker.rings["cam0"].rejected < 100 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert worker.rings["cam0"].rejected == 100
+        assert worker.demand_rois == {7: {"cam0": (0, 0, 4, 4)}}
+    finally:
+        worker.close()
