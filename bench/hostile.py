@@ -286,14 +286,17 @@ def file_sweep(seed: int = 16) -> list[CaseResult]:
 
 @dataclass
 class Attack:
-    """A hostile peer on the demo's loopback hub (bounded: ``duration_s`` and ``max_messages``)."""
+    """A hostile peer on the demo's loopback hub (bounded: ``duration_s`` and ``max_messages``), paced
+    at ``rate_hz`` rounds a second so that it lasts the whole run: start-up and replay window."""
 
     port: int
     cameras: tuple[str, ...]
     duration_s: float
-    max_messages: int = 20_000
+    max_messages: int = 200_000
+    rate_hz: float = 50.0
     hostile: bool = True  # False: only listen to the workers' status (the clean run)
     sent: int = 0
+    seconds: float = 0.0  # how long it attacked
     status: dict = field(default_factory=dict)
 
     def run(self, stop: threading.Event) -> None:
@@ -326,10 +329,12 @@ class Attack:
         sub = session.declare_subscriber(keys.status("*"), on_status)
         big = FrameMessage.from_image(self.cameras[0], FAR, 0, rng.integers(0, 256, (1200, 1400, 3), np.uint8))
         big_bytes = big.to_bytes()  # ~5 MB, far-future id
-        t_end = time.monotonic() + self.duration_s
+        t0 = time.monotonic()
+        t_end = t0 + self.duration_s
         try:
             while not self.hostile and not stop.is_set() and time.monotonic() < t_end:
                 time.sleep(0.1)
+            rounds = 0
             while self.hostile and not stop.is_set() and time.monotonic() < t_end and self.sent < self.max_messages:
                 for cam in self.cameras:
                     session.put(keys.frame(cam), rng.bytes(int(rng.integers(1, 2000))))  # malformed
@@ -346,7 +351,9 @@ class Attack:
                 for _ in range(20):  # a flood of notices
                     session.put(keys.have(self.cameras[-1]), HaveMessage(self.cameras[-1], (FAR + 1,)).to_bytes())
                 self.sent += 20
-                time.sleep(0.01)
+                rounds += 1
+                time.sleep(max(0.0, t0 + rounds / self.rate_hz - time.monotonic()))
+            self.seconds = time.monotonic() - t0 if self.hostile else 0.0
             # linger to read the workers' last status
             time.sleep(1.5)
         finally:
@@ -354,11 +361,28 @@ class Attack:
             session.close()
 
 
-def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: int = 1) -> dict:
+def attacker_main(port: int, cameras: int, duration_s: float, niceness: int) -> int:
+    """``--attacker``: the hostile peer alone, in its own process (niced by ``niceness``); prints
+    ``{"sent", "seconds"}`` when it ends (``duration_s`` or SIGTERM)."""
+    import signal
+
+    os.nice(niceness)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    attack = Attack(port, tuple(f"cam{i}" for i in range(cameras)), duration_s=duration_s)
+    attack.run(stop)
+    print(json.dumps({"sent": attack.sent, "seconds": round(attack.seconds, 1)}), flush=True)
+    return 0
+
+
+def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: int = 1,
+         attacker_nice: int | None = None) -> dict:
     """Poses per second of the live demo, clean and under attack, and the workers' rejected counts.
 
     ``runs`` pairs back to back, the order alternating (clean first, then attack first) so that
-    neither side always runs first; the figures are the medians, each run's in ``*_runs``."""
+    neither side always runs first; the figures are the medians, each run's in ``*_runs``.
+    ``attacker_nice``: the attacker runs in its own process at this niceness (on a machine as small
+    as the studio's, its own CPU is otherwise taken from the studio); None: in this process."""
     from dataclasses import replace
 
     from service.commands import demo as demo_cmd
@@ -368,7 +392,8 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
     parser = argparse.ArgumentParser()
     demo_cmd.add_args(parser)
     result: dict = {"poses_per_s_clean_runs": [], "poses_per_s_under_attack_runs": [], "ok_clean_runs": [],
-                    "ok_under_attack_runs": [], "machine_ref_ms_runs": [], "loadavg_1min_runs": []}
+                    "ok_under_attack_runs": [], "machine_ref_ms_runs": [], "loadavg_1min_runs": [],
+                    "hub_and_attacker_cpu_s_clean_runs": [], "hub_and_attacker_cpu_s_under_attack_runs": []}
     if not stub_fitter:  # numba's disk cache filled first: else the first run pays for compiling
         from tracker.fitting.warmup import warm_up
 
@@ -383,14 +408,31 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
                                                            if stub_fitter else []))
                 opts = replace(demo_cmd.options_from_args(args), port=free_port())
                 stop = threading.Event()
-                attack = Attack(opts.port, tuple(f"cam{i}" for i in range(cameras)),
-                                duration_s=opts.live_start_delay_s + duration_s + 5, hostile=label == "under_attack")
+                attack_s = opts.live_start_delay_s + duration_s + 5
+                separate = attacker_nice is not None and label == "under_attack"
+                attack = Attack(opts.port, tuple(f"cam{i}" for i in range(cameras)), duration_s=attack_s,
+                                hostile=label == "under_attack" and not separate)
                 thread = threading.Thread(target=attack.run, args=(stop,), daemon=True)
                 thread.start()
+                attacker = subprocess.Popen(
+                    [sys.executable, __file__, "--attacker", str(opts.port), "--cameras", str(cameras),
+                     "--duration-s", str(attack_s), "--attacker-nice", str(attacker_nice)],
+                    stdout=subprocess.PIPE, text=True,
+                    env={**os.environ, "PYTHONPATH": str(REPO)}) if separate else None
+                self_cpu = resource.getrusage(resource.RUSAGE_SELF)
                 try:
                     summary = run_demo(opts, progress=lambda m: print(m, file=sys.stderr))
                 finally:
                     stop.set()
+                    if attacker is not None:
+                        attacker.terminate()
+                        out, _ = attacker.communicate(timeout=30)
+                        lines = out.strip().splitlines()
+                        got = json.loads(lines[-1]) if lines else {}
+                        attack.sent, attack.seconds = got.get("sent", 0), got.get("seconds", 0.0)
+                used = resource.getrusage(resource.RUSAGE_SELF)  # this process: the demo's hub, taps and the attacker
+                result[f"hub_and_attacker_cpu_s_{label}_runs"].append(
+                    round(used.ru_utime + used.ru_stime - self_cpu.ru_utime - self_cpu.ru_stime, 2))
                 result[f"poses_per_s_{label}_runs"].append(summary.poses_per_s)
                 result[f"ok_{label}_runs"].append(summary.ok)
                 thread.join(10)
@@ -398,6 +440,7 @@ def live(duration_s: float, cameras: int, *, stub_fitter: bool = False, runs: in
                                   if k in ("rejected", "bad", "mismatched_key", "unknown")))
                 if label == "under_attack":
                     result["attack_messages"] = attack.sent
+                    result["attack_s"] = round(attack.seconds, 1)
                     result["worker_status"] = attack.status
                     result["rejected_messages"] = refused
                 else:
@@ -422,7 +465,13 @@ def main(argv=None) -> int:
     ap.add_argument("--stub-fitter", action="store_true",
                     help="live: a trivial fitter plug-in (tests.support.plugins) instead of the tracker, so the "
                          "figure is the transport and segmentation under attack, not the tracker's luck")
+    ap.add_argument("--attacker-nice", type=int, default=None,
+                    help="live: run the attacker in its own process at this niceness (0-19); default: in this "
+                         "process, where its own CPU is taken from the studio's share of the machine")
+    ap.add_argument("--attacker", type=int, default=None, metavar="PORT", help=argparse.SUPPRESS)
     opts = ap.parse_args(argv)
+    if opts.attacker is not None:
+        return attacker_main(opts.attacker, opts.cameras, opts.duration_s, opts.attacker_nice or 0)
     ref = machine_ref_ms()
     t0 = time.perf_counter()
     results = [] if opts.no_sweep else file_sweep()
@@ -433,7 +482,8 @@ def main(argv=None) -> int:
            "rejected_messages": None, "machine_ref_ms": round(ref, 2), "sweep_s": round(sweep_s, 1),
            "unclean": [f"{r.name}: rc {r.rc}: {r.last_line}" for r in results if not r.clean]}
     if not opts.no_live:
-        out.update(live(opts.duration_s, opts.cameras, stub_fitter=opts.stub_fitter, runs=opts.runs))
+        out.update(live(opts.duration_s, opts.cameras, stub_fitter=opts.stub_fitter, runs=opts.runs,
+                        attacker_nice=opts.attacker_nice))
     out["max_rss_mb"] = round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, 1)
     if opts.json:
         print(json.dumps(out))

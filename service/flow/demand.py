@@ -58,8 +58,9 @@ class FrameRing:
         """Keep one received frame (its header validated); returns its id, or None when it was
         refused (counted in ``rejected``): larger than ``max_bytes``, over the rate limit, or an id
         outside the camera's plausible window.  A renumbering (see ``FrameIdWindow``) drops the frames
-        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is bad or names another
-        camera.  The frames held never exceed ``size`` frames nor ``max_bytes`` bytes."""
+        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is
+        bad or names another camera.  The frames held never exceed ``size`` frames nor ``max_bytes``
+        bytes."""
         camera, fid = frame_header(data)
         if camera != self.camera:
             raise MessageError(f"frame of camera {camera} on camera {self.camera}'s key")
@@ -85,13 +86,21 @@ class FrameRing:
             self.cv.notify_all()
         return fid
 
+    def demandable(self, frame_id: int) -> bool:
+        """Whether :meth:`demand` would take ``frame_id`` now (read-only)."""
+        with self.cv:
+            return self._demandable(frame_id)
+
+    def _demandable(self, frame_id: int) -> bool:
+        upper = self.window.upper(self._clock())
+        return upper is not None and 0 <= frame_id <= upper
+
     def demand(self, frame_id: int, now_s: float) -> bool:
         """The tracker wants ``frame_id`` (kept until taken, skipped or expired).  A demand for an id
         this camera cannot have yet (beyond its window: no frame received, or far ahead of the
         newest) is refused (False, counted in ``rejected``) so it cannot push real demands out."""
         with self.cv:
-            upper = self.window.upper(self._clock())
-            if upper is None or not 0 <= frame_id <= upper:
+            if not self._demandable(frame_id):
                 self.rejected += 1
                 return False
             if all(f != frame_id for f, _ in self._demands):
@@ -242,6 +251,15 @@ class DemandPlanner:
                 self.last_demanded = min(self.last_demanded, newest - 1)
             self._newest[camera] = newest
         return True
+
+    def plausible(self, camera: str, frame_ids: tuple[int, ...], now_s: float) -> bool:
+        """Whether :meth:`have` could take a notice (a configured camera, an id within its window);
+        read-only, so that a receiving thread can drop a notice that cannot be taken before it
+        displaces one that can."""
+        if camera not in self.cameras:
+            return False
+        window = self._windows.get(camera)
+        return window is None or not frame_ids or any(window.plausible(f, now_s) for f in frame_ids)
 
     @property
     def rejected(self) -> int:

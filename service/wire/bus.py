@@ -254,21 +254,23 @@ class Inbox(Generic[T]):
     :class:`Received` ``(key, message, sent_ns)`` or None.  Inboxes given the same ``cv`` (a
     ``threading.Condition``) can be waited on together with :func:`wait_any`.  ``latest_per_key``: only
     the newest item of each key is kept (for state notices such as ``have``: a flood on one key then
-    never pushes another key's notice out; a superseded item is not counted as dropped).
+    never pushes another key's notice out; a superseded item is not counted as dropped).  ``keep``:
+    called with a decoded message's key and message; False drops it before it takes a place or wakes
+    a reader (counted in ``refused``).
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], T], *,
                  mode: str = "live", depth: int = 4, cv: threading.Condition | None = None,
-                 latest_per_key: bool = False) -> None:
+                 latest_per_key: bool = False, keep: Callable[[str, T], bool] | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"delivery mode must be one of {MODES}, got {mode!r}")
         self.key, self.mode, self.depth = key, mode, int(depth)
-        self._decode = decode
+        self._decode, self._keep = decode, keep
         self.latest_per_key = bool(latest_per_key)
         self._items: collections.deque | collections.OrderedDict = (
             collections.OrderedDict() if self.latest_per_key else collections.deque())
         self._cv = cv if cv is not None else threading.Condition()
-        self.received = self.dropped = self.bad = 0
+        self.received = self.dropped = self.bad = self.refused = 0
         self._last_log = 0.0
         self._sub = session.declare_subscriber(key, self._on_sample)
 
@@ -284,6 +286,10 @@ class Inbox(Generic[T]):
             if now - self._last_log > 1.0:
                 self._last_log = now
                 log.warning("bad message on %s (%d so far): %s", printable(key), self.bad, printable(exc))
+            return
+        if self._keep is not None and not self._keep(key, msg):
+            with self._cv:
+                self.refused += 1
             return
         with self._cv:
             self.received += 1

@@ -117,10 +117,13 @@ class SegmentWorker:
             return
         if demand.consumer == TRACK_CONSUMER:
             now = time.monotonic()
-            with self.lock:  # the demanded frame's regions of interest, the newest few kept
-                self.demand_rois[demand.frame_id] = demand.rois or {}
-                while len(self.demand_rois) > 16:
-                    del self.demand_rois[next(iter(self.demand_rois))]
+            # the demanded frame's regions of interest, the newest few kept (not for a demand no camera
+            # takes: a far-future flood would push the real demands' regions out)
+            if any(ring.demandable(demand.frame_id) for ring in self.rings.values()):
+                with self.lock:
+                    self.demand_rois[demand.frame_id] = demand.rois or {}
+                    while len(self.demand_rois) > 16:
+                        del self.demand_rois[next(iter(self.demand_rois))]
             for ring in self.rings.values():
                 ring.demand(demand.frame_id, now)
 

@@ -87,11 +87,15 @@ class TrackWorker:
                            FrameMessage.from_bytes if frames else functools.partial(ChamferMessage.from_bytes,
                                                                                     max_bytes=CHAMFER_MAX_BYTES),
                            mode=mode, depth=16 * len(cameras) if lossless else 2 * len(cameras), cv=cv)
-        self.haves = None if lossless or frames else Inbox(session, keys.have("*"), HaveMessage.from_bytes,
-                                                           depth=64 * len(cameras), cv=cv, latest_per_key=True)
         self.planner = None if lossless or frames else DemandPlanner(
             cameras, absent_after_s=absent_after_s, startup_grace_s=absent_after_s,
             demand_timeout_s=max(0.25, 2 * set_timeout_s) if demand_timeout_s is None else demand_timeout_s)
+        # a notice that cannot be taken (another camera's key, no plausible id) is dropped on receipt:
+        # a flood of them then never displaces a camera's real notice nor wakes this loop
+        self.haves = None if self.planner is None else Inbox(
+            session, keys.have("*"), HaveMessage.from_bytes, depth=64 * len(cameras), cv=cv, latest_per_key=True,
+            keep=lambda key, msg: (keys.camera_of(key) == msg.camera
+                                   and self.planner.plausible(msg.camera, msg.frame_ids, self.clock())))
         # lossless: every camera is waited for (absent_after_s None); "cameras" reports those heard within 1 s
         self.absent_after_s = 1.0 if lossless else absent_after_s
         self.asm: FrameSetAssembler = FrameSetAssembler(
@@ -112,7 +116,7 @@ class TrackWorker:
                "overflow": asm.overflow, "bad": inbox.bad, "dropped": inbox.dropped,
                "cameras": len(asm.present(self.clock(), self.absent_after_s))}
         if self.planner is not None:
-            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected,
+            out.update(bad=inbox.bad + self.haves.bad, rejected=self.planner.rejected + self.haves.refused,
                        have_dropped=self.haves.dropped, demands=self.planner.demands,
                        demand_timeouts=self.planner.timeouts, cameras=len(self.planner.live(self.clock())))
         return out
