@@ -35,7 +35,7 @@ import numpy as np
 
 from service.workers.components import TrackerFitter, message_to_chamfer, silhouette_mask
 
-__all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter"]
+__all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter", "ThreadSearches"]
 
 log = logging.getLogger("contourcap.worker")
 
@@ -108,6 +108,22 @@ class EffortController:
         return self.level
 
 
+class ThreadSearches:
+    """Runs each search in a daemon thread (the live default): ``start(fn, name)``, ``busy()``."""
+
+    def __init__(self) -> None:
+        self._thread: threading.Thread | None = None
+
+    def start(self, fn: Callable[[], None], name: str) -> None:
+        """Run ``fn()`` beside the caller."""
+        self._thread = threading.Thread(target=fn, name=name, daemon=True)
+        self._thread.start()
+
+    def busy(self) -> bool:
+        """Whether the last search still runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+
 class LiveTrackerFitter(TrackerFitter):
     """``(frame_id, timestamp_ns, {camera: ChamferMessage}) -> pose record`` for live delivery
     (module docstring).
@@ -125,11 +141,14 @@ class LiveTrackerFitter(TrackerFitter):
         (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
     clock : callable () -> float
         Seconds (fit times).
+    search_runner : object with ``start(fn, name)`` and ``busy()``, optional
+        Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
+        synchronously and holds their result for a given number of sets).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter, search_runner=None) -> None:
         super().__init__(tracker)
         tracker.recover = False
         self.base_options = tracker.options
@@ -138,7 +157,7 @@ class LiveTrackerFitter(TrackerFitter):
         self.roi_max_margin_m, self.roi_margin_px = float(roi_max_margin_m), int(roi_margin_px)
         self.clock = clock
         self._lock = threading.Lock()
-        self._search: threading.Thread | None = None
+        self.search_runner = ThreadSearches() if search_runner is None else search_runner
         self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
         self._last_frame: int | None = None
         self._clipped = False
@@ -160,7 +179,7 @@ class LiveTrackerFitter(TrackerFitter):
     @property
     def searching(self) -> bool:
         """Whether a search runs in the background."""
-        return self._search is not None and self._search.is_alive()
+        return self.search_runner.busy()
 
     def _start_search(self, frame_id: int, hint, images: dict, silhouettes: dict) -> None:
         """Search from ``silhouettes`` in a thread (``hint`` None: initialisation, else the last good pose)."""
@@ -192,8 +211,7 @@ class LiveTrackerFitter(TrackerFitter):
 
         self.searches += 1
         tr.n_initialisations += 1
-        self._search = threading.Thread(target=run, name=f"search-{what}", daemon=True)
-        self._search.start()
+        self.search_runner.start(run, f"search-{what}")
 
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
