@@ -15,6 +15,7 @@ live fitter's behaviour under frame gaps and slow searches.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -28,18 +29,32 @@ __all__ = ["HeldSearches", "LiveReplay", "replay_live", "every_nth", "load_clip"
 class HeldSearches:
     """Runs a search at once, but reports it busy for the next ``frames`` sets (``advance()`` per set).
 
-    ``frames`` 0: the result is taken on the next set.
+    ``frames``: an int, or a mapping from what the search function returned (the live fitter's
+    search kind: ``"initialise"``, ``"rejoin"``, ``"full"``; None when it failed) to an int, with
+    ``"default"`` for the rest.  0: the result is taken on the next set.  With ``sets_per_cpu_s``
+    instead, a search is held for ``ceil(sets_per_cpu_s × its CPU seconds)`` sets (not
+    deterministic: for benchmarks, not tests).
     """
 
-    def __init__(self, frames: int) -> None:
-        if int(frames) < 0:
-            raise ValueError(f"frames: expected >= 0, got {frames!r}")
-        self.frames, self._left = int(frames), 0
+    def __init__(self, frames: int | dict = 0, *, sets_per_cpu_s: float | None = None) -> None:
+        table = dict(frames) if isinstance(frames, dict) else {"default": frames}
+        if "default" not in table or any(int(v) < 0 for v in table.values()):
+            raise ValueError(f"frames: expected counts >= 0 with a default, got {frames!r}")
+        if sets_per_cpu_s is not None and not sets_per_cpu_s > 0:
+            raise ValueError(f"sets_per_cpu_s: expected > 0, got {sets_per_cpu_s!r}")
+        self.frames, self._left, self.sets_per_cpu_s = {k: int(v) for k, v in table.items()}, 0, sets_per_cpu_s
+        self.held: list[tuple[object, int]] = []  # (kind, sets) of every search
 
-    def start(self, fn: Callable[[], None], name: str) -> None:
-        """Run ``fn()`` now; its result is held for ``frames`` sets."""
-        fn()
-        self._left = self.frames + 1  # the set that started it is the first
+    def start(self, fn: Callable[[], object], name: str) -> None:
+        """Run ``fn()`` now; its result is held for the sets its kind (or its CPU time) takes."""
+        c0 = time.process_time()
+        kind = fn()
+        if self.sets_per_cpu_s is not None:
+            sets = int(np.ceil(self.sets_per_cpu_s * (time.process_time() - c0)))
+        else:
+            sets = self.frames.get(kind, self.frames["default"])
+        self.held.append((kind, sets))
+        self._left = sets + 1  # the set that started it is the first
 
     def busy(self) -> bool:
         """Whether the last search is (deemed) still running."""
@@ -120,7 +135,7 @@ def every_nth(n_sets: int, gap: int | Sequence[int], *, start: int = 0) -> list[
     return out
 
 
-def replay_live(clip: Clip, schedule: Iterable[int], *, search_frames: int = 0, fitter=None, model: str = "knossow40",
+def replay_live(clip: Clip, schedule: Iterable[int], *, search_frames: int | dict = 0, fitter=None, model: str = "knossow40",
                 effort_level: int | None = 0, use_rois: bool = True,
                 progress: Callable[[dict], None] | None = None) -> LiveReplay:
     """Fit the frame ids of ``schedule`` (increasing) through a :class:`LiveTrackerFitter`.
@@ -131,7 +146,7 @@ def replay_live(clip: Clip, schedule: Iterable[int], *, search_frames: int = 0, 
         From :func:`load_clip`; frame id ``f`` is clip frame ``f mod clip.n_frames``.
     schedule : iterable of int
         The frame ids the tracker gets, in order.
-    search_frames : int
+    search_frames : int or dict
         Sets a search takes (:class:`HeldSearches`).
     fitter : LiveTrackerFitter, optional
         Default: one on the clip's session and ``model``, with ``HeldSearches(search_frames)``.

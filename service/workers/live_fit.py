@@ -144,11 +144,20 @@ class LiveTrackerFitter(TrackerFitter):
     search_runner : object with ``start(fn, name)`` and ``busy()``, optional
         Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
         synchronously and holds their result for a given number of sets).
+    rejoin_headings : int
+        Headings per seed of the cheap recovery stage (``tracker.search.recovery.rejoin``).
+    bring_forward : bool
+        Bring a search's pose that no longer fits onto the newest set (``_take_found``).
+    rejoin_spacing : int
+        A poor fit tries the cheap recovery at once, in the set's own time (``_rejoin_now``), when
+        the last such try was at least this many sets ago (-1: never; the background search after
+        ``patience`` bad sets remains).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
-                 clock: Callable[[], float] = time.perf_counter, search_runner=None) -> None:
+                 clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
+                 bring_forward: bool = True, rejoin_spacing: int = 5) -> None:
         super().__init__(tracker)
         tracker.recover = False
         self.base_options = tracker.options
@@ -158,11 +167,15 @@ class LiveTrackerFitter(TrackerFitter):
         self.clock = clock
         self._lock = threading.Lock()
         self.search_runner = ThreadSearches() if search_runner is None else search_runner
-        self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
+        # (frame id, params or None on failure, whether it was a bring-forward)
+        self._found: tuple[int, np.ndarray | None, bool] | None = None
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
-        self.searches = self.rejoined = 0
+        self.searches = self.rejoined = self.brought_forward = 0
+        self.search_kinds: dict[str, int] = {}
+        self.rejoin_headings, self.bring_forward = rejoin_headings, bool(bring_forward)
+        self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -181,10 +194,14 @@ class LiveTrackerFitter(TrackerFitter):
         """Whether a search runs in the background."""
         return self.search_runner.busy()
 
-    def _start_search(self, frame_id: int, hint, images: dict, silhouettes: dict) -> None:
-        """Search from ``silhouettes`` in a thread (``hint`` None: initialisation, else the last good pose)."""
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
+        """Search from ``silhouettes`` beside the stream (``search_runner``).
+
+        ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
+        ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
+        from the first of them."""
         from tracker.search.initialise import initialise
-        from tracker.search.recovery import recover
+        from tracker.search.recovery import recover, rejoin
 
         tr = self.tracker
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
@@ -193,21 +210,31 @@ class LiveTrackerFitter(TrackerFitter):
         cams = [tr.cameras[n] for n in names]
         sils = {n: silhouettes[n] for n in names}
         chs = {n: images[n] for n in names}
-        hint = None if hint is None else np.array(hint)
-        what = "initialisation" if hint is None else "recovery"
+        seeds = None if seeds is None else [np.array(p) for p in seeds if p is not None]
+        what = "initialisation" if seeds is None else "recovery"
 
-        def run() -> None:
+        def run() -> str | None:
+            kind = "initialise" if seeds is None else "rejoin"
             try:
-                if hint is None:
+                if seeds is None:
                     res = initialise(tr.model, cams, sils, chs, options=tr.options.initialise_search)
                 else:
-                    res = recover(tr.model, cams, sils, chs, hint, options=tr.options.recover_search)
-                found = tr.model.clamp(np.asarray(res.params, dtype=float))
+                    res = rejoin(tr.model, cams, sils, chs, seeds, options=tr.options.recover_search,
+                                 n_headings=self.rejoin_headings, accept_iou=tr.options.min_iou,
+                                 min_inside_fraction=tr.options.min_inside_fraction)
+                    if res is None and full:
+                        kind = "full"
+                        res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
+                found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
+                if found is None and not full:  # bringing a stale pose forward failed: take it as it is
+                    found = seeds[0]
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = None
             with self._lock:
-                self._found = (frame_id, found)
+                self._found = (frame_id, found, not full)
+            self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
+            return kind if found is not None else None
 
         self.searches += 1
         tr.n_initialisations += 1
@@ -217,9 +244,10 @@ class LiveTrackerFitter(TrackerFitter):
         """A finished search's pose (no velocity across it) when it fits this set better.
 
         The search's pose is of the set it started on; the track went on meanwhile.  Both the
-        tracker's prediction and the search's pose are fitted to this set and the one whose fit
-        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
-        the search's pose, there is no other)."""
+        tracker's prediction (if any) and the search's pose are fitted to this set and the one whose
+        fit scores the higher silhouette IoU becomes the tracker's pose.  When even that one scores
+        below ``TrackerOptions.min_iou`` on a later set than the search's (the body moved on while it
+        searched), it is brought onto this set by the cheap ``rejoin`` beside the stream."""
         from tracker.fitting.tracking import fit_frame
         from tracker.search.scoring import ScoreViews
 
@@ -231,21 +259,54 @@ class LiveTrackerFitter(TrackerFitter):
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
         start, start_frame = found[1], int(found[0])
-        if current is not None and names:
+        if names:
             cams = [tr.cameras[n] for n in names]
             chs = {n: images[n] for n in names}
             views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
             fitted = []
-            for start in (current, found[1]):
-                res, _ = fit_frame(tr.model, cams, chs, start, sliding=tr.sliding, solver=tr.solver,
-                                   options=tr.options)
+            for p in (current, found[1]):
+                if p is None:
+                    fitted.append((-1.0, None))
+                    continue
+                res, _ = fit_frame(tr.model, cams, chs, p, sliding=tr.sliding, solver=tr.solver, options=tr.options)
                 fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
             if fitted[0][0] >= fitted[1][0]:
                 return  # the track is as good: it came back by itself
+            if fitted[1][0] < tr.options.min_iou and int(frame_id) != start_frame and self.bring_forward \
+                    and not found[2]:
+                self.brought_forward += 1
+                self._start_search(frame_id, [fitted[1][1], found[1]], images, silhouettes, full=False)
+                return
             start, start_frame = fitted[1][1], int(frame_id)
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
+
+    def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
+        """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the
+        tracker's fit) on this set, in the caller's time; when it finds a pose that passes the
+        tracker's gate, the set is fitted again from it and that record returned, else None."""
+        from tracker.search.recovery import rejoin
+
+        tr = self.tracker
+        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        if not names:
+            return None
+        try:
+            res = rejoin(tr.model, [tr.cameras[n] for n in names], {n: silhouettes[n] for n in names},
+                         {n: images[n] for n in names}, [tr.last_good, tr.params], options=tr.options.recover_search,
+                         n_headings=self.rejoin_headings, accept_iou=tr.options.min_iou,
+                         min_inside_fraction=tr.options.min_inside_fraction)
+        except ValueError as exc:
+            log.info("rejoin failed: %s", exc)
+            return None
+        self.search_kinds["rejoin now"] = self.search_kinds.get("rejoin now", 0) + 1
+        if res is None:
+            return None
+        tr.params, tr.previous, tr._frames = tr.model.clamp(np.asarray(res.params, dtype=float)), None, (None, None)
+        tr.monitor.reset()
+        self.rejoined += 1
+        return tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
 
     def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:
         """The record of a set that arrives while a search runs: not ok, the prediction if any."""
@@ -286,11 +347,17 @@ class LiveTrackerFitter(TrackerFitter):
                 if not self.searching:
                     self.effort.update(self.clock() - t0, bool(record.get("ok")))
                 if not record.get("ok"):
+                    poor = str(record.get("reason", "")).startswith("poor fit")
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
-                    elif tr.monitor.bad_frames >= tr.monitor.patience:
-                        self._start_search(frame_id, tr.last_good, images, silhouettes)
+                    elif poor and self.rejoin_spacing >= 0 and self._sets_since_rejoin >= self.rejoin_spacing:
+                        self._sets_since_rejoin = 0
+                        record = self._rejoin_now(frame_id, timestamp_ns, images, silhouettes) or record
+                        record["effort"] = level.as_record()
+                    if not record.get("ok") and not self.searching and tr.monitor.bad_frames >= tr.monitor.patience:
+                        self._start_search(frame_id, [tr.last_good, tr.params], images, silhouettes)
             self._last_frame = int(frame_id)
+            self._sets_since_rejoin += 1
         self._last_ok = bool(record.get("ok"))
         record["fit_ms"] = 1e3 * (self.clock() - t0)
         return record
