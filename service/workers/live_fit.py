@@ -335,8 +335,9 @@ class LiveTrackerFitter(TrackerFitter):
             silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
             if not self.searching:
                 self._take_found(frame_id, images, silhouettes)
-            if tr.params is None:
-                self._start_search(frame_id, None, images, silhouettes)
+            if tr.params is None:  # (a search's pose may be being brought onto a newer set)
+                if not self.searching:
+                    self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
             else:  # tracking goes on beside a recovery search: it may come back by itself
                 level = EFFORT_LEVELS[self.effort.level]
