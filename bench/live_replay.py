@@ -7,8 +7,8 @@ its searches held back for as many sets as they would take live (``--search-sets
 default=15,rejoin=3``, or ``--sets-per-cpu-s 60``: a search's CPU seconds × that, i.e. the frame
 rate times how much slower a search runs beside the stream than alone).  Prints ok sets, mean
 joint error over ok sets and over all sets with a pose, searches by kind, and the bad sets' clip
-frames.  ``--old-recovery`` turns off what issue 13's recovery work added (the cheap rejoin at once
-and bringing a stale search's pose forward) for A/B runs on one tree.
+frames.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
+runs on one tree.
 
     python bench/live_replay.py [--json] [--sets 180] [--gaps 1 2 3 2,1,3] [--search-sets default=15,rejoin=3]
 """
@@ -63,7 +63,7 @@ def main() -> None:
     for gaps in args.gaps:
         gap = [int(g) for g in gaps.split(",")]
         runner = HeldSearches(parse_sets(args.search_sets), sets_per_cpu_s=args.sets_per_cpu_s)
-        extra = dict(rejoin_spacing=-1, bring_forward=False) if args.old_recovery else {}
+        extra = dict(rejoin_spacing=-1) if args.old_recovery else {}
         fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, **extra)
         c0 = time.process_time()
         rep = replay_live(clip, every_nth(args.sets, gap), fitter=fitter, use_rois=not args.no_rois)
@@ -74,7 +74,7 @@ def main() -> None:
                "mean_joint_error_ok_m": float(np.nanmean(err[ok])) if ok.any() else None,
                "mean_joint_error_all_m": float(np.nanmean(err)) if np.isfinite(err).any() else None,
                "searches": dict(getattr(fitter, "search_kinds", {"all": fitter.searches})), "rejoined": fitter.rejoined,
-               "brought_forward": getattr(fitter, "brought_forward", 0), "held_sets": [s for _, s in runner.held],
+               "held_sets": [s for _, s in runner.held],
                "roi_sets": rep.roi_sets, "cpu_ms_per_set": 1e3 * cpu / max(1, len(rep.records)),
                "bad_clip_frames": [int(r["frame"]) % clip.n_frames for r in rep.records if not r.get("ok")]}
         runs.append(run)

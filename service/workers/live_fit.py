@@ -3,14 +3,17 @@
 :class:`LiveTrackerFitter` wraps :class:`~tracker.fitting.tracking.Tracker` for live delivery
 (lossless keeps :class:`~service.workers.components.TrackerFitter`: the same poses as offline):
 
+- **Rejoin at once.**  A poor fit tries the cheap recovery on its own set, in the set's time
+  (``tracker.search.recovery.rejoin`` from the last good pose and the fit, a few tens of ms;
+  at most every ``rejoin_spacing`` sets): when it finds a pose the set is fitted again from it.
 - **Never stall the stream.**  A search from the silhouettes (the first frame's initialisation,
-  the recovery once ``patience`` frames in a row were bad) runs in a thread beside the worker's
-  loop.  While it searches, every set still gets its record at once: during the initialisation
-  ``ok: false`` with ``reason`` ``"searching: ..."``; during a recovery the tracker goes on
-  fitting from its prediction (a bad fit is ``ok: false``, its reason saying a search runs).
-  When the search ends, the tracker's prediction and the pose found are both fitted to the next
-  set; the one with the higher silhouette IoU is the tracker's pose from there (a track that came
-  back by itself is kept, a drifted one rejoins the search's); a failed search is retried.
+  the recovery once ``patience`` frames in a row were bad: ``rejoin`` again, then the full
+  ``recover``) runs beside the worker's loop (a thread: ``search_runner``).  While it searches,
+  every set still gets its record at once: during the initialisation ``ok: false`` with
+  ``reason`` ``"searching: ..."``; during a recovery the tracker goes on fitting from its
+  prediction (a bad fit is ``ok: false``, its reason saying a search runs).  When the search
+  ends, the tracker's prediction and the pose found are both fitted to the next set; the one
+  with the higher silhouette IoU is the tracker's pose from there; a failed search is retried.
 - **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
   tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
   fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
@@ -57,6 +60,10 @@ class EffortLevel:
 
 EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLevel(2, 5, 6, 100))
 """Full effort first (the ``TrackerOptions`` defaults), then cheaper settings."""
+
+REJOIN_ACCEPT_IOU = None
+"""Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
+``TrackerOptions.min_iou``; docs/performance.md compares stricter ones)."""
 
 
 class EffortController:
@@ -146,8 +153,8 @@ class LiveTrackerFitter(TrackerFitter):
         synchronously and holds their result for a given number of sets).
     rejoin_headings : int
         Headings per seed of the cheap recovery stage (``tracker.search.recovery.rejoin``).
-    bring_forward : bool
-        Bring a search's pose that no longer fits onto the newest set (``_take_found``).
+    rejoin_accept_iou : float or None
+        Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate).
     rejoin_spacing : int
         A poor fit tries the cheap recovery at once, in the set's own time (``_rejoin_now``), when
         the last such try was at least this many sets ago (-1: never; the background search after
@@ -157,7 +164,7 @@ class LiveTrackerFitter(TrackerFitter):
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
-                 bring_forward: bool = True, rejoin_spacing: int = 5) -> None:
+                 rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU) -> None:
         super().__init__(tracker)
         tracker.recover = False
         self.base_options = tracker.options
@@ -167,14 +174,13 @@ class LiveTrackerFitter(TrackerFitter):
         self.clock = clock
         self._lock = threading.Lock()
         self.search_runner = ThreadSearches() if search_runner is None else search_runner
-        # (frame id, params or None on failure, whether it was a bring-forward)
-        self._found: tuple[int, np.ndarray | None, bool] | None = None
+        self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
-        self.searches = self.rejoined = self.brought_forward = 0
+        self.searches = self.rejoined = 0
         self.search_kinds: dict[str, int] = {}
-        self.rejoin_headings, self.bring_forward = rejoin_headings, bool(bring_forward)
+        self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
 
     @classmethod
@@ -194,12 +200,17 @@ class LiveTrackerFitter(TrackerFitter):
         """Whether a search runs in the background."""
         return self.search_runner.busy()
 
-    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
+    def _rejoin_accept_iou(self) -> float:
+        """Least silhouette IoU of a rejoined pose (``rejoin_accept_iou``, at least the tracker's gate)."""
+        gate = self.tracker.options.min_iou
+        return gate if self.rejoin_accept_iou is None else max(gate, self.rejoin_accept_iou)
+
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict) -> None:
         """Search from ``silhouettes`` beside the stream (``search_runner``).
 
         ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
-        ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
-        from the first of them."""
+        ``seeds`` (the poses to try, in order) and, when it fails, the full ``recover`` from the
+        first of them."""
         from tracker.search.initialise import initialise
         from tracker.search.recovery import recover, rejoin
 
@@ -220,19 +231,17 @@ class LiveTrackerFitter(TrackerFitter):
                     res = initialise(tr.model, cams, sils, chs, options=tr.options.initialise_search)
                 else:
                     res = rejoin(tr.model, cams, sils, chs, seeds, options=tr.options.recover_search,
-                                 n_headings=self.rejoin_headings, accept_iou=tr.options.min_iou,
+                                 n_headings=self.rejoin_headings, accept_iou=self._rejoin_accept_iou(),
                                  min_inside_fraction=tr.options.min_inside_fraction)
-                    if res is None and full:
+                    if res is None:
                         kind = "full"
                         res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
-                found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
-                if found is None and not full:  # bringing a stale pose forward failed: take it as it is
-                    found = seeds[0]
+                found = tr.model.clamp(np.asarray(res.params, dtype=float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = None
             with self._lock:
-                self._found = (frame_id, found, not full)
+                self._found = (frame_id, found)
             self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
             return kind if found is not None else None
 
@@ -244,10 +253,9 @@ class LiveTrackerFitter(TrackerFitter):
         """A finished search's pose (no velocity across it) when it fits this set better.
 
         The search's pose is of the set it started on; the track went on meanwhile.  Both the
-        tracker's prediction (if any) and the search's pose are fitted to this set and the one whose
-        fit scores the higher silhouette IoU becomes the tracker's pose.  When even that one scores
-        below ``TrackerOptions.min_iou`` on a later set than the search's (the body moved on while it
-        searched), it is brought onto this set by the cheap ``rejoin`` beside the stream."""
+        tracker's prediction and the search's pose are fitted to this set and the one whose fit
+        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
+        the search's pose, there is no other)."""
         from tracker.fitting.tracking import fit_frame
         from tracker.search.scoring import ScoreViews
 
@@ -259,24 +267,16 @@ class LiveTrackerFitter(TrackerFitter):
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
         start, start_frame = found[1], int(found[0])
-        if names:
+        if current is not None and names:
             cams = [tr.cameras[n] for n in names]
             chs = {n: images[n] for n in names}
             views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
             fitted = []
             for p in (current, found[1]):
-                if p is None:
-                    fitted.append((-1.0, None))
-                    continue
                 res, _ = fit_frame(tr.model, cams, chs, p, sliding=tr.sliding, solver=tr.solver, options=tr.options)
                 fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
             if fitted[0][0] >= fitted[1][0]:
                 return  # the track is as good: it came back by itself
-            if fitted[1][0] < tr.options.min_iou and int(frame_id) != start_frame and self.bring_forward \
-                    and not found[2]:
-                self.brought_forward += 1
-                self._start_search(frame_id, [fitted[1][1], found[1]], images, silhouettes, full=False)
-                return
             start, start_frame = fitted[1][1], int(frame_id)
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
@@ -295,7 +295,7 @@ class LiveTrackerFitter(TrackerFitter):
         try:
             res = rejoin(tr.model, [tr.cameras[n] for n in names], {n: silhouettes[n] for n in names},
                          {n: images[n] for n in names}, [tr.last_good, tr.params], options=tr.options.recover_search,
-                         n_headings=self.rejoin_headings, accept_iou=tr.options.min_iou,
+                         n_headings=self.rejoin_headings, accept_iou=self._rejoin_accept_iou(),
                          min_inside_fraction=tr.options.min_inside_fraction)
         except ValueError as exc:
             log.info("rejoin failed: %s", exc)
@@ -335,9 +335,8 @@ class LiveTrackerFitter(TrackerFitter):
             silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
             if not self.searching:
                 self._take_found(frame_id, images, silhouettes)
-            if tr.params is None:  # (a search's pose may be being brought onto a newer set)
-                if not self.searching:
-                    self._start_search(frame_id, None, images, silhouettes)
+            if tr.params is None:
+                self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
             else:  # tracking goes on beside a recovery search: it may come back by itself
                 level = EFFORT_LEVELS[self.effort.level]
