@@ -151,20 +151,21 @@ class LiveTrackerFitter(TrackerFitter):
     search_runner : object with ``start(fn, name)`` and ``busy()``, optional
         Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
         synchronously and holds their result for a given number of sets).
-    rejoin_headings : int
-        Headings per seed of the cheap recovery stage (``tracker.search.recovery.rejoin``).
-    rejoin_accept_iou : float or None
-        Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate).
-    rejoin_spacing : int
-        A poor fit tries the cheap recovery at once, in the set's own time (``_rejoin_now``), when
-        the last such try was at least this many sets ago (-1: never; the background search after
-        ``patience`` bad sets remains).
+    rejoin_headings, rejoin_accept_iou : int, float or None
+        The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; least IoU of
+        its pose (None: the tracker's own gate).
+    rejoin_spacing, rejoin_beside : int, bool
+        A poor fit tries the cheap recovery at once when the last try was at least
+        ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
+        in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
+        latency spike; its pose is taken a few sets later, as a search's).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
-                 rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU) -> None:
+                 rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
+                 rejoin_beside: bool = False) -> None:
         super().__init__(tracker)
         tracker.recover = False
         self.base_options = tracker.options
@@ -182,6 +183,7 @@ class LiveTrackerFitter(TrackerFitter):
         self.search_kinds: dict[str, int] = {}
         self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
+        self.rejoin_beside = bool(rejoin_beside)
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -205,12 +207,12 @@ class LiveTrackerFitter(TrackerFitter):
         gate = self.tracker.options.min_iou
         return gate if self.rejoin_accept_iou is None else max(gate, self.rejoin_accept_iou)
 
-    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict) -> None:
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
         """Search from ``silhouettes`` beside the stream (``search_runner``).
 
         ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
-        ``seeds`` (the poses to try, in order) and, when it fails, the full ``recover`` from the
-        first of them."""
+        ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
+        from the first of them."""
         from tracker.search.initialise import initialise
         from tracker.search.recovery import recover, rejoin
 
@@ -233,10 +235,10 @@ class LiveTrackerFitter(TrackerFitter):
                     res = rejoin(tr.model, cams, sils, chs, seeds, options=tr.options.recover_search,
                                  n_headings=self.rejoin_headings, accept_iou=self._rejoin_accept_iou(),
                                  min_inside_fraction=tr.options.min_inside_fraction)
-                    if res is None:
+                    if res is None and full:
                         kind = "full"
                         res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
-                found = tr.model.clamp(np.asarray(res.params, dtype=float))
+                found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = None
@@ -350,12 +352,18 @@ class LiveTrackerFitter(TrackerFitter):
                     poor = str(record.get("reason", "")).startswith("poor fit")
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
-                    elif poor and self.rejoin_spacing >= 0 and self._sets_since_rejoin >= self.rejoin_spacing:
-                        self._sets_since_rejoin = 0
-                        record = self._rejoin_now(frame_id, timestamp_ns, images, silhouettes) or record
-                        record["effort"] = level.as_record()
-                    if not record.get("ok") and not self.searching and tr.monitor.bad_frames >= tr.monitor.patience:
-                        self._start_search(frame_id, [tr.last_good, tr.params], images, silhouettes)
+                    else:
+                        due = poor and self.rejoin_spacing >= 0 and self._sets_since_rejoin >= self.rejoin_spacing
+                        if due:
+                            self._sets_since_rejoin = 0
+                        if due and not self.rejoin_beside:
+                            record = self._rejoin_now(frame_id, timestamp_ns, images, silhouettes) or record
+                            record["effort"] = level.as_record()
+                        seeds = [tr.last_good, tr.params]
+                        if not record.get("ok") and tr.monitor.bad_frames >= tr.monitor.patience:
+                            self._start_search(frame_id, seeds, images, silhouettes)  # rejoin, then the full search
+                        elif due and self.rejoin_beside:
+                            self._start_search(frame_id, seeds, images, silhouettes, full=False)
             self._last_frame = int(frame_id)
             self._sets_since_rejoin += 1
         self._last_ok = bool(record.get("ok"))
