@@ -3,14 +3,17 @@
 :class:`LiveTrackerFitter` wraps :class:`~tracker.fitting.tracking.Tracker` for live delivery
 (lossless keeps :class:`~service.workers.components.TrackerFitter`: the same poses as offline):
 
+- **Rejoin at once.**  A poor fit tries the cheap recovery on its own set, in the set's time
+  (``tracker.search.recovery.rejoin`` from the last good pose and the fit, a few tens of ms;
+  at most every ``rejoin_spacing`` sets): when it finds a pose the set is fitted again from it.
 - **Never stall the stream.**  A search from the silhouettes (the first frame's initialisation,
-  the recovery once ``patience`` frames in a row were bad) runs in a thread beside the worker's
-  loop.  While it searches, every set still gets its record at once: during the initialisation
-  ``ok: false`` with ``reason`` ``"searching: ..."``; during a recovery the tracker goes on
-  fitting from its prediction (a bad fit is ``ok: false``, its reason saying a search runs).
-  When the search ends, the tracker's prediction and the pose found are both fitted to the next
-  set; the one with the higher silhouette IoU is the tracker's pose from there (a track that came
-  back by itself is kept, a drifted one rejoins the search's); a failed search is retried.
+  the recovery once ``patience`` frames in a row were bad: ``rejoin`` again, then the full
+  ``recover``) runs beside the worker's loop (a thread: ``search_runner``).  While it searches,
+  every set still gets its record at once: during the initialisation ``ok: false`` with
+  ``reason`` ``"searching: ..."``; during a recovery the tracker goes on fitting from its
+  prediction (a bad fit is ``ok: false``, its reason saying a search runs).  When the search
+  ends, the tracker's prediction and the pose found are both fitted to the next set; the one
+  with the higher silhouette IoU is the tracker's pose from there; a failed search is retried.
 - **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
   tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
   fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
@@ -35,7 +38,7 @@ import numpy as np
 
 from service.workers.components import TrackerFitter, message_to_chamfer, silhouette_mask
 
-__all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter"]
+__all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter", "ThreadSearches"]
 
 log = logging.getLogger("contourcap.worker")
 
@@ -57,6 +60,10 @@ class EffortLevel:
 
 EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLevel(2, 5, 6, 100))
 """Full effort first (the ``TrackerOptions`` defaults), then cheaper settings."""
+
+REJOIN_ACCEPT_IOU = None
+"""Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
+``TrackerOptions.min_iou``; docs/performance.md compares stricter ones)."""
 
 
 class EffortController:
@@ -108,6 +115,22 @@ class EffortController:
         return self.level
 
 
+class ThreadSearches:
+    """Runs each search in a daemon thread (the live default): ``start(fn, name)``, ``busy()``."""
+
+    def __init__(self) -> None:
+        self._thread: threading.Thread | None = None
+
+    def start(self, fn: Callable[[], None], name: str) -> None:
+        """Run ``fn()`` beside the caller."""
+        self._thread = threading.Thread(target=fn, name=name, daemon=True)
+        self._thread.start()
+
+    def busy(self) -> bool:
+        """Whether the last search still runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+
 class LiveTrackerFitter(TrackerFitter):
     """``(frame_id, timestamp_ns, {camera: ChamferMessage}) -> pose record`` for live delivery
     (module docstring).
@@ -125,11 +148,24 @@ class LiveTrackerFitter(TrackerFitter):
         (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
     clock : callable () -> float
         Seconds (fit times).
+    search_runner : object with ``start(fn, name)`` and ``busy()``, optional
+        Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
+        synchronously and holds their result for a given number of sets).
+    rejoin_headings, rejoin_accept_iou : int, float or None
+        The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; least IoU of
+        its pose (None: the tracker's own gate).
+    rejoin_spacing, rejoin_beside : int, bool
+        A poor fit tries the cheap recovery at once when the last try was at least
+        ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
+        in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
+        latency spike; its pose is taken a few sets later, as a search's).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
+                 rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
+                 rejoin_beside: bool = False) -> None:
         super().__init__(tracker)
         tracker.recover = False
         self.base_options = tracker.options
@@ -138,12 +174,16 @@ class LiveTrackerFitter(TrackerFitter):
         self.roi_max_margin_m, self.roi_margin_px = float(roi_max_margin_m), int(roi_margin_px)
         self.clock = clock
         self._lock = threading.Lock()
-        self._search: threading.Thread | None = None
+        self.search_runner = ThreadSearches() if search_runner is None else search_runner
         self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
         self.searches = self.rejoined = 0
+        self.search_kinds: dict[str, int] = {}
+        self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
+        self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
+        self.rejoin_beside = bool(rejoin_beside)
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -160,12 +200,21 @@ class LiveTrackerFitter(TrackerFitter):
     @property
     def searching(self) -> bool:
         """Whether a search runs in the background."""
-        return self._search is not None and self._search.is_alive()
+        return self.search_runner.busy()
 
-    def _start_search(self, frame_id: int, hint, images: dict, silhouettes: dict) -> None:
-        """Search from ``silhouettes`` in a thread (``hint`` None: initialisation, else the last good pose)."""
+    def _rejoin_accept_iou(self) -> float:
+        """Least silhouette IoU of a rejoined pose (``rejoin_accept_iou``, at least the tracker's gate)."""
+        gate = self.tracker.options.min_iou
+        return gate if self.rejoin_accept_iou is None else max(gate, self.rejoin_accept_iou)
+
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
+        """Search from ``silhouettes`` beside the stream (``search_runner``).
+
+        ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
+        ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
+        from the first of them."""
         from tracker.search.initialise import initialise
-        from tracker.search.recovery import recover
+        from tracker.search.recovery import recover, rejoin
 
         tr = self.tracker
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
@@ -174,26 +223,33 @@ class LiveTrackerFitter(TrackerFitter):
         cams = [tr.cameras[n] for n in names]
         sils = {n: silhouettes[n] for n in names}
         chs = {n: images[n] for n in names}
-        hint = None if hint is None else np.array(hint)
-        what = "initialisation" if hint is None else "recovery"
+        seeds = None if seeds is None else [np.array(p) for p in seeds if p is not None]
+        what = "initialisation" if seeds is None else "recovery"
 
-        def run() -> None:
+        def run() -> str | None:
+            kind = "initialise" if seeds is None else "rejoin"
             try:
-                if hint is None:
+                if seeds is None:
                     res = initialise(tr.model, cams, sils, chs, options=tr.options.initialise_search)
                 else:
-                    res = recover(tr.model, cams, sils, chs, hint, options=tr.options.recover_search)
-                found = tr.model.clamp(np.asarray(res.params, dtype=float))
+                    res = rejoin(tr.model, cams, sils, chs, seeds, options=tr.options.recover_search,
+                                 n_headings=self.rejoin_headings, accept_iou=self._rejoin_accept_iou(),
+                                 min_inside_fraction=tr.options.min_inside_fraction)
+                    if res is None and full:
+                        kind = "full"
+                        res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
+                found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = None
             with self._lock:
                 self._found = (frame_id, found)
+            self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
+            return kind if found is not None else None
 
         self.searches += 1
         tr.n_initialisations += 1
-        self._search = threading.Thread(target=run, name=f"search-{what}", daemon=True)
-        self._search.start()
+        self.search_runner.start(run, f"search-{what}")
 
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
@@ -218,9 +274,8 @@ class LiveTrackerFitter(TrackerFitter):
             chs = {n: images[n] for n in names}
             views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
             fitted = []
-            for start in (current, found[1]):
-                res, _ = fit_frame(tr.model, cams, chs, start, sliding=tr.sliding, solver=tr.solver,
-                                   options=tr.options)
+            for p in (current, found[1]):
+                res, _ = fit_frame(tr.model, cams, chs, p, sliding=tr.sliding, solver=tr.solver, options=tr.options)
                 fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
             if fitted[0][0] >= fitted[1][0]:
                 return  # the track is as good: it came back by itself
@@ -228,6 +283,32 @@ class LiveTrackerFitter(TrackerFitter):
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
+
+    def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
+        """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the
+        tracker's fit) on this set, in the caller's time; when it finds a pose that passes the
+        tracker's gate, the set is fitted again from it and that record returned, else None."""
+        from tracker.search.recovery import rejoin
+
+        tr = self.tracker
+        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        if not names:
+            return None
+        try:
+            res = rejoin(tr.model, [tr.cameras[n] for n in names], {n: silhouettes[n] for n in names},
+                         {n: images[n] for n in names}, [tr.last_good, tr.params], options=tr.options.recover_search,
+                         n_headings=self.rejoin_headings, accept_iou=self._rejoin_accept_iou(),
+                         min_inside_fraction=tr.options.min_inside_fraction)
+        except ValueError as exc:
+            log.info("rejoin failed: %s", exc)
+            return None
+        self.search_kinds["rejoin now"] = self.search_kinds.get("rejoin now", 0) + 1
+        if res is None:
+            return None
+        tr.params, tr.previous, tr._frames = tr.model.clamp(np.asarray(res.params, dtype=float)), None, (None, None)
+        tr.monitor.reset()
+        self.rejoined += 1
+        return tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
 
     def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:
         """The record of a set that arrives while a search runs: not ok, the prediction if any."""
@@ -268,11 +349,23 @@ class LiveTrackerFitter(TrackerFitter):
                 if not self.searching:
                     self.effort.update(self.clock() - t0, bool(record.get("ok")))
                 if not record.get("ok"):
+                    poor = str(record.get("reason", "")).startswith("poor fit")
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
-                    elif tr.monitor.bad_frames >= tr.monitor.patience:
-                        self._start_search(frame_id, tr.last_good, images, silhouettes)
+                    else:
+                        due = poor and self.rejoin_spacing >= 0 and self._sets_since_rejoin >= self.rejoin_spacing
+                        if due:
+                            self._sets_since_rejoin = 0
+                        if due and not self.rejoin_beside:
+                            record = self._rejoin_now(frame_id, timestamp_ns, images, silhouettes) or record
+                            record["effort"] = level.as_record()
+                        seeds = [tr.last_good, tr.params]
+                        if not record.get("ok") and tr.monitor.bad_frames >= tr.monitor.patience:
+                            self._start_search(frame_id, seeds, images, silhouettes)  # rejoin, then the full search
+                        elif due and self.rejoin_beside:
+                            self._start_search(frame_id, seeds, images, silhouettes, full=False)
             self._last_frame = int(frame_id)
+            self._sets_since_rejoin += 1
         self._last_ok = bool(record.get("ok"))
         record["fit_ms"] = 1e3 * (self.clock() - t0)
         return record

@@ -186,3 +186,23 @@ def test_local_stage_falls_back_to_the_full_search():
     err = np.linalg.norm(joint_centre_array(model, forward(model, res.params))
                          - joint_centre_array(model, forward(model, truth)), axis=1)
     assert err.mean() < 0.04
+
+
+def test_rejoin_takes_the_first_sure_seed_and_skips_bad_ones():
+    """``rejoin``: non-finite seeds are skipped; from a seed near the truth (the hop, 3 frames
+    earlier) it returns a pose within 30 mm that reaches ``recover``'s own acceptance; a gate no
+    pose can reach gives None (the caller then runs the full search)."""
+    from tracker.search.recovery import rejoin
+
+    mot = _hop(74)
+    model, last, truth = mot.model, mot.params[70], mot.params[73]
+    cams = ring_cameras(4, size=(640, 480), start_deg=20.0)
+    sils, chamfer = rendered_views(model, truth, cams)
+    truth_joints = joint_centre_array(model, forward(model, truth))
+    bad = np.full(model.n_params, np.nan)
+    res = rejoin(model, cams, sils, chamfer, [bad, last])
+    assert res is not None and res.label.startswith("local/")
+    assert np.linalg.norm(joint_centre_array(model, forward(model, res.params)) - truth_joints, axis=1).mean() < 0.03
+    assert rejoin(model, cams, sils, chamfer, [bad]) is None
+    assert rejoin(model, cams, sils, chamfer, [last], options=SearchOptions.for_recovery(accept_iou=1.01),
+                  accept_iou=1.01) is None

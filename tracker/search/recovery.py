@@ -44,7 +44,7 @@ from tracker.search.mirror import front_back_cost, joints_at_limits, mirror_para
 from tracker.search.refine import InitResult, refine
 from tracker.search.scoring import ScoreViews, prepare_inputs
 
-__all__ = ["LossMonitor", "LossState", "recover", "local_search"]
+__all__ = ["LossMonitor", "LossState", "recover", "local_search", "rejoin"]
 
 OK, SUSPECT, LOST = "ok", "suspect", "lost"
 
@@ -252,3 +252,54 @@ def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[st
         model, hull, n_headings=options.n_headings, arm_abduction_deg=options.arm_abduction_deg, hint=last)
     facing = feet_direction(hull) if options.use_feet else None
     return search_candidates(model, inputs, hull, views, cands, options, facing=facing)
+
+
+def rejoin(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],
+           chamfer: ChamferViews | None, seeds: Sequence[np.ndarray], *,
+           options: SearchOptions = SearchOptions.for_recovery(), n_headings: int | None = None,
+           accept_iou: float | None = None, min_inside_fraction: float = 0.8) -> InitResult | None:
+    """The cheap stage of ``recover`` alone, from several seeds: a lost track rejoins or None.
+
+    ``local_search`` runs from each finite seed in turn (e.g. the last good pose, then the
+    tracker's last fit, or a stale search result to bring onto this frame set).  A result that
+    reaches ``recover``'s own acceptance IoU is returned at once; otherwise the best-scoring
+    result that reaches ``accept_iou`` after all seeds.  Its cost is bounded (one hull, at most
+    one limb search and two staged refinements per seed), so a caller can run it between frames.
+
+    Parameters
+    ----------
+    model, cameras, silhouettes, chamfer
+        As ``recover``.
+    seeds : sequence of ndarray, shape (n_params,)
+        Start poses, tried in order; non-finite ones are skipped.
+    options : SearchOptions
+        ``accept_iou``, ``iou_margin``, ``front_back``, the hull and scoring views.
+    n_headings : int, optional
+        Headings tried per seed (default ``options.n_headings``).
+    accept_iou, min_inside_fraction : float or None, float
+        Least mean IoU and fraction of contour points on the silhouettes of an accepted result
+        (``accept_iou`` None: as ``recover``; a tracker passes its own quality gate).
+
+    Returns
+    -------
+    InitResult or None
+        ValueError as ``recover`` (bad views, no common volume).
+    """
+    inputs = prepare_inputs(model, cameras, silhouettes, chamfer)
+    hull, views = search_views(model, inputs, options, caller="rejoin")
+    sure = min(options.accept_iou, views.expected_iou() - options.iou_margin)
+    accept = sure if accept_iou is None else min(float(accept_iou), sure)
+    best = None
+    for seed in seeds:
+        seed = np.asarray(seed, dtype=float)
+        if seed.shape != (model.n_params,) or not np.all(np.isfinite(seed)):
+            continue
+        res = local_search(model, inputs.cameras, inputs.chamfer, views, hull, model.clamp(seed),
+                           n_headings=options.n_headings if n_headings is None else int(n_headings),
+                           accept_iou=accept, min_inside_fraction=min_inside_fraction,
+                           mirror_check=options.front_back)
+        if res is not None and res.score >= sure:
+            return res
+        if res is not None and (best is None or res.score > best.score):
+            best = res
+    return best
