@@ -67,7 +67,7 @@ from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
 from tracker.synthetic.bvh import load_bvh  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
-from service.offline import track_session  # noqa: E402
+from service.offline import floor_test, track_session  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
 from tracker.synthetic.synth import bundled_motion  # noqa: E402
@@ -109,17 +109,22 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     rng = np.random.default_rng(7919 * subject_index + n_cameras)
     backgrounds = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(N_BACKGROUND)])
                    for c, bg in zip(cams, studio.backgrounds)}  # fmt: skip
+    floor = floor_test(cams, backgrounds)
     for c in cams:
         (root / c.name).mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     ious = []
     for f in range(prim.n_frames):
         images, masks = studio.render(prim, f)
-        for c, img, mask in zip(cams, images, masks):
+        decoded_set = {}
+        for c, img in zip(cams, images):
             decoded, jpeg = studio.camera_output(img, rng)
             (root / c.name / f"{f:06d}.jpg").write_bytes(jpeg)
-            if f % IOU_EVERY == 0:
-                sil = segment_frame(backgrounds[c.name], decoded).silhouette > 0
+            decoded_set[c.name] = decoded
+        if f % IOU_EVERY == 0:
+            for c, mask in zip(cams, masks):
+                fl = None if floor is None else floor.for_camera(c.name, decoded_set)
+                sil = segment_frame(backgrounds[c.name], decoded_set[c.name], floor=fl).silhouette > 0
                 ious.append(np.sum(sil & mask) / max(np.sum(sil | mask), 1))
     render_ms = 1e3 * (time.perf_counter() - t0) / prim.n_frames
     save_calibration(root / "calibration.toml", cams)

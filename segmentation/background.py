@@ -297,20 +297,24 @@ class BackgroundModel:
         x0, y0, x1, y1 = check_roi(roi, self.size)
         return self._distance_in(image_bgr[y0:y1, x0:x1], (slice(y0, y1), slice(x0, x1)))
 
-    def _distance_in(self, region: np.ndarray, sl) -> np.ndarray:
+    def _distance_in(self, region: np.ndarray, sl, terms: bool = False):
         """Distance ``(h, w)`` of a BGR uint8 ``region`` ``(h, w, 3)`` against the model pixels
-        ``sl = (slice(y0, y1), slice(x0, x1))``, computed in bands of rows that stay in cache."""
+        ``sl = (slice(y0, y1), slice(x0, x1))``, computed in bands of rows that stay in cache;
+        ``terms``: also the plain distance and the brightness ratio (``distance_terms``)."""
         h, w = region.shape[:2]
         d = np.empty((h, w), np.float32)
+        plain = np.empty((h, w), np.float32) if terms else None
+        ratio = np.empty((h, w), np.float32) if terms else None
         rows = max(1, min(h, BAND_PIXELS // max(w, 1)))
         ws = self._workspace((rows, w))
         y0 = sl[0].start
         for r0 in range(0, h, rows):  # a loop over ~10-30 bands, not over pixels
             r1 = min(r0 + rows, h)
-            self._distance_band(region[r0:r1], (slice(y0 + r0, y0 + r1), sl[1]), ws, r1 - r0, d[r0:r1])
-        return d
+            extra = (plain[r0:r1], ratio[r0:r1]) if terms else None
+            self._distance_band(region[r0:r1], (slice(y0 + r0, y0 + r1), sl[1]), ws, r1 - r0, d[r0:r1], extra)
+        return (d, plain, ratio) if terms else d
 
-    def _distance_band(self, region, sl, ws: dict, n: int, out: np.ndarray) -> None:
+    def _distance_band(self, region, sl, ws: dict, n: int, out: np.ndarray, extra=None) -> None:
         bgr, p, t3, big_c, big_b, s, t = (ws[k][:n] for k in ("bgr", "p", "t3", "c", "b", "s", "t"))
         np.copyto(bgr, region, casting="unsafe")  # uint8 -> float32 into a reused buffer
         cv2.transform(bgr, BGR2YUV, dst=p)
@@ -326,6 +330,11 @@ class BackgroundModel:
         cv2.multiply(p, self._a[sl], dst=t3)
         cv2.transform(t3, _ONES, dst=big_b)
         cv2.multiply(big_b, self._inv_a[sl], dst=s)
+        if extra is not None:  # C - 2 B + A: the distance without the shadow relaxation; B / A
+            cv2.scaleAdd(big_b, -2.0, big_c, dst=extra[0])
+            cv2.add(extra[0], self._big_a[sl], dst=extra[0])
+            cv2.max(extra[0], 0.0, dst=extra[0])
+            np.copyto(extra[1], s)
         lo, hi = self.shadow_range
         cv2.max(s, lo, dst=s)
         cv2.min(s, hi, dst=s)
@@ -350,7 +359,55 @@ class BackgroundModel:
             self._scratch[shape] = ws
         return ws
 
-    def coarse_distance(self, image_bgr: np.ndarray) -> np.ndarray:
+    def distance_terms(self, image_bgr: np.ndarray, *, roi=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`distance`, the plain Mahalanobis distance (no shadow relaxation) and the
+        brightness ratio ``B / A`` of each pixel (the shadow factor before clipping).
+
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+        roi : (int, int, int, int), optional
+            ``(x0, y0, x1, y1)``, as :meth:`distance`.
+
+        Returns
+        -------
+        distance, plain, ratio : ndarray, each shape (y1 - y0, x1 - x0), float32
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        x0, y0, x1, y1 = check_roi(roi, self.size)
+        return self._distance_in(image_bgr[y0:y1, x0:x1], (slice(y0, y1), slice(x0, x1)), terms=True)
+
+    def distance_at(self, image_bgr: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                    scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Plain squared distances of single pixels to the background and to the background
+        darkened by ``scale`` (``s * mu``: a shadow of that depth), without relaxation.
+
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+        rows, cols : ndarray of int, shape (n,)
+            Pixel coordinates inside the image.
+        scale : ndarray, shape (n,)
+            Brightness factor per pixel.
+
+        Returns
+        -------
+        unchanged, darkened : ndarray, each shape (n,), float32
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        rows, cols = np.asarray(rows, np.intp), np.asarray(cols, np.intp)
+        p = image_bgr[rows, cols].astype(np.float32) @ BGR2YUV.T  # (n, 3) centred YUV
+        mu = self.mean_yuv[rows, cols]
+        inv = self._inv[rows, cols]  # (n, 3, 3)
+        a = np.einsum("nij,nj->ni", inv, mu)  # K^-1 mu
+        big_a, big_b = np.einsum("ni,ni->n", a, mu), np.einsum("ni,ni->n", a, p)
+        big_c = np.einsum("ni,nij,nj->n", p, inv, p)
+        s = np.asarray(scale, np.float32)
+        unchanged = np.maximum(big_c - 2 * big_b + big_a, 0)
+        darkened = np.maximum(big_c - 2 * s * big_b + s * s * big_a, 0)
+        return unchanged.astype(np.float32), darkened.astype(np.float32)
+
+    def coarse_distance(self, image_bgr: np.ndarray, *, plain: bool = False) -> np.ndarray:
         """The distance at half resolution: 2x2 block means of the image against those of the model.
 
         About four times cheaper; a first pass that finds where the person is (e.g. for an automatic
@@ -359,6 +416,8 @@ class BackgroundModel:
         Parameters
         ----------
         image_bgr : ndarray, shape (h, w, 3), uint8
+        plain : bool
+            The distance without the shadow relaxation (finds shadows and shadow-like body parts too).
 
         Returns
         -------
@@ -367,7 +426,8 @@ class BackgroundModel:
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         coarse = self._coarse_model()
         small = _downsample(image_bgr)
-        return coarse._distance_in(small, (slice(0, small.shape[0]), slice(0, small.shape[1])))
+        sl = (slice(0, small.shape[0]), slice(0, small.shape[1]))
+        return coarse._distance_in(small, sl, terms=True)[1] if plain else coarse._distance_in(small, sl)
 
     def _coarse_model(self) -> "BackgroundModel":
         if self._coarse is None:
