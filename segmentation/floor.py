@@ -18,14 +18,17 @@ there votes:
 
 A candidate is body when its body votes outnumber its shadow votes, or when no other camera sees
 its floor point at all (a cast shadow lies near the body, on the floor all cameras watch).  Body
-candidates lose the shadow relaxation (their distance becomes the plain one); the rest keep it.
-Pixels whose ray does not reach the floor in front of the camera are left alone.
+candidates that survive an opening (with the pixels already foreground: thin lines of
+view-dependent change, e.g. a glossy floor's reflection hidden by the person, are dropped) lose
+the shadow relaxation (their distance becomes the plain one); the rest keep it.  Pixels whose ray
+does not reach the floor in front of the camera are left alone.
 """
 
 from __future__ import annotations
 
 from typing import Mapping, Sequence
 
+import cv2
 import numpy as np
 
 from capture.camera import Camera
@@ -69,9 +72,13 @@ class FloorShadows:
         Background model per camera name (each of its camera's image size).
     low : float
         The foreground threshold on the squared distance (the segmentation's hysteresis ``low``).
+    open_px : int
+        Radius of the opening of (foreground or body candidates) that body candidates must survive,
+        pixels (0: none).
     """
 
-    def __init__(self, cameras: Sequence[Camera], models: Mapping[str, BackgroundModel], *, low: float = 16.0) -> None:
+    def __init__(self, cameras: Sequence[Camera], models: Mapping[str, BackgroundModel], *, low: float = 16.0,
+                 open_px: int = 2) -> None:
         self.cameras = {c.name: c for c in cameras}
         if len(self.cameras) < 2:
             raise ValueError(f"cameras: the floor test needs at least 2 cameras, got {len(self.cameras)}")
@@ -84,7 +91,11 @@ class FloorShadows:
         if not (np.isfinite(low) and low > 0):
             raise ValueError(f"low: expected a finite number > 0, got {low!r}")
         self.models = {n: models[n] for n in self.cameras}
+        if not (isinstance(open_px, (int, np.integer)) and open_px >= 0):
+            raise ValueError(f"open_px: expected an integer >= 0, got {open_px!r}")
         self.low = float(low)
+        self.open_px = int(open_px)
+        self._disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * self.open_px + 1, 2 * self.open_px + 1))
         self._floor = {n: floor_points(c) for n, c in self.cameras.items()}
 
     def refine(self, name: str, images: Mapping[str, np.ndarray], box, distance: np.ndarray, plain: np.ndarray,
@@ -136,8 +147,13 @@ class FloorShadows:
             body_votes[idx] += (unchanged <= self.low) & (unchanged < darkened)
             shadow_votes[idx] += (darkened <= self.low) & (darkened <= unchanged)
         body = (body_votes > shadow_votes) | ~seen
+        promoted = np.zeros(distance.shape, np.uint8)
+        promoted[rows[body], cols[body]] = 255
+        if self.open_px > 0:  # thin promoted lines (a view-dependent change along a wall's base) go
+            union = np.where(distance > self.low, np.uint8(255), promoted)
+            promoted &= cv2.morphologyEx(union, cv2.MORPH_OPEN, self._disk)
         out = distance.copy()
-        out[rows[body], cols[body]] = plain[rows[body], cols[body]]
+        np.copyto(out, plain, where=promoted > 0)
         return out
 
     def for_camera(self, name: str, images: Mapping[str, np.ndarray]):

@@ -105,3 +105,5 @@ def test_floor_test_rejects_bad_input():
         FloorShadows(cams, models, low=float("nan"))
     with pytest.raises(ValueError, match="no camera"):
         FloorShadows(cams, models).for_camera("nope", {})
+    with pytest.raises(ValueError, match="open_px"):
+        FloorShadows(cams, models, open_px=-1)
