@@ -62,3 +62,21 @@ def test_without_a_reference_the_floor_applies():
     assert opts.lost_iou_floor < opts.min_iou
     tracker = Tracker(retarget_bvh(load_bvh(HOP), model="knossow40", frames=1).model, ring_cameras(2, size=(64, 48)))
     assert tracker.lost_iou_limit() == pytest.approx(opts.lost_iou_floor)
+
+
+def test_an_rms_jump_triggers_the_iou_check(scene):
+    # silhouettes of a body 20 % larger than the model: the fit's RMS triples (0.45 -> ~1.4 px) but
+    # stays far below the RMS limit (6 px); the jump makes the IoU render run, and the IoU fails
+    from tracker.body.model import load_model
+
+    cameras, model, p0, (ch, sil) = scene
+    big = load_model("knossow40", height_m=1.2 * model.height_m)
+    ch2, sil2 = render_chamfer(big, p0, cameras)
+    for jump, expect_checked in ((1.5, True), (None, False)):
+        tracker = Tracker(model, cameras, initial_params=p0, options=TrackerOptions(iou_every=100, iou_rms_jump=jump))
+        first = [tracker.step(k, k, ch, sil) for k in range(4)]
+        assert ["iou" in r for r in first] == [True, False, False, False]
+        after = tracker.step(4, 4, ch2, sil2)
+        assert after["rms_px"] < 0.75 * tracker.rms_limit()
+        assert ("iou" in after) is expect_checked
+        assert after["ok"] is not expect_checked

@@ -61,7 +61,7 @@ class TrackerOptions:
         Start each fit from the constant-velocity extrapolation.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
         Quality limits of a good frame (a worse frame is reported ``ok: false``).
-    iou_every, iou_check_coverage
+    iou_every, iou_check_coverage, iou_rms_jump
         When the silhouette IoU check (costly: a render) runs.
     lost_iou_margin, lost_iou_floor, iou_window
         Which IoU failures count towards a lost track (the rest are only not ok).
@@ -125,6 +125,9 @@ class TrackerOptions:
     #: above ¾ of its limit, or an inside fraction within 0.1 of its limit (1: every frame)
     iou_every: int = 10
     iou_check_coverage: float = 0.8
+    #: ... and when the RMS exceeds ``iou_rms_jump`` × the median RMS of the recent good frames (a
+    #: fit that jumps off the body without reaching the RMS limit; None: off)
+    iou_rms_jump: float | None = 1.5
     #: a body that is not the model's shape cannot reach ``min_iou``: a frame that fails only the IoU
     #: limit yet reaches ``max(lost_iou_floor, min(min_iou, reference - lost_iou_margin))`` (reference:
     #: the median IoU of the last ``iou_window`` frames that passed the other limits; none yet: the
@@ -360,7 +363,10 @@ class Tracker:
 
     def _iou_due(self, terms) -> bool:
         """Whether the (costly) silhouette IoU check runs on this frame (``TrackerOptions``)."""
-        return self._last_bad or self._since_iou + 1 >= self.options.iou_every or self._suspect(terms)
+        o = self.options
+        jump = (o.iou_rms_jump is not None and bool(self._good_rms)
+                and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
+        return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
 
     def _bad(self, terms, views) -> str:
         """Why the fit at ``terms`` is poor ("" when it is good); ``views``: a callable returning
