@@ -428,11 +428,12 @@ class BackgroundModel:
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         rows, cols = np.asarray(rows, np.intp), np.asarray(cols, np.intp)
         p = image_bgr[rows, cols].astype(np.float32) @ BGR2YUV.T  # (n, 3) centred YUV
-        mu = self.mean_yuv[rows, cols]
-        inv = self._inv[rows, cols]  # (n, 3, 3)
-        a = np.einsum("nij,nj->ni", inv, mu)  # K^-1 mu
-        big_a, big_b = np.einsum("ni,ni->n", a, mu), np.einsum("ni,ni->n", a, p)
-        big_c = np.einsum("ni,nij,nj->n", p, inv, p)
+        big_a = self._big_a[rows, cols]
+        big_b = np.einsum("ni,ni->n", self._a[rows, cols], p)  # p^T K^-1 mu
+        if self.covariance == "full":
+            big_c = np.einsum("ni,nij,nj->n", p, self._inv[rows, cols], p)
+        else:
+            big_c = np.einsum("ni,ni->n", p * p, self._pdiag[rows, cols])
         s = np.asarray(scale, np.float32)
         unchanged = np.maximum(big_c - 2 * big_b + big_a, 0)
         darkened = np.maximum(big_c - 2 * s * big_b + s * s * big_a, 0)
