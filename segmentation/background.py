@@ -366,9 +366,10 @@ class BackgroundModel:
         lo, hi = self.shadow_range
         cv2.max(s, lo, dst=s)
         cv2.min(s, hi, dst=s)
-        if resid is not None:  # the relaxed residual p - s mu
-            np.multiply(self.mean_yuv[sl], s[..., None], out=resid)
-            np.subtract(p, resid, out=resid)
+        if resid is not None:  # the relaxed residual p - s mu (t3 is free here; OpenCV, not a broadcast)
+            cv2.merge((s, s, s), dst=t3)
+            cv2.multiply(self.mean_yuv[sl], t3, dst=t3)
+            cv2.subtract(p, t3, dst=resid)
         cv2.multiply(s, self._big_a[sl], dst=t)
         cv2.scaleAdd(big_b, -2.0, t, dst=t)  # s A - 2 B
         cv2.multiply(s, t, dst=t)
