@@ -340,7 +340,9 @@ class BackgroundModel:
             window = cv2.transform(q, _ONES)
         window *= np.float32(k * k / WINDOW_CORRELATION)
         window = cv2.erode(window, self._window_disk, borderType=cv2.BORDER_REFLECT)
-        np.maximum(d, window, out=d, where=d > WINDOW_GATE)
+        # raise only pixels above the gate: window zeroed elsewhere (d >= 0), OpenCV not a masked ufunc
+        cv2.subtract(window, window, dst=window, mask=cv2.compare(d, WINDOW_GATE, cv2.CMP_LE))
+        cv2.max(d, window, dst=d)
 
     def _distance_band(self, region, sl, ws: dict, n: int, out: np.ndarray, extra=None, resid=None) -> None:
         bgr, p, t3, big_c, big_b, s, t = (ws[k][:n] for k in ("bgr", "p", "t3", "c", "b", "s", "t"))
