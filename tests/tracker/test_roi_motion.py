@@ -80,3 +80,16 @@ def test_bad_arguments(model):
     bad = p.copy()
     bad[7] = np.nan
     np.testing.assert_array_equal(motion_margins(model, bad, p, max_m=0.3), 0.3)
+
+
+def test_gain_one_covers_the_previous_pose(model):
+    """Every corner of a part's box at ``previous`` is within the part's motion of a corner at the
+    prediction, so with gain 1 the rectangle also holds the previous pose's rectangle (no union needed)."""
+    rng = np.random.default_rng(4)
+    cams = ring_cameras(4, size=(800, 600))
+    for _ in range(8):
+        prev = model.random_params(rng, fraction=0.3)
+        pred = model.clamp(prev + rng.normal(0.0, 0.08, model.n_params))
+        grown = pose_rois(model, pred, cams, margin_m=motion_margins(model, pred, prev, base_m=0.0), margin_px=0)
+        for (a0, b0, a1, b1), (c0, d0, c1, d1) in zip(pose_rois(model, prev, cams, margin_m=0.0, margin_px=0), grown):
+            assert c0 <= a0 and d0 <= b0 and a1 <= c1 and b1 <= d1
