@@ -57,7 +57,9 @@ def motion_margins(model: BodyModel, params: np.ndarray, previous: np.ndarray, *
     Each part's margin is ``base_m + gain * motion``, where ``motion`` is the largest displacement of
     the part's box corners between ``previous`` (the pose the prediction starts from, e.g. the last
     fit) and ``params`` (the prediction), capped at ``max_m``; ``gain`` 1 covers a part that stops
-    or doubles its speed.  Poses that are not finite give ``max_m`` everywhere.
+    or doubles its speed, and (every corner at ``previous`` being within that distance of one at
+    ``params``) the rectangle then also holds the one of ``previous``: no union of the two needed.
+    Poses that are not finite give ``max_m`` everywhere.
 
     Parameters
     ----------
