@@ -22,7 +22,6 @@ import cv2
 import numpy as np
 
 from segmentation.checks import check_finite_array, check_mask
-from segmentation.edt import exact_distance
 
 __all__ = ["ChamferImages", "ChamferSample", "chamfer_images", "distance_to_mask", "sample_bilinear",
            "quantise", "content_box"]
@@ -66,6 +65,8 @@ def distance_to_mask(mask: np.ndarray, *, max_distance_px: float, precise: bool 
     if not (np.isfinite(max_distance_px) and max_distance_px > 0):
         raise ValueError(f"max_distance_px: expected a finite number > 0, got {max_distance_px!r}")
     if precise:  # the exact transform, truncation-aware (segmentation.edt): OpenCV's values, cheaper
+        from segmentation.edt import exact_distance  # numba is imported on first use, not with the package
+
         return exact_distance(mask, float(max_distance_px))
     if cv2.countNonZero(mask) == 0:  # OpenCV would return ~1e19 (no zero pixel in its input)
         return np.full(mask.shape, max_distance_px, np.float32)
