@@ -47,6 +47,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import datetime  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
@@ -67,7 +68,8 @@ from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
 from tracker.synthetic.bvh import load_bvh  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
-from service.offline import track_session  # noqa: E402
+from service.offline import floor_test, track_session  # noqa: E402
+from tracker.fitting.tracking import TrackerOptions  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
 from tracker.synthetic.synth import bundled_motion  # noqa: E402
@@ -109,17 +111,22 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
     rng = np.random.default_rng(7919 * subject_index + n_cameras)
     backgrounds = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(N_BACKGROUND)])
                    for c, bg in zip(cams, studio.backgrounds)}  # fmt: skip
+    floor = floor_test(cams, backgrounds)
     for c in cams:
         (root / c.name).mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     ious = []
     for f in range(prim.n_frames):
         images, masks = studio.render(prim, f)
-        for c, img, mask in zip(cams, images, masks):
+        decoded_set = {}
+        for c, img in zip(cams, images):
             decoded, jpeg = studio.camera_output(img, rng)
             (root / c.name / f"{f:06d}.jpg").write_bytes(jpeg)
-            if f % IOU_EVERY == 0:
-                sil = segment_frame(backgrounds[c.name], decoded).silhouette > 0
+            decoded_set[c.name] = decoded
+        if f % IOU_EVERY == 0:
+            for c, mask in zip(cams, masks):
+                fl = None if floor is None else floor.for_camera(c.name, decoded_set)
+                sil = segment_frame(backgrounds[c.name], decoded_set[c.name], floor=fl).silhouette > 0
                 ious.append(np.sum(sil & mask) / max(np.sum(sil | mask), 1))
     render_ms = 1e3 * (time.perf_counter() - t0) / prim.n_frames
     save_calibration(root / "calibration.toml", cams)
@@ -188,6 +195,13 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     err = frame_errors(pred, truth)
     series = {"mpjpe_mm": [None if not np.isfinite(v) else round(1e3 * v, 1) for v in err["mpjpe"]],
               "mirrored": [bool(v) for v in mirrored_frames(err)], "ok": [bool(v) for v in ok]}
+    per_joint = np.linalg.norm(pred - truth, axis=-1)  # (n, 16), NaN without a pose
+    posed = np.isfinite(per_joint).all(axis=1)
+    joint_mm = {j: round(1e3 * float(per_joint[posed, i].mean()), 1) if posed.any() else None
+                for i, j in enumerate(JOINT_NAMES)}
+    by_frame = {rec["frame"]: rec for rec in records}
+    for key in ("iou", "rms_px", "inside_fraction", "coverage", "reason"):  # the quality figures, for gate studies
+        series[key] = [by_frame.get(k, {}).get(key) for k in range(len(truth))]
     floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
     reasons: dict[str, int] = {}
@@ -198,7 +212,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
             "height_m": round(height, 3),
             **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
-            "not_ok_reasons": reasons, "ms_per_frame_median": float(np.median(lat)),
+            "not_ok_reasons": reasons, "joint_mm": joint_mm, "ms_per_frame_median": float(np.median(lat)),
             "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
             "wall_s": time.perf_counter() - t_clip,
             "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
@@ -261,6 +275,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
     ap.add_argument("--no-front-back", action="store_true",
                     help="track without the front/back guard (tracker.fitting.hypotheses), for comparison")
+    ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
+                    help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
                     help="combine the --out files of several runs (nothing is run)")
@@ -269,6 +285,8 @@ def main(argv=None) -> int:
         return _emit(merge(args.merge), args)
     if args.no_front_back:
         TRACK_OPTIONS["front_back"] = None
+    if args.tracker_option:
+        TRACK_OPTIONS["options"] = _tracker_options(args.tracker_option, ap)
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
@@ -316,6 +334,20 @@ def main(argv=None) -> int:
     result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), **header, "wall_s": time.perf_counter() - t_start,
               "per_clip": per_clip}
     return _emit(result, args)
+
+
+def _tracker_options(pairs, ap) -> TrackerOptions:
+    """``TrackerOptions`` with ``NAME=VALUE`` fields replaced (numbers, true/false, none)."""
+    fields = {f.name: f for f in dataclasses.fields(TrackerOptions)}
+    changes = {}
+    for pair in pairs:
+        name, _, text = pair.partition("=")
+        if name not in fields or not text:
+            ap.error(f"--tracker-option {pair!r}: expected NAME=VALUE with NAME a TrackerOptions field")
+        low = text.lower()
+        changes[name] = (None if low == "none" else low == "true" if low in ("true", "false")
+                         else int(text) if text.lstrip("-").isdigit() else float(text))
+    return dataclasses.replace(TrackerOptions(), **changes)
 
 
 def _emit(result: dict, args) -> int:

@@ -239,11 +239,14 @@ def bench_distance_accuracy() -> dict:
     return {"mask5_max_abs_err_px": float(np.abs(precise - mask5).max())}
 
 
-def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: Path | None) -> dict:
+def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: Path | None,
+                   stages: bool = True) -> dict:
     """Segmentation where the body can be: per camera, the rectangle of ``tracker.imaging.roi.pose_rois``
     around the predicted pose (constant velocity from the two previous true poses, as the tracker
     predicts from its fits) against the full frame (``auto_roi`` off) and the default automatic
-    ROI, on a rendered hop session (``tracker.synthetic.synth``, true silhouettes kept).  Times are medians
+    ROI, on a rendered hop session (``tracker.synthetic.synth``, true silhouettes kept); also the rectangle
+    with per-part margins from the predicted motion (``motion_margins``: 2 cm + the part's motion since
+    the previous pose), and (``stages``) the time of each stage of the three.  Times are medians
     over cameras and frames of ``segment_frame``; IoU against the true silhouette and against the
     full-frame segmentation (1.0: the ROI lost nothing)."""
     import tempfile
@@ -251,7 +254,7 @@ def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: P
     from capture.replay import iter_frame_sets
     from capture.session import load_session
     from service.offline import background_models, session_model
-    from tracker.imaging.roi import pose_rois
+    from tracker.imaging.roi import motion_margins, pose_rois
     from tracker.synthetic.synth import bundled_motion
 
     from service.synthetic_session import make_synthetic_session
@@ -268,28 +271,41 @@ def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: P
         names = [c.name for c in cams]
         bgs, _ = background_models(session, names)
         full_p, auto_p = SegmentationParams(auto_roi=False), SegmentationParams()
-        rows = []
+        rows, stage_rows = [], {}
         for fid, group in iter_frame_sets(session, frames=range(2, frames)):
             pred = model.clamp(2.0 * np.asarray(truth[fid - 1]) - np.asarray(truth[fid - 2]))
             rois = pose_rois(model, pred, cams)
-            for cam, roi in zip(cams, rois):
+            motion = pose_rois(model, pred, cams, margin_m=motion_margins(model, pred, np.asarray(truth[fid - 1])))
+            for cam, roi, mroi in zip(cams, rois, motion):
                 img, bg = group[cam.name].image, bgs[cam.name]
                 mask_path = root / "masks" / cam.name / f"{fid:06d}.png"
                 true = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) if mask_path.is_file() else None
                 t_full, seg_full = _ms(lambda: segment_frame(bg, img, params=full_p), repeats)
                 t_auto, _ = _ms(lambda: segment_frame(bg, img, params=auto_p), repeats)
                 t_roi, seg_roi = _ms(lambda: segment_frame(bg, img, roi=roi, params=full_p), repeats)
+                t_motion, seg_motion = _ms(lambda: segment_frame(bg, img, roi=mroi, params=full_p), repeats)
                 w, h = bg.size
                 x0, y0, x1, y1 = roi or (0, 0, w, h)
-                rows.append({"full_ms": t_full, "auto_ms": t_auto, "roi_ms": t_roi,
+                mx0, my0, mx1, my1 = mroi or (0, 0, w, h)
+                if stages:
+                    for key, box in (("full", None), ("roi", roi), ("motion_roi", mroi)):
+                        stage_rows.setdefault(key, []).append(stage_times(bg, img, full_p, box, repeats))
+                rows.append({"full_ms": t_full, "auto_ms": t_auto, "roi_ms": t_roi, "motion_roi_ms": t_motion,
                              "roi_fraction": (x1 - x0) * (y1 - y0) / (w * h),
+                             "motion_roi_fraction": (mx1 - mx0) * (my1 - my0) / (w * h),
+                             "iou_motion_roi_vs_full": _iou(seg_motion.silhouette, seg_full.silhouette),
                              "iou_roi_vs_full": _iou(seg_roi.silhouette, seg_full.silhouette),
                              "iou_full_vs_true": _iou(seg_full.silhouette, true) if true is not None else None,
                              "iou_roi_vs_true": _iou(seg_roi.silhouette, true) if true is not None else None})
-    med = {k: float(np.median([r[k] for r in rows])) for k in ("full_ms", "auto_ms", "roi_ms", "roi_fraction")}
+    med = {k: float(np.median([r[k] for r in rows]))
+           for k in ("full_ms", "auto_ms", "roi_ms", "motion_roi_ms", "roi_fraction", "motion_roi_fraction")}
     out = {"frames": frames - 2, "cameras": len(cams), "size": list(size), "camera_frames": len(rows), **med,
            "roi_over_full": med["roi_ms"] / med["full_ms"], "roi_over_auto": med["roi_ms"] / med["auto_ms"],
-           "iou_roi_vs_full_min": min(r["iou_roi_vs_full"] for r in rows)}
+           "motion_roi_over_full": med["motion_roi_ms"] / med["full_ms"],
+           "iou_roi_vs_full_min": min(r["iou_roi_vs_full"] for r in rows),
+           "iou_motion_roi_vs_full_min": min(r["iou_motion_roi_vs_full"] for r in rows)}
+    for key, per in stage_rows.items():  # median ms per stage, each stage timed alone (stage_times)
+        out[f"stages_{key}"] = {k: float(np.median([t[k] for t in per])) for k in per[0] if k.endswith("_ms")}
     if rows[0]["iou_full_vs_true"] is not None:
         out["iou_full_vs_true_mean"] = float(np.mean([r["iou_full_vs_true"] for r in rows]))
         out["iou_roi_vs_true_mean"] = float(np.mean([r["iou_roi_vs_true"] for r in rows]))

@@ -15,17 +15,18 @@ the nearest point of the segment ``{s * mu : s in shadow_range}``::
     A = mu^T K^-1 mu,   B = p^T K^-1 mu,   C = p^T K^-1 p
     s = clip(B / A, *shadow_range),   d = (C - 2 s B + s^2 A) / min(s, 1)^2        (d >= 0)
 
-The division by ``s^2`` (the same scaling as OpenCV's MOG2 shadow test) makes a darker
-"shadow" match the background's colour more closely.  For neutral (grey / white) background
-colours this axis is exactly the Y axis, i.e. the paper's relaxation; for coloured backgrounds
-(a green floor) it is the physically right one.  With ``shadow_range = (1, 1)`` it is the plain
-Mahalanobis distance.
+The division by ``s^2`` (as OpenCV's MOG2 shadow test) makes a darker "shadow" match the background's
+colour more closely.  For grey backgrounds this axis is the paper's Y axis; for coloured ones (a
+green floor) the physically right one; ``shadow_range = (1, 1)``: the plain Mahalanobis distance.
 
-Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only; the default: the
-variance floor ``min_sigma`` dominates on nearly noiseless backgrounds and the cross terms change
-nothing measurable).  Measurements behind these choices: docs/tuning.md, "Segmentation".
-All per-frame work is a handful of OpenCV float32 array operations into reused buffers.
-``BGR2YUV`` has OpenCV's YUV coefficients without the +128 offsets and without uint8 clipping.
+Camouflage (``window_px`` > 0).  A body part near the background's colour differs a little but by
+one offset over its area; noise and shadows do not.  The relaxed residuals ``p - s mu`` are averaged
+over a square window, their norm scaled by its effective sample count (area / ``WINDOW_CORRELATION``),
+grey-eroded, and raise pixels already above ``WINDOW_GATE``.
+
+Covariance ``"full"`` (3x3 per pixel) or ``"diag"`` (YUV variances only, the default); measurements
+behind these choices: docs/tuning.md, "Segmentation".  ``BGR2YUV``: OpenCV's YUV coefficients without
+the +128 offsets and without uint8 clipping.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ _PERM = BGR2YUV[[1, 2, 0]].copy()
 _ONES = np.ones((1, 3), np.float32)
 _COV_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # layout of the 6 stored covariance terms
 _FORMAT_VERSION = 1
+WINDOW_CORRELATION = 3.0  # window area per effectively independent sample of the camouflage test
+WINDOW_GATE = 4.0  # the camouflage test raises only pixels whose own distance exceeds this
 BAND_PIXELS = 65536  # pixels per band of rows in the distance computation (measured ~20 % faster than whole-image)
 
 
@@ -135,11 +138,13 @@ class BackgroundModel:
         ``(s_lo, s_hi)`` brightness factors still explained as background.
     min_sigma : float
         Floor of the per-channel standard deviation, YUV levels.
+    window_px : int
+        Radius of the camouflage test's window, pixels (0: off).
     """
 
     def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "diag",
                  luma_relax: float = 1.0, shadow_range: tuple[float, float] = (0.5, 1.1),
-                 min_sigma: float = 2.5) -> None:
+                 min_sigma: float = 2.5, window_px: int = 1) -> None:
         mean_yuv = np.asarray(mean_yuv, dtype=np.float32)
         cov_yuv = np.asarray(cov_yuv, dtype=np.float32)
         if mean_yuv.ndim != 3 or mean_yuv.shape[2] != 3 or min(mean_yuv.shape[:2]) < 1:
@@ -157,6 +162,8 @@ class BackgroundModel:
             raise ValueError(f"luma_relax: expected a finite number >= 1, got {luma_relax!r}")
         if not (np.isfinite(min_sigma) and min_sigma > 0):
             raise ValueError(f"min_sigma: expected a finite number > 0, got {min_sigma!r}")
+        if not (isinstance(window_px, (int, np.integer)) and 0 <= window_px <= 8):
+            raise ValueError(f"window_px: expected an integer in 0..8, got {window_px!r}")
         self.mean_yuv = np.ascontiguousarray(mean_yuv)
         self.cov_yuv = np.ascontiguousarray(cov_yuv)
         if covariance == "diag":
@@ -165,6 +172,8 @@ class BackgroundModel:
         self.luma_relax = float(luma_relax)
         self.shadow_range = (lo, hi)
         self.min_sigma = float(min_sigma)
+        self.window_px = int(window_px)
+        self._window_disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * self.window_px + 1,) * 2)
         self._scratch: dict = {}
         self._coarse: BackgroundModel | None = None
         self._precision()
@@ -180,7 +189,7 @@ class BackgroundModel:
         frames : iterable of ndarray, each shape (h, w, 3), uint8
             At least 2 BGR frames of the empty scene.
         **options
-            ``covariance``, ``luma_relax``, ``shadow_range``, ``min_sigma`` (see the class).
+            ``covariance``, ``luma_relax``, ``shadow_range``, ``min_sigma``, ``window_px`` (see the class).
 
         Returns
         -------
@@ -297,20 +306,45 @@ class BackgroundModel:
         x0, y0, x1, y1 = check_roi(roi, self.size)
         return self._distance_in(image_bgr[y0:y1, x0:x1], (slice(y0, y1), slice(x0, x1)))
 
-    def _distance_in(self, region: np.ndarray, sl) -> np.ndarray:
+    def _distance_in(self, region: np.ndarray, sl, terms: bool = False):
         """Distance ``(h, w)`` of a BGR uint8 ``region`` ``(h, w, 3)`` against the model pixels
-        ``sl = (slice(y0, y1), slice(x0, x1))``, computed in bands of rows that stay in cache."""
+        ``sl = (slice(y0, y1), slice(x0, x1))``, computed in bands of rows that stay in cache;
+        ``terms``: also the plain distance and the brightness ratio (``distance_terms``)."""
         h, w = region.shape[:2]
         d = np.empty((h, w), np.float32)
+        plain = np.empty((h, w), np.float32) if terms else None
+        ratio = np.empty((h, w), np.float32) if terms else None
         rows = max(1, min(h, BAND_PIXELS // max(w, 1)))
         ws = self._workspace((rows, w))
         y0 = sl[0].start
+        q = np.empty((h, w, 3), np.float32) if self.window_px else None
         for r0 in range(0, h, rows):  # a loop over ~10-30 bands, not over pixels
             r1 = min(r0 + rows, h)
-            self._distance_band(region[r0:r1], (slice(y0 + r0, y0 + r1), sl[1]), ws, r1 - r0, d[r0:r1])
-        return d
+            extra = (plain[r0:r1], ratio[r0:r1]) if terms else None
+            self._distance_band(region[r0:r1], (slice(y0 + r0, y0 + r1), sl[1]), ws, r1 - r0, d[r0:r1], extra,
+                                None if q is None else q[r0:r1])
+        if q is not None:
+            self._camouflage(q, sl, d)
+        return (d, plain, ratio) if terms else d
 
-    def _distance_band(self, region, sl, ws: dict, n: int, out: np.ndarray) -> None:
+    def _camouflage(self, q: np.ndarray, sl, d: np.ndarray) -> None:
+        """The window test of the module docstring, in place on ``d`` (h, w); ``q`` (h, w, 3) the relaxed
+        residual vectors of the pixels ``sl``."""
+        k = 2 * self.window_px + 1
+        cv2.boxFilter(q, -1, (k, k), dst=q, borderType=cv2.BORDER_REFLECT)
+        if self.covariance == "full":
+            window = np.einsum("hwi,hwij,hwj->hw", q, self._inv[sl], q).astype(np.float32)
+        else:
+            cv2.multiply(q, q, dst=q)
+            cv2.multiply(q, self._pdiag[sl], dst=q)
+            window = cv2.transform(q, _ONES)
+        window *= np.float32(k * k / WINDOW_CORRELATION)
+        window = cv2.erode(window, self._window_disk, borderType=cv2.BORDER_REFLECT)
+        # raise only pixels above the gate: window zeroed elsewhere (d >= 0), OpenCV not a masked ufunc
+        cv2.subtract(window, window, dst=window, mask=cv2.compare(d, WINDOW_GATE, cv2.CMP_LE))
+        cv2.max(d, window, dst=d)
+
+    def _distance_band(self, region, sl, ws: dict, n: int, out: np.ndarray, extra=None, resid=None) -> None:
         bgr, p, t3, big_c, big_b, s, t = (ws[k][:n] for k in ("bgr", "p", "t3", "c", "b", "s", "t"))
         np.copyto(bgr, region, casting="unsafe")  # uint8 -> float32 into a reused buffer
         cv2.transform(bgr, BGR2YUV, dst=p)
@@ -326,9 +360,18 @@ class BackgroundModel:
         cv2.multiply(p, self._a[sl], dst=t3)
         cv2.transform(t3, _ONES, dst=big_b)
         cv2.multiply(big_b, self._inv_a[sl], dst=s)
+        if extra is not None:  # C - 2 B + A: the distance without the shadow relaxation; B / A
+            cv2.scaleAdd(big_b, -2.0, big_c, dst=extra[0])
+            cv2.add(extra[0], self._big_a[sl], dst=extra[0])
+            cv2.max(extra[0], 0.0, dst=extra[0])
+            np.copyto(extra[1], s)
         lo, hi = self.shadow_range
         cv2.max(s, lo, dst=s)
         cv2.min(s, hi, dst=s)
+        if resid is not None:  # the relaxed residual p - s mu (t3 is free here; OpenCV, not a broadcast)
+            cv2.merge((s, s, s), dst=t3)
+            cv2.multiply(self.mean_yuv[sl], t3, dst=t3)
+            cv2.subtract(p, t3, dst=resid)
         cv2.multiply(s, self._big_a[sl], dst=t)
         cv2.scaleAdd(big_b, -2.0, t, dst=t)  # s A - 2 B
         cv2.multiply(s, t, dst=t)
@@ -350,7 +393,56 @@ class BackgroundModel:
             self._scratch[shape] = ws
         return ws
 
-    def coarse_distance(self, image_bgr: np.ndarray) -> np.ndarray:
+    def distance_terms(self, image_bgr: np.ndarray, *, roi=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`distance`, the plain Mahalanobis distance (no shadow relaxation) and the
+        brightness ratio ``B / A`` of each pixel (the shadow factor before clipping).
+
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+        roi : (int, int, int, int), optional
+            ``(x0, y0, x1, y1)``, as :meth:`distance`.
+
+        Returns
+        -------
+        distance, plain, ratio : ndarray, each shape (y1 - y0, x1 - x0), float32
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        x0, y0, x1, y1 = check_roi(roi, self.size)
+        return self._distance_in(image_bgr[y0:y1, x0:x1], (slice(y0, y1), slice(x0, x1)), terms=True)
+
+    def distance_at(self, image_bgr: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                    scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Plain squared distances of single pixels to the background and to the background
+        darkened by ``scale`` (``s * mu``: a shadow of that depth), without relaxation.
+
+        Parameters
+        ----------
+        image_bgr : ndarray, shape (h, w, 3), uint8
+        rows, cols : ndarray of int, shape (n,)
+            Pixel coordinates inside the image.
+        scale : ndarray, shape (n,)
+            Brightness factor per pixel.
+
+        Returns
+        -------
+        unchanged, darkened : ndarray, each shape (n,), float32
+        """
+        check_image_bgr(image_bgr, "image_bgr", size=self.size)
+        rows, cols = np.asarray(rows, np.intp), np.asarray(cols, np.intp)
+        p = image_bgr[rows, cols].astype(np.float32) @ BGR2YUV.T  # (n, 3) centred YUV
+        big_a = self._big_a[rows, cols]
+        big_b = np.einsum("ni,ni->n", self._a[rows, cols], p)  # p^T K^-1 mu
+        if self.covariance == "full":
+            big_c = np.einsum("ni,nij,nj->n", p, self._inv[rows, cols], p)
+        else:
+            big_c = np.einsum("ni,ni->n", p * p, self._pdiag[rows, cols])
+        s = np.asarray(scale, np.float32)
+        unchanged = np.maximum(big_c - 2 * big_b + big_a, 0)
+        darkened = np.maximum(big_c - 2 * s * big_b + s * s * big_a, 0)
+        return unchanged.astype(np.float32), darkened.astype(np.float32)
+
+    def coarse_distance(self, image_bgr: np.ndarray, *, plain: bool = False) -> np.ndarray:
         """The distance at half resolution: 2x2 block means of the image against those of the model.
 
         About four times cheaper; a first pass that finds where the person is (e.g. for an automatic
@@ -359,6 +451,8 @@ class BackgroundModel:
         Parameters
         ----------
         image_bgr : ndarray, shape (h, w, 3), uint8
+        plain : bool
+            The distance without the shadow relaxation (finds shadows and shadow-like body parts too).
 
         Returns
         -------
@@ -367,13 +461,15 @@ class BackgroundModel:
         check_image_bgr(image_bgr, "image_bgr", size=self.size)
         coarse = self._coarse_model()
         small = _downsample(image_bgr)
-        return coarse._distance_in(small, (slice(0, small.shape[0]), slice(0, small.shape[1])))
+        sl = (slice(0, small.shape[0]), slice(0, small.shape[1]))
+        return coarse._distance_in(small, sl, terms=True)[1] if plain else coarse._distance_in(small, sl)
 
     def _coarse_model(self) -> "BackgroundModel":
         if self._coarse is None:
             self._coarse = BackgroundModel(_downsample(self.mean_yuv), _downsample(self.cov_yuv),
                                            covariance=self.covariance, luma_relax=self.luma_relax,
-                                           shadow_range=self.shadow_range, min_sigma=self.min_sigma)
+                                           shadow_range=self.shadow_range, min_sigma=self.min_sigma,
+                                           window_px=self.window_px)
         return self._coarse
 
     def update(self, image_bgr: np.ndarray, foreground: np.ndarray, *, rate: float = 0.01) -> None:
@@ -416,7 +512,8 @@ class BackgroundModel:
         np.savez_compressed(
             path, format_version=np.int64(_FORMAT_VERSION), mean_yuv=self.mean_yuv, cov_yuv=self.cov_yuv,
             covariance=np.array(self.covariance), luma_relax=np.float64(self.luma_relax),
-            shadow_range=np.array(self.shadow_range, np.float64), min_sigma=np.float64(self.min_sigma))
+            shadow_range=np.array(self.shadow_range, np.float64), min_sigma=np.float64(self.min_sigma),
+            window_px=np.int64(self.window_px))
         return path
 
     @classmethod
@@ -445,6 +542,7 @@ class BackgroundModel:
                 return cls(z["mean_yuv"], z["cov_yuv"], covariance=str(z["covariance"]),
                            luma_relax=float(z["luma_relax"]),
                            shadow_range=tuple(float(v) for v in z["shadow_range"]),
-                           min_sigma=float(z["min_sigma"]))
+                           min_sigma=float(z["min_sigma"]),
+                           window_px=int(z["window_px"]) if "window_px" in z.files else 1)
         except (KeyError, ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
             raise BackgroundFileError(f"{path}: not a background model file ({exc})") from exc

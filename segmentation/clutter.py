@@ -169,11 +169,12 @@ def without_clutter(silhouette: np.ndarray, clutter: np.ndarray | None, *, keep:
 
 def segment_without_clutter(model: BackgroundModel, image_bgr: np.ndarray, clutter: np.ndarray | None, *,
                             keep: np.ndarray | None = None, ignore: np.ndarray | None = None,
-                            params: SegmentationParams | None = None) -> tuple[FrameSegmentation, np.ndarray]:
+                            params: SegmentationParams | None = None, floor=None) -> tuple[FrameSegmentation, np.ndarray]:
     """``segmentation.pipeline.segment_frame`` with the clutter cut (``without_clutter``) between
     the silhouette and the edges / chamfer images; ``ignore`` (h, w) bool is cut whatever ``keep``
     says (the operator's never-body pixels).  Returns ``(segmentation of the body, raw silhouette
-    (h, w) uint8 with the clutter, ignore regions cut)``; the raw one feeds ``StaticClutter.update``."""
+    (h, w) uint8 with the clutter, ignore regions cut)``; the raw one feeds ``StaticClutter.update``;
+    ``floor``: the floor test, as ``segment_frame``'s."""
     params = params or SegmentationParams()
     w, h = model.size
     raw = np.zeros((h, w), np.uint8)
@@ -188,7 +189,7 @@ def segment_without_clutter(model: BackgroundModel, image_bgr: np.ndarray, clutt
         return without_clutter(sil_roi, clutter[y0:y1, x0:x1], keep=None if keep is None else keep[y0:y1, x0:x1],
                                min_area_px=0.25 * params.min_area_px((w, h)))
 
-    return segment_frame(model, image_bgr, params=params, cut=cut), raw
+    return segment_frame(model, image_bgr, params=params, cut=cut, floor=floor), raw
 
 
 def ignore_masks(sizes: Mapping[str, tuple[int, int]], regions: Mapping[str, Sequence[Sequence[int]]]) -> dict:

@@ -43,6 +43,8 @@ class SegmentationParams:
     auto_roi, auto_roi_margin_px : bool, int
         Without a ``roi``, find one with a half-resolution pass and process only the box around
         what it finds, grown by the margin in pixels; nothing found: an empty segmentation.
+    floor_test : bool
+        Callers holding a whole calibrated frame set apply ``segmentation.floor`` (off: shadow-like is shadow).
     max_distance_px, resolution_px, precise, precise_edges : float, float, bool, bool
         Chamfer images (:func:`chamfer_images`); by default the edge distance uses the cheaper
         5x5 chamfer mask (edges are noisy anyway).
@@ -66,6 +68,7 @@ class SegmentationParams:
     precise_edges: bool = False
     auto_roi: bool = True
     auto_roi_margin_px: int = 16
+    floor_test: bool = True
 
     def __post_init__(self) -> None:
         # the options a wrong value would turn into silently empty or unbounded output (the rest are
@@ -131,7 +134,7 @@ class FrameSegmentation:
 
 
 def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
-                  params: SegmentationParams | None = None, cut=None) -> FrameSegmentation:
+                  params: SegmentationParams | None = None, cut=None, floor=None) -> FrameSegmentation:
     """Segment one frame against a background model: silhouette, edges and chamfer images.
 
     Does not adapt the model (call ``model.update`` for that).
@@ -146,6 +149,9 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     cut : callable (silhouette_roi, box) -> silhouette_roi, optional
         Edits the silhouette of the box before the edges and chamfer images are made
         (``segmentation.clutter``).
+    floor : callable (box, distance, plain, ratio) -> distance, optional
+        The multi-view floor test of shadow-like pixels (``segmentation.floor.FloorShadows.for_camera``);
+        with it the automatic ROI also covers shadow-like pixels.
 
     Returns
     -------
@@ -156,11 +162,14 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     w, h = model.size
     x0, y0, x1, y1 = box = check_roi(roi, (w, h))
     if roi is None and params.auto_roi:
-        found = _auto_roi(model, image_bgr, params)
+        found = _auto_roi(model, image_bgr, params, plain=floor is not None)
         if found is None:
             return _empty(params, (w, h))
         x0, y0, x1, y1 = box = found
-    d = model.distance(image_bgr, roi=box)
+    if floor is None:
+        d = model.distance(image_bgr, roi=box)
+    else:
+        d = floor(box, *model.distance_terms(image_bgr, roi=box))
     sil_roi = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
                                max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
                                close_px=params.close_px, max_components=params.max_components)
@@ -177,10 +186,11 @@ def segment_frame(model: BackgroundModel, image_bgr: np.ndarray, *, roi=None,
     return FrameSegmentation(sil_roi, edges_roi, chamfer, fraction, box, (w, h))
 
 
-def _auto_roi(model: BackgroundModel, image_bgr: np.ndarray, params: SegmentationParams):
-    """Box ``(x0, y0, x1, y1)`` around the foreground found at half resolution, or None."""
+def _auto_roi(model: BackgroundModel, image_bgr: np.ndarray, params: SegmentationParams, plain: bool = False):
+    """Box ``(x0, y0, x1, y1)`` around the foreground found at half resolution, or None (``plain``:
+    without the shadow relaxation)."""
     w, h = model.size
-    d_small = model.coarse_distance(image_bgr)
+    d_small = model.coarse_distance(image_bgr, plain=plain)
     sil = clean_silhouette(d_small, low=params.low, high=params.high,
                            min_area_px=params.min_area_px((w, h)) / 4.0, max_hole_fraction=1.0,
                            open_px=0, close_px=1, max_components=params.max_components)

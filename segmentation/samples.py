@@ -2,8 +2,8 @@
 
 :meth:`BackgroundModel.distance` tests whole images (or boxes).  A voxel-based reconstruction only
 looks at a few pixels per voxel projection, so its cost should not grow with the image size:
-:func:`background_samples` evaluates exactly the same shadow-relaxed Mahalanobis distance as
-``distance`` (module docstring of ``segmentation.background``) at given pixels only, and returns
+:func:`background_samples` evaluates the same shadow-relaxed Mahalanobis distance as ``distance``
+(module docstring of ``segmentation.background``; without its camouflage window) at given pixels only, and returns
 their colours too (the coloured hull keeps a mean colour per view).  It reads the model's
 precomputed per-pixel terms (precision, ``K^-1 mu``, ``mu^T K^-1 mu``), so ``update`` is honoured.
 """
@@ -34,7 +34,7 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
     Returns
     -------
     distance : ndarray, shape (m,), float32
-        Squared shadow-relaxed Mahalanobis distance, as ``model.distance`` gives at those pixels.
+        Squared shadow-relaxed Mahalanobis distance, as ``model.distance`` with ``window_px=0`` gives.
     bgr : ndarray, shape (m, 3), float32
         The pixels' colours, BGR levels.
     """

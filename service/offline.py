@@ -19,6 +19,7 @@ from capture.media import StreamCheck
 from capture.replay import iter_frame_sets
 from capture.session import Session, SessionError
 from segmentation.background import BackgroundModel
+from segmentation.floor import FloorShadows
 from segmentation.pipeline import SegmentationParams, segment_frame
 from service.backgrounds import background_models
 from tracker.body.model import BodyModel, load_model
@@ -26,7 +27,7 @@ from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
-__all__ = ["background_models", "session_model", "track_session", "summarise", "TrackSummary"]
+__all__ = ["background_models", "floor_test", "session_model", "track_session", "summarise", "TrackSummary"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -39,6 +40,16 @@ def session_model(session: Session, name: str = "knossow40") -> BodyModel:
         if subject.model == name:
             return subject.body()
     return load_model(name, height_m=session.height_m, segment_lengths=session.segment_lengths)
+
+
+def floor_test(cameras, backgrounds: dict[str, BackgroundModel],
+               params: SegmentationParams | None = None) -> FloorShadows | None:
+    """The multi-view floor test of shadow-like pixels (``segmentation.floor``) for these cameras,
+    or None when ``params.floor_test`` is off or there is only one camera."""
+    params = params or SegmentationParams()
+    if not params.floor_test or len(cameras) < 2:
+        return None
+    return FloorShadows(cameras, backgrounds, low=params.low)
 
 
 def _frame_sets(session: Session, cameras, frames, stream_check) -> Iterator[tuple[int, dict]]:
@@ -114,13 +125,17 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                       options=options, clock=clock, front_back=front_back)
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
-                          segmentation=segmentation)
+                          segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation))
         for fid, group in _frame_sets(session, names, frames, stream_check):
             ts = next(iter(group.values())).timestamp_ns
             yield st.step(fid, ts, {n: f.image for n, f in group.items()})
         return
+    floor = floor_test(cams, backgrounds, segmentation)
     for fid, group in _frame_sets(session, names, frames, stream_check):
-        segs = {n: segment_frame(backgrounds[n], f.image, params=segmentation) for n, f in group.items()}
+        images = {n: f.image for n, f in group.items()}
+        segs = {n: segment_frame(backgrounds[n], img, params=segmentation,
+                                 floor=None if floor is None else floor.for_camera(n, images))
+                for n, img in images.items()}
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
                            silhouettes={n: s.silhouette for n, s in segs.items()},

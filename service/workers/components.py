@@ -52,6 +52,12 @@ class BackgroundSegmenter:
 
     takes_roi = True
 
+    def warm_up(self) -> None:
+        """Compile (or load) the segmentation's numba kernel before the first frame, not on it."""
+        from segmentation.edt import warm_up
+
+        warm_up()
+
     def __call__(self, frame: FrameMessage, image: np.ndarray, *,
                  roi: tuple[int, int, int, int] | None = None) -> ChamferMessage | None:
         """Chamfer images of ``image`` (h, w, 3) uint8 BGR, or None while learning; MessageError if
@@ -82,7 +88,7 @@ class BackgroundSegmenter:
             roi = (x0, y0, min(max(int(roi[2]), x0 + 1), w), min(max(int(roi[3]), y0 + 1), h))
         seg = segment_frame(self.model, image, roi=roi, params=self.params)
         if roi is not None:
-            attrs["roi_clipped"] = float(roi_clipped(seg.silhouette, roi, self.model.size))
+            attrs["roi_clipped"] = float(roi_clipped_crop(seg.silhouette_roi, roi, self.model.size))
         if self.on_result is not None:
             self.on_result(frame, seg)
         return chamfer_to_message(frame.camera, frame.frame_id, frame.timestamp_ns, seg.chamfer,
@@ -96,6 +102,17 @@ def roi_clipped(silhouette: np.ndarray, roi: tuple[int, int, int, int], size: tu
     w, h = size
     sides = ((x0 > 0, silhouette[y0:y1, x0]), (x1 < w, silhouette[y0:y1, x1 - 1]),
              (y0 > 0, silhouette[y0, x0:x1]), (y1 < h, silhouette[y1 - 1, x0:x1]))
+    return any(inner and bool(line.any()) for inner, line in sides)
+
+
+def roi_clipped_crop(silhouette_roi: np.ndarray, roi: tuple[int, int, int, int], size: tuple[int, int]) -> bool:
+    """:func:`roi_clipped` of the silhouette of the box only, ``(y1 - y0, x1 - x0)`` (no full-size image)."""
+    x0, y0, x1, y1 = roi
+    w, h = size
+    if silhouette_roi.shape != (y1 - y0, x1 - x0):
+        raise ValueError(f"silhouette_roi: shape {silhouette_roi.shape} does not match roi {roi!r}")
+    sides = ((x0 > 0, silhouette_roi[:, 0]), (x1 < w, silhouette_roi[:, -1]),
+             (y0 > 0, silhouette_roi[0, :]), (y1 < h, silhouette_roi[-1, :]))
     return any(inner and bool(line.any()) for inner, line in sides)
 
 

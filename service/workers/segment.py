@@ -207,6 +207,9 @@ class SegmentWorker:
 
         Raises :class:`WorkerError` naming the camera whose segmentation crashed.
         """
+        for segment in self.segmenters.values():  # compile kernels before the first frame, not on it
+            if hasattr(segment, "warm_up"):
+                segment.warm_up()
         threads = [threading.Thread(target=self._thread, args=item, name=f"segment-{item[0]}", daemon=True)
                    for item in self.segmenters.items()]
         for t in threads:

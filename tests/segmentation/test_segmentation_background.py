@@ -51,7 +51,8 @@ def test_median_background_from_session_frames(scene):
 
 
 def test_distance_matches_direct_formula(models, rng):
-    model = models["full"]
+    full = models["full"]
+    model = BackgroundModel(full.mean_yuv, full.cov_yuv, covariance="full", window_px=0)  # the camouflage test: below
     img = rng.integers(0, 256, (model.size[1], model.size[0], 3), dtype=np.uint8)
     d = model.distance(img).astype(np.float64)
     inv = model._inv.astype(np.float64)
@@ -191,3 +192,30 @@ def test_evenly_spaced_bounded_and_spread(n, count):
         assert picked[0] == 0
     if n > 2 * count and count >= 2:  # spread over the whole sequence, not just its start
         assert picked[-1] >= n // 2
+
+
+@pytest.mark.parametrize("cov", ["full", "diag"])
+def test_camouflage_window_matches_direct_formula(models, scene, cov):
+    """``window_px``: the relaxed residuals averaged over the window, their Mahalanobis norm times
+    area / WINDOW_CORRELATION, grey-eroded, raise pixels already above WINDOW_GATE."""
+    from segmentation.background import WINDOW_CORRELATION, WINDOW_GATE
+
+    base = models[cov]
+    plain = BackgroundModel(base.mean_yuv, base.cov_yuv, covariance=cov, window_px=0)
+    model = BackgroundModel(base.mean_yuv, base.cov_yuv, covariance=cov, window_px=1)
+    img = scene.frames[2]
+    d0 = plain.distance(img).astype(np.float64)
+    inv = plain._inv.astype(np.float64)
+    mu = plain.mean_yuv.astype(np.float64)
+    p = bgr_to_yuv(img).astype(np.float64)
+    s = np.clip(np.einsum("hwi,hwij,hwj->hw", p, inv, mu) / np.einsum("hwi,hwij,hwj->hw", mu, inv, mu),
+                *plain.shadow_range)
+    r = np.pad(p - s[..., None] * mu, ((1, 1), (1, 1), (0, 0)), mode="symmetric")
+    h, w = d0.shape
+    mean = sum(r[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9.0
+    win = np.pad(np.einsum("hwi,hwij,hwj->hw", mean, inv, mean) * 9.0 / WINDOW_CORRELATION, 1, mode="symmetric")
+    eroded = np.min([win[1:-1, 1:-1], win[:-2, 1:-1], win[2:, 1:-1], win[1:-1, :-2], win[1:-1, 2:]], axis=0)
+    ref = np.where(d0 > WINDOW_GATE, np.maximum(d0, eroded), d0)
+    np.testing.assert_allclose(model.distance(img), ref, rtol=1e-3, atol=1e-2)
+    with pytest.raises(ValueError, match="window_px"):
+        BackgroundModel(base.mean_yuv, base.cov_yuv, window_px=-1)

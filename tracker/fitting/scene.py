@@ -112,6 +112,7 @@ class SceneTracker:
     ignore : camera name -> (h, w) bool mask of the operator's ignore regions (optional)
     options : SceneOptions
     segmentation : SegmentationParams for every camera
+    floor : segmentation.floor.FloorShadows or None, the multi-view floor test of shadow-like pixels
 
     Attributes
     ----------
@@ -121,8 +122,9 @@ class SceneTracker:
 
     def __init__(self, tracker: Tracker, backgrounds: Mapping[str, BackgroundModel], *,
                  ignore: Mapping[str, np.ndarray] | None = None, options: SceneOptions = SceneOptions(),
-                 segmentation: SegmentationParams | None = None) -> None:
+                 segmentation: SegmentationParams | None = None, floor=None) -> None:
         self.tracker = tracker
+        self.floor = floor
         self.backgrounds = dict(backgrounds)
         self.options = options
         self.segmentation = segmentation or SegmentationParams()
@@ -175,7 +177,8 @@ class SceneTracker:
         for name, img in images.items():
             segs[name], raws[name] = segment_without_clutter(
                 self.backgrounds[name], img, self.clutter(name), keep=self._explained.get(name),
-                ignore=self.ignore.get(name), params=self.segmentation)
+                ignore=self.ignore.get(name), params=self.segmentation,
+                floor=None if self.floor is None else self.floor.for_camera(name, images))
         self.last_segmentation = segs
         tr = self.tracker
         if tr.params is None and self.options.seated:

@@ -61,8 +61,10 @@ class TrackerOptions:
         Start each fit from the constant-velocity extrapolation.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
         Quality limits of a good frame (a worse frame is reported ``ok: false``).
-    iou_every, iou_check_coverage
+    iou_every, iou_check_coverage, iou_rms_jump
         When the silhouette IoU check (costly: a render) runs.
+    lost_iou_margin, lost_iou_floor, iou_window
+        Which IoU failures count towards a lost track (the rest are only not ok).
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
     initialise_search, recover_search : SearchOptions
@@ -123,6 +125,17 @@ class TrackerOptions:
     #: above ¾ of its limit, or an inside fraction within 0.1 of its limit (1: every frame)
     iou_every: int = 10
     iou_check_coverage: float = 0.8
+    #: ... and when the RMS exceeds ``iou_rms_jump`` × the median RMS of the recent good frames (a
+    #: fit that jumps off the body without reaching the RMS limit; None: off)
+    iou_rms_jump: float | None = 1.5
+    #: a body that is not the model's shape cannot reach ``min_iou``: a frame that fails only the IoU
+    #: limit yet reaches ``max(lost_iou_floor, min(min_iou, reference - lost_iou_margin))`` (reference:
+    #: the median IoU of the last ``iou_window`` frames that passed the other limits; none yet: the
+    #: floor) is reported not ok but does not count towards a lost track (no search, velocity kept)
+    #: (``lost_iou_margin`` None: every not-ok frame counts)
+    lost_iou_margin: float | None = 0.04
+    lost_iou_floor: float = 0.65
+    iou_window: int = 30
     #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
     #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
     #: mirror of the fit is fitted too (``front_back_iterations`` LM steps); when its
@@ -259,6 +272,8 @@ class Tracker:
         self.monitor = LossMonitor(max_rms_px=max(options.max_rms_px, options.max_rms_ceiling_px),
                                    min_inside_fraction=options.min_inside_fraction, patience=patience)
         self._good_rms: list[float] = []
+        self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
+        self._iou_only = False  # the last ``_bad`` failed the IoU limit alone
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
         self.n_front_back_checks = 0
@@ -325,6 +340,19 @@ class Tracker:
             lim = max(lim, o.rms_ratio * float(np.median(self._good_rms)))
         return min(lim, o.max_rms_ceiling_px)
 
+    def lost_iou_limit(self) -> float:
+        """IoU below which a frame counts towards a lost track (``TrackerOptions.lost_iou_margin``)."""
+        o = self.options
+        if o.lost_iou_margin is None:
+            return o.min_iou
+        if not self._good_iou:
+            return min(o.min_iou, o.lost_iou_floor)
+        return min(o.min_iou, max(o.lost_iou_floor, float(np.median(self._good_iou)) - o.lost_iou_margin))
+
+    def _soft(self, bad: str) -> bool:
+        """The frame failed only the IoU limit and stays above ``lost_iou_limit``: not ok, not lost."""
+        return bool(bad) and self._iou_only and self._last_iou is not None and self._last_iou >= self.lost_iou_limit()
+
     def _suspect(self, terms) -> bool:
         """A cheap figure is near its limit: RMS above ¾ of it, inside fraction within 0.1 of it,
         or coverage below ``iou_check_coverage`` (``TrackerOptions``)."""
@@ -335,7 +363,10 @@ class Tracker:
 
     def _iou_due(self, terms) -> bool:
         """Whether the (costly) silhouette IoU check runs on this frame (``TrackerOptions``)."""
-        return self._last_bad or self._since_iou + 1 >= self.options.iou_every or self._suspect(terms)
+        o = self.options
+        jump = (o.iou_rms_jump is not None and bool(self._good_rms)
+                and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
+        return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
 
     def _bad(self, terms, views) -> str:
         """Why the fit at ``terms`` is poor ("" when it is good); ``views``: a callable returning
@@ -348,11 +379,15 @@ class Tracker:
             why.append(f"rms {rms:.2f} px > {lim:.3g}")
         if not (np.isfinite(inside) and inside >= o.min_inside_fraction):
             why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
+        self._iou_only = False
         if views is not None and (why or self._iou_due(terms)):
             iou = float(views().score(np.asarray(terms.pose.params)))
             self._last_iou = iou
             if not iou >= o.min_iou:
+                self._iou_only = not why
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
+            if not why or (self._iou_only and iou >= self.lost_iou_limit()):
+                self._good_iou = (self._good_iou + [iou])[-o.iou_window:]
         return "; ".join(why)
 
     def _front_back(self, cams, chs, res, terms, views):
@@ -462,7 +497,7 @@ class Tracker:
         self._last_iou = None
         bad = self._bad(terms, views)
         restarted = False
-        state = self.monitor.update({"ok": False, "reason": f"poor fit: {bad}"} if bad
+        state = self.monitor.update({"ok": False, "reason": f"poor fit: {bad}"} if bad and not self._soft(bad)
                                     else {"rms_px": rms, "inside_fraction": inside})
         if bad and state.lost and self.recover and can_search:
             try:
@@ -474,7 +509,7 @@ class Tracker:
                 bad2 = self._bad(terms2, views)
                 if not bad2 or rms2 < rms:
                     res, terms, rms, inside, bad = res2, terms2, rms2, inside2, bad2
-                    if not bad:
+                    if not bad or self._soft(bad):
                         self.monitor.reset()
                     restarted = True  # no velocity across a re-initialisation
                     if self.guard is not None:
@@ -489,7 +524,7 @@ class Tracker:
                     rms, inside = terms.rms_px(), terms.inside_fraction()
                     self._last_iou = None  # the IoU recorded was the other hypothesis's
                     bad = self._bad(terms, views)
-                    if not bad:
+                    if not bad or self._soft(bad):
                         self.monitor.reset()
                     self.n_turned += 1
                     restarted = True  # no velocity across the turn
@@ -512,7 +547,7 @@ class Tracker:
         self._last_bad = bool(bad)
         if bad or unsure:
             record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else []))
-        if bad:
+        if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
             self._frames = (self._frames[1], int(frame_id))

@@ -1,0 +1,82 @@
+"""The IoU gate's two jobs apart: a frame below ``min_iou`` is not ok, but only an IoU well below
+what this body reaches (``TrackerOptions.lost_iou_margin``) counts towards a lost track."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.tracker.test_tracking import HOP, render_chamfer
+from tracker.body.kinematics import forward, joint_centre_array
+from tracker.fitting.tracking import Tracker, TrackerOptions
+from tracker.search.candidates import turn_about_vertical
+from tracker.synthetic.bvh import load_bvh
+from tracker.synthetic.retarget import retarget_bvh
+from tracker.synthetic.scene import ring_cameras
+
+
+@pytest.fixture(scope="module")
+def scene():
+    cameras = ring_cameras(4, size=(400, 300))
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
+    model, p0 = rt.model, rt.params[0]
+    return cameras, model, p0, render_chamfer(model, p0, cameras)
+
+
+def test_a_body_below_min_iou_is_not_ok_but_not_lost(scene):
+    # min_iou above what the fit reaches (~0.9 on its own render at half resolution) stands for a
+    # non-model body: every frame is reported not ok, the track is never searched again
+    cameras, model, p0, (ch, sil) = scene
+    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=TrackerOptions(min_iou=0.99))
+    recs = [tracker.step(k, k, ch, sil) for k in range(6)]
+    assert not any(r["ok"] for r in recs)
+    assert all("silhouette IoU" in r["reason"] for r in recs)
+    assert tracker.n_initialisations == 0
+    assert 0.8 < tracker.lost_iou_limit() < 0.99
+    assert tracker.last_good is not None  # the frames were kept for tracking
+
+    # the old single gate: the same frames make the track lost and searched
+    strict = Tracker(model, cameras, initial_params=p0, patience=2,
+                     options=TrackerOptions(min_iou=0.99, lost_iou_margin=None))
+    [strict.step(k, k, ch, sil) for k in range(4)]
+    assert strict.n_initialisations >= 1
+
+
+def test_an_iou_drop_below_the_reference_counts_towards_lost(scene):
+    # after frames at the body's usual IoU, a jump the local fit cannot follow drops the IoU far
+    # below that reference: those frames count, and the track is searched again
+    cameras, model, p0, (ch, sil) = scene
+    p1 = turn_about_vertical(model, p0, np.pi / 2, joint_centre_array(model, forward(model, p0))[0])
+    p1[:2] += [0.6, -0.5]
+    ch1, sil1 = render_chamfer(model, p1, cameras)
+    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=TrackerOptions(min_iou=0.99))
+    [tracker.step(k, k, ch, sil) for k in range(3)]
+    reference = tracker.lost_iou_limit()
+    recs = [tracker.step(k, k, ch1, sil1) for k in range(3, 7)]
+    assert recs[0]["iou"] < reference
+    assert tracker.n_initialisations >= 1
+
+
+def test_without_a_reference_the_floor_applies():
+    opts = TrackerOptions()
+    assert opts.lost_iou_floor < opts.min_iou
+    tracker = Tracker(retarget_bvh(load_bvh(HOP), model="knossow40", frames=1).model, ring_cameras(2, size=(64, 48)))
+    assert tracker.lost_iou_limit() == pytest.approx(opts.lost_iou_floor)
+
+
+def test_an_rms_jump_triggers_the_iou_check(scene):
+    # silhouettes of a body 20 % larger than the model: the fit's RMS triples (0.45 -> ~1.4 px) but
+    # stays far below the RMS limit (6 px); the jump makes the IoU render run, and the IoU fails
+    from tracker.body.model import load_model
+
+    cameras, model, p0, (ch, sil) = scene
+    big = load_model("knossow40", height_m=1.2 * model.height_m)
+    ch2, sil2 = render_chamfer(big, p0, cameras)
+    for jump, expect_checked in ((1.5, True), (None, False)):
+        tracker = Tracker(model, cameras, initial_params=p0, options=TrackerOptions(iou_every=100, iou_rms_jump=jump))
+        first = [tracker.step(k, k, ch, sil) for k in range(4)]
+        assert ["iou" in r for r in first] == [True, False, False, False]
+        after = tracker.step(4, 4, ch2, sil2)
+        assert after["rms_px"] < 0.75 * tracker.rms_limit()
+        assert ("iou" in after) is expect_checked
+        assert after["ok"] is not expect_checked
