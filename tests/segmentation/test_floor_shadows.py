@@ -118,3 +118,18 @@ def test_grey_trousers_on_a_dark_floor_need_the_camouflage_window():
     assert np.median(before) < 0.75
     assert np.median(after) > 0.8
     assert np.median(after) > np.median(before) + 0.1
+
+
+def test_voting_on_a_grid_keeps_most_of_the_gain():
+    # stride 2: a quarter of the votes (uu_studio: refine 21 -> 10 ms per 4-camera set); subject 3's
+    # legs stay body (IoU 0.96 -> 0.93 measured on the walk_turn frames)
+    cams, models, sets = _studio_frames(3, dark_floor=True)
+    test = FloorShadows(cams, models, stride=2)
+    ious = []
+    for decoded, masks, _ in sets:
+        for c in cams:
+            sil = segment_frame(models[c.name], decoded[c.name], floor=test.for_camera(c.name, decoded)).silhouette > 0
+            ious.append(np.sum(sil & masks[c.name]) / max(np.sum(sil | masks[c.name]), 1))
+    assert np.median(ious) > 0.85
+    with pytest.raises(ValueError, match="stride"):
+        FloorShadows(cams, models, stride=0)
