@@ -34,7 +34,7 @@ def _studio_frames(seed: int, *, dark_floor: bool, frames=(0, 15), n_cams: int =
     cams = fit_ring_cameras(pts, n_cams, size=(320, 240))
     studio = Studio(cams, seed=seed, dark_floor=dark_floor)
     rng = np.random.default_rng(seed)
-    models = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(10)])
+    models = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(10)], window_px=1)
               for c, bg in zip(cams, studio.backgrounds)}
     sets = []
     for f in frames:
