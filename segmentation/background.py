@@ -139,12 +139,12 @@ class BackgroundModel:
     min_sigma : float
         Floor of the per-channel standard deviation, YUV levels.
     window_px : int
-        Radius of the camouflage test's window, pixels (0: off).
+        Radius of the camouflage test's window, pixels (0: off, the default; 1 is what was measured).
     """
 
     def __init__(self, mean_yuv: np.ndarray, cov_yuv: np.ndarray, *, covariance: str = "diag",
                  luma_relax: float = 1.0, shadow_range: tuple[float, float] = (0.5, 1.1),
-                 min_sigma: float = 2.5, window_px: int = 1) -> None:
+                 min_sigma: float = 2.5, window_px: int = 0) -> None:
         mean_yuv = np.asarray(mean_yuv, dtype=np.float32)
         cov_yuv = np.asarray(cov_yuv, dtype=np.float32)
         if mean_yuv.ndim != 3 or mean_yuv.shape[2] != 3 or min(mean_yuv.shape[:2]) < 1:
@@ -543,6 +543,6 @@ class BackgroundModel:
                            luma_relax=float(z["luma_relax"]),
                            shadow_range=tuple(float(v) for v in z["shadow_range"]),
                            min_sigma=float(z["min_sigma"]),
-                           window_px=int(z["window_px"]) if "window_px" in z.files else 1)
+                           window_px=int(z["window_px"]) if "window_px" in z.files else 0)
         except (KeyError, ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
             raise BackgroundFileError(f"{path}: not a background model file ({exc})") from exc

@@ -169,7 +169,8 @@ def without_clutter(silhouette: np.ndarray, clutter: np.ndarray | None, *, keep:
 
 def segment_without_clutter(model: BackgroundModel, image_bgr: np.ndarray, clutter: np.ndarray | None, *,
                             keep: np.ndarray | None = None, ignore: np.ndarray | None = None,
-                            params: SegmentationParams | None = None, floor=None) -> tuple[FrameSegmentation, np.ndarray]:
+                            params: SegmentationParams | None = None,
+                            floor=None) -> tuple[FrameSegmentation, np.ndarray]:
     """``segmentation.pipeline.segment_frame`` with the clutter cut (``without_clutter``) between
     the silhouette and the edges / chamfer images; ``ignore`` (h, w) bool is cut whatever ``keep``
     says (the operator's never-body pixels).  Returns ``(segmentation of the body, raw silhouette

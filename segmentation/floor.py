@@ -75,10 +75,12 @@ class FloorShadows:
     open_px : int
         Radius of the opening of (foreground or body candidates) that body candidates must survive,
         pixels (0: none).
+    stride : int
+        Candidates vote on every ``stride``-th row and column; each decides for its block.
     """
 
     def __init__(self, cameras: Sequence[Camera], models: Mapping[str, BackgroundModel], *, low: float = 16.0,
-                 open_px: int = 2) -> None:
+                 open_px: int = 2, stride: int = 1) -> None:
         self.cameras = {c.name: c for c in cameras}
         if len(self.cameras) < 2:
             raise ValueError(f"cameras: the floor test needs at least 2 cameras, got {len(self.cameras)}")
@@ -93,8 +95,11 @@ class FloorShadows:
         self.models = {n: models[n] for n in self.cameras}
         if not (isinstance(open_px, (int, np.integer)) and open_px >= 0):
             raise ValueError(f"open_px: expected an integer >= 0, got {open_px!r}")
+        if not (isinstance(stride, (int, np.integer)) and 1 <= stride <= 8):
+            raise ValueError(f"stride: expected an integer in 1..8, got {stride!r}")
         self.low = float(low)
         self.open_px = int(open_px)
+        self.stride = int(stride)
         self._disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * self.open_px + 1, 2 * self.open_px + 1))
         self._floor = {n: floor_points(c) for n, c in self.cameras.items()}
 
@@ -120,9 +125,12 @@ class FloorShadows:
         """
         x0, y0, x1, y1 = box
         cand = (plain > self.low) & (distance <= self.low)
-        rows, cols = np.nonzero(cand)
-        if rows.size == 0:
+        if not cand.any():
             return distance
+        step = self.stride  # vote on a grid; each grid pixel decides for its stride x stride block
+        grid = cand[::step, ::step]
+        rows, cols = np.nonzero(grid)
+        rows, cols = rows * step, cols * step
         xy = self._floor[name][rows + y0, cols + x0]
         on_floor = np.isfinite(xy[:, 0])
         rows, cols, xy = rows[on_floor], cols[on_floor], xy[on_floor].astype(np.float64)
@@ -147,8 +155,11 @@ class FloorShadows:
             body_votes[idx] += (unchanged <= self.low) & (unchanged < darkened)
             shadow_votes[idx] += (darkened <= self.low) & (darkened <= unchanged)
         body = (body_votes > shadow_votes) | ~seen
-        promoted = np.zeros(distance.shape, np.uint8)
-        promoted[rows[body], cols[body]] = 255
+        votes = np.zeros(grid.shape, np.uint8)
+        votes[rows[body] // step, cols[body] // step] = 255
+        h, w = distance.shape
+        promoted = np.repeat(np.repeat(votes, step, axis=0), step, axis=1)[:h, :w]
+        promoted[~cand] = 0
         if self.open_px > 0:  # thin promoted lines (a view-dependent change along a wall's base) go
             union = np.where(distance > self.low, np.uint8(255), promoted)
             promoted &= cv2.morphologyEx(union, cv2.MORPH_OPEN, self._disk)

@@ -44,7 +44,7 @@ class SegmentationParams:
         Without a ``roi``, find one with a half-resolution pass and process only the box around
         what it finds, grown by the margin in pixels; nothing found: an empty segmentation.
     floor_test : bool
-        Callers holding a whole calibrated frame set apply ``segmentation.floor`` (off: shadow-like is shadow).
+        Offline callers holding a whole frame set apply ``segmentation.floor`` (live workers see one camera).
     max_distance_px, resolution_px, precise, precise_edges : float, float, bool, bool
         Chamfer images (:func:`chamfer_images`); by default the edge distance uses the cheaper
         5x5 chamfer mask (edges are noisy anyway).
@@ -68,7 +68,7 @@ class SegmentationParams:
     precise_edges: bool = False
     auto_roi: bool = True
     auto_roi_margin_px: int = 16
-    floor_test: bool = True
+    floor_test: bool = False
 
     def __post_init__(self) -> None:
         # the options a wrong value would turn into silently empty or unbounded output (the rest are

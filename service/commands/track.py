@@ -17,6 +17,7 @@ from service.atomic import JsonlWriter
 from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from service.offline import background_models, session_model, summarise, track_session
+from segmentation.pipeline import SegmentationParams
 from tracker.fitting.scene import SceneOptions
 from tracker.body.model import available_models
 
@@ -45,6 +46,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=("contours", "blobs"), default="contours",
                         help="contours: chamfer fit of the model's contours (Knossow); blobs: coloured hull, "
                              "EM blobs and inverse kinematics (Caillette & Howard)")
+    parser.add_argument("--floor-test", action="store_true",
+                        help="decide shadow-like pixels with the other cameras (segmentation.floor): dark clothes "
+                             "on a dark floor; offline only, so poses then differ from a lossless live run")
     parser.add_argument("--initial-pose", type=Path, default=None, metavar="POSES.jsonl",
                         help="start from the params of the first record of this pose file (else automatic)")
 
@@ -106,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
         for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
                                  frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
                                  method=args.method, stream_check=check, ignore=ignore,
+                                 segmentation=SegmentationParams(floor_test=args.floor_test),
                                  scene=None if args.no_scene or args.method != "contours" else SceneOptions()):
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})

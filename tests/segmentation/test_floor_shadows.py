@@ -34,7 +34,7 @@ def _studio_frames(seed: int, *, dark_floor: bool, frames=(0, 15), n_cams: int =
     cams = fit_ring_cameras(pts, n_cams, size=(320, 240))
     studio = Studio(cams, seed=seed, dark_floor=dark_floor)
     rng = np.random.default_rng(seed)
-    models = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(10)])
+    models = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(10)], window_px=1)
               for c, bg in zip(cams, studio.backgrounds)}
     sets = []
     for f in frames:
@@ -78,7 +78,8 @@ def test_shadows_on_a_light_floor_stay_background():
         for k, c in enumerate(cams):
             seg = segment_frame(models[c.name], decoded[c.name], floor=test.for_camera(c.name, decoded))
             plain = segment_frame(models[c.name], decoded[c.name])
-            shadow = (np.abs(decoded[c.name].astype(int) - studio.backgrounds[k].astype(int)).sum(-1) > 30) & ~masks[c.name]
+            changed = np.abs(decoded[c.name].astype(int) - studio.backgrounds[k].astype(int)).sum(-1) > 30
+            shadow = changed & ~masks[c.name]
             grown = np.sum((seg.silhouette > 0) & shadow) - np.sum((plain.silhouette > 0) & shadow)
             assert grown <= 0.1 * max(shadow.sum(), 1) + 20
 
@@ -118,3 +119,18 @@ def test_grey_trousers_on_a_dark_floor_need_the_camouflage_window():
     assert np.median(before) < 0.75
     assert np.median(after) > 0.8
     assert np.median(after) > np.median(before) + 0.1
+
+
+def test_voting_on_a_grid_keeps_most_of_the_gain():
+    # stride 2: a quarter of the votes (uu_studio: refine 21 -> 10 ms per 4-camera set); subject 3's
+    # legs stay body (IoU 0.96 -> 0.93 measured on the walk_turn frames)
+    cams, models, sets = _studio_frames(3, dark_floor=True)
+    test = FloorShadows(cams, models, stride=2)
+    ious = []
+    for decoded, masks, _ in sets:
+        for c in cams:
+            sil = segment_frame(models[c.name], decoded[c.name], floor=test.for_camera(c.name, decoded)).silhouette > 0
+            ious.append(np.sum(sil & masks[c.name]) / max(np.sum(sil | masks[c.name]), 1))
+    assert np.median(ious) > 0.85
+    with pytest.raises(ValueError, match="stride"):
+        FloorShadows(cams, models, stride=0)

@@ -27,7 +27,8 @@ def test_a_body_below_min_iou_is_not_ok_but_not_lost(scene):
     # min_iou above what the fit reaches (~0.9 on its own render at half resolution) stands for a
     # non-model body: every frame is reported not ok, the track is never searched again
     cameras, model, p0, (ch, sil) = scene
-    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=TrackerOptions(min_iou=0.99))
+    soft = TrackerOptions(min_iou=0.99, lost_iou_margin=0.04)
+    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=soft)
     recs = [tracker.step(k, k, ch, sil) for k in range(6)]
     assert not any(r["ok"] for r in recs)
     assert all("silhouette IoU" in r["reason"] for r in recs)
@@ -49,7 +50,8 @@ def test_an_iou_drop_below_the_reference_counts_towards_lost(scene):
     p1 = turn_about_vertical(model, p0, np.pi / 2, joint_centre_array(model, forward(model, p0))[0])
     p1[:2] += [0.6, -0.5]
     ch1, sil1 = render_chamfer(model, p1, cameras)
-    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=TrackerOptions(min_iou=0.99))
+    soft = TrackerOptions(min_iou=0.99, lost_iou_margin=0.04)
+    tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=soft)
     [tracker.step(k, k, ch, sil) for k in range(3)]
     reference = tracker.lost_iou_limit()
     recs = [tracker.step(k, k, ch1, sil1) for k in range(3, 7)]
@@ -58,10 +60,13 @@ def test_an_iou_drop_below_the_reference_counts_towards_lost(scene):
 
 
 def test_without_a_reference_the_floor_applies():
-    opts = TrackerOptions()
+    opts = TrackerOptions(lost_iou_margin=0.04)
     assert opts.lost_iou_floor < opts.min_iou
-    tracker = Tracker(retarget_bvh(load_bvh(HOP), model="knossow40", frames=1).model, ring_cameras(2, size=(64, 48)))
+    model = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1).model
+    tracker = Tracker(model, ring_cameras(2, size=(64, 48)), options=opts)
     assert tracker.lost_iou_limit() == pytest.approx(opts.lost_iou_floor)
+    # the default: every IoU failure counts towards lost (round-1 behaviour)
+    assert Tracker(model, ring_cameras(2, size=(64, 48))).lost_iou_limit() == TrackerOptions().min_iou
 
 
 def test_an_rms_jump_triggers_the_iou_check(scene):
