@@ -168,6 +168,9 @@ class LiveTrackerFitter(TrackerFitter):
                  rejoin_beside: bool = False) -> None:
         super().__init__(tracker)
         tracker.recover = False
+        # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
+        # schedules it found as many ok sets but longer bad runs while searches were held (docs/performance.md)
+        tracker.options = replace(tracker.options, iou_rms_jump=None)
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)
