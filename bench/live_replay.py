@@ -33,10 +33,16 @@ from machine_ref import machine_ref_ms  # noqa: E402
 
 
 def parse_sets(text: str) -> dict:
+    """``"default=15,rejoin=3"`` (or a bare ``"15"`` for the default) -> {kind: sets}."""
     out = {}
     for item in text.split(","):
-        key, _, value = item.partition("=")
-        out[key.strip() or "default"] = int(value)
+        key, eq, value = item.partition("=")
+        if not eq:
+            key, value = "default", key
+        try:
+            out[key.strip() or "default"] = int(value)
+        except ValueError:
+            raise SystemExit(f"live_replay.py: --search-sets {text!r}: expected KIND=SETS[,KIND=SETS] or SETS") from None
     return out
 
 
