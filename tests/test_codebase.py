@@ -3,7 +3,7 @@ and free of measured figures in tracker/ and segmentation/ (those live in docs/t
 
 from __future__ import annotations
 
-from tests.support.codebase import cycles, docstring_findings, import_graph
+from tests.support.codebase import cycles, docstring_findings, face_shadows, import_graph
 
 
 def test_no_module_imports_another_in_a_circle():
@@ -20,6 +20,11 @@ def test_docstrings_are_short_and_hold_no_measured_figures():
     long, figures = docstring_findings()
     assert long == [], "docstrings over 30 lines"
     assert figures == [], "measured figures belong in docs/tuning.md or the README"
+
+
+def test_no_package_face_exports_a_name_that_is_also_its_submodule():
+    # ``from tracker.search import initialise`` gave the function or the module depending on import order
+    assert face_shadows() == []
 
 
 def test_the_checks_can_fail():

@@ -51,21 +51,26 @@ class FrameRing:
         self.cv = cv if cv is not None else threading.Condition()
         self._changed = False
         self.received = self.bad = self.evicted = 0
+        self.skipped = 0  # frames older than a demand: the tracker went past them
         self.rejected = 0  # far-future/far-past ids, oversized or over-rate frames, implausible demands
 
     def put(self, data: bytes, sent_ns: int | None) -> int | None:
         """Keep one received frame (its header validated); returns its id, or None when it was
         refused (counted in ``rejected``): larger than ``max_bytes``, over the rate limit, or an id
-        outside the camera's plausible window.  MessageError if the header is bad or names another
+        outside the camera's plausible window.  A renumbering (see ``FrameIdWindow``) drops the frames
+        held, which will never be demanded (counted in ``skipped``).  MessageError if the header is bad or names another
         camera.  The frames held never exceed ``size`` frames nor ``max_bytes`` bytes."""
         camera, fid = frame_header(data)
         if camera != self.camera:
             raise MessageError(f"frame of camera {camera} on camera {self.camera}'s key")
         now = self._clock()
         with self.cv:
+            restarts = self.window.restarts
             if len(data) > self.max_bytes or not self.rate.allow(now) or not self.window.accept(fid, now):
                 self.rejected += 1
                 return None
+            if self.window.restarts != restarts:  # renumbered: the frames held are of the old numbering
+                self._drop_older(float("inf"))
             old = self._frames.pop(fid, None)
             if old is not None:
                 self._bytes -= len(old[0])
@@ -125,7 +130,9 @@ class FrameRing:
 
         A demanded frame that is held is taken out of the ring; one that is not held while a newer
         frame is (skipped or evicted), or that has not arrived within ``wait_s``, is missed; one not
-        arrived yet is kept waiting (None)."""
+        arrived yet is kept waiting (None).  Frames older than a demand taken or missed are dropped
+        (counted in ``skipped``): the tracker demands ever newer ids, so they would only sit in the
+        ring and in its have notices."""
         missed: list[int] = []
         with self.cv:
             while self._demands:
@@ -134,13 +141,21 @@ class FrameRing:
                     self._demands.popleft()
                     data, sent_ns = self._frames.pop(fid)
                     self._bytes -= len(data)
+                    self._drop_older(fid)
                     return missed, (fid, data, sent_ns)
                 if any(f > fid for f in self._frames) or now_s - since > wait_s:
                     self._demands.popleft()
                     missed.append(fid)
+                    self._drop_older(fid)
                     continue
                 break
         return missed, None
+
+    def _drop_older(self, frame_id: float) -> None:
+        """Drop the frames held with ids below ``frame_id`` (call with ``cv`` held)."""
+        for f in [f for f in self._frames if f < frame_id]:
+            self._bytes -= len(self._frames.pop(f)[0])
+            self.skipped += 1
 
     def __len__(self) -> int:
         return len(self._frames)

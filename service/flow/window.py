@@ -5,9 +5,12 @@ Frame ids are trigger pulses, so they advance at most at the trigger's rate.  A
 the newest id accepted and when.  An id is accepted when it is no further ahead than the reference
 plus what the trigger can have produced since (``rate_hz`` × elapsed, plus ``ahead_s`` of margin and
 ``slack`` frames), and no further behind than ``behind`` frames.  An id further behind is a
-*renumbering* (a restarted trigger or replay loop): it is accepted and becomes the reference, but at
-most once per ``restart_holdoff_s`` — so a peer sending ids 10^12 cannot move a live studio's demands,
-and one sending ids 0 cannot hold its numbering back for more than one id per hold-off.
+*renumbering* (a restarted trigger or replay loop): it is accepted and becomes the reference, at most
+once per ``restart_holdoff_s``, and only once the numbering it replaces has stopped (no id advanced it
+for ``restart_holdoff_s``) or was never confirmed (fewer than ``confirm`` ids advanced it: a hostile
+first id is overruled by the camera's own) — so a peer sending ids 10^12 cannot move a live studio's
+demands, and one sending ids 0 cannot move a running camera's reference back (which would refuse
+the camera's real ids as far ahead).
 Everything refused is counted (``rejected``).  No I/O, clocks injected.
 """
 
@@ -31,18 +34,22 @@ class FrameIdWindow:
     slack : int
         Frames allowed ahead in any case.
     restart_holdoff_s : float
-        Shortest time between two accepted renumberings (seconds).
+        Shortest time between two accepted renumberings, and the silence after which a confirmed
+        numbering counts as stopped (seconds).
+    confirm : int
+        Ids that must advance a numbering before a renumbering has to wait for it to stop.
     """
 
     def __init__(self, *, rate_hz: float = 240.0, ahead_s: float = 2.0, behind: int = 256, slack: int = 64,
-                 restart_holdoff_s: float = 1.0) -> None:
+                 restart_holdoff_s: float = 1.0, confirm: int = 3) -> None:
         if not rate_hz > 0 or ahead_s < 0 or behind < 0 or slack < 0 or restart_holdoff_s < 0:
             raise ValueError("FrameIdWindow: rate_hz > 0 and non-negative bounds are needed")
         self.rate_hz, self.ahead_s, self.behind, self.slack = float(rate_hz), float(ahead_s), int(behind), int(slack)
-        self.restart_holdoff_s = float(restart_holdoff_s)
+        self.restart_holdoff_s, self.confirm = float(restart_holdoff_s), int(confirm)
         self._ref: tuple[int, float] | None = None
+        self._advances = 0  # ids that advanced the current numbering
         self._last_restart = float("-inf")
-        self.accepted = self.rejected = self.restarts = 0
+        self.accepted = self.rejected = self.restarts = self.stale = 0
 
     def upper(self, now_s: float) -> int | None:
         """The highest id accepted at ``now_s`` (None before the first id)."""
@@ -57,7 +64,10 @@ class FrameIdWindow:
             return frame_id >= 0
         if frame_id < 0 or frame_id > self.upper(now_s):
             return False
-        return frame_id >= self._ref[0] - self.behind or now_s - self._last_restart >= self.restart_holdoff_s
+        if frame_id >= self._ref[0] - self.behind:
+            return True
+        replaceable = self._advances < self.confirm or now_s - self._ref[1] >= self.restart_holdoff_s
+        return replaceable and now_s - self._last_restart >= self.restart_holdoff_s
 
     def accept(self, frame_id: int, now_s: float) -> bool:
         """Check ``frame_id``; True (and the reference follows it) if plausible, else counted in ``rejected``."""
@@ -68,16 +78,25 @@ class FrameIdWindow:
         if self._ref is not None and frame_id < self._ref[0] - self.behind:
             self.restarts += 1
             self._last_restart = now_s
-            self._ref = (frame_id, now_s)
+            self._ref, self._advances = (frame_id, now_s), 0
         elif self._ref is None or frame_id >= self._ref[0]:
+            self._advances += self._ref is None or frame_id > self._ref[0]
             self._ref = (frame_id, now_s)
         self.accepted += 1
         return True
 
     def filter(self, frame_ids, now_s: float) -> tuple[int, ...]:
-        """The plausible ids of one notice (its newest sets the reference; the others judged against it)."""
-        ids = sorted({int(f) for f in frame_ids}, reverse=True)
-        kept = [f for f in ids if self.accept(f, now_s)]
+        """The plausible ids of one notice (its newest sets the reference; the others judged against it).
+
+        An id more than ``behind`` below the newest id accepted from the same notice is stale (an old
+        frame still held), not a renumbering: it is left out (counted in ``stale``) and never moves
+        the reference back."""
+        kept: list[int] = []
+        for f in sorted({int(f) for f in frame_ids}, reverse=True):
+            if kept and f < kept[0] - self.behind:
+                self.stale += 1
+            elif self.accept(f, now_s):
+                kept.append(f)
         return tuple(sorted(kept))
 
 

@@ -4,7 +4,8 @@ have/demand notices.
 All of them are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
-``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``effort``).  Status, credit, have and demand records carry
+``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``effort``, ``missing_cameras``: the
+names of the cameras a live set went on without).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -25,6 +26,7 @@ STATUS_MAX_BYTES = 64 * 1024
 RECORD_VERSION = 1
 _MAX_PARAMS = 1024
 _MAX_JOINTS = 128
+_MAX_CAMERAS = 64
 
 
 def _finite_list(value: Any, key: str, *, length: int | None = None, max_len: int = _MAX_PARAMS) -> list[float]:
@@ -79,6 +81,11 @@ class PoseRecord:
         for key in ("iterations", "cameras"):
             if key in obj:
                 meta_int(obj, key)
+        if "missing_cameras" in obj:
+            missing = obj["missing_cameras"]
+            if not isinstance(missing, list) or len(missing) > _MAX_CAMERAS:
+                raise MessageError(f"missing_cameras: expected a list of at most {_MAX_CAMERAS} camera names")
+            obj["missing_cameras"] = [check_name(c, "missing_cameras") for c in missing]
         return cls(frame, ts, ok, MappingProxyType(obj))
 
     @property

@@ -155,6 +155,8 @@ class TrackWorker:
             record = {"frame": fs.frame_id, "timestamp_ns": first.timestamp_ns, "ok": False,
                       "reason": f"fitting failed: {exc.__class__.__name__}: {exc}"[:200]}
         record.setdefault("cameras", len(fs.items))
+        if fs.missing:  # which cameras the set went on without (absent, or late beyond the set timeout)
+            record.setdefault("missing_cameras", list(fs.missing))
         record.setdefault("fit_ms", 1e3 * (self.clock() - t_fit))
         t0 = self.sent.pop(fs.frame_id, None)
         if t0 is not None:

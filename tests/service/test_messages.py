@@ -84,6 +84,9 @@ def test_pose_is_plain_design_json(rng):
     ({"frame": 1, "timestamp_ns": 0, "ok": True, "joints": {"a": [1, 2]}}, "joints.a"),
     ({"frame": 1, "timestamp_ns": 0, "ok": True, "joints": {"../x": [1, 2, 3]}}, "joint name"),
     ({"frame": 1, "timestamp_ns": 0, "ok": "yes"}, "ok"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": True, "missing_cameras": ["\x1b[2J"]}, "missing_cameras"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": True, "missing_cameras": "cam0"}, "missing_cameras"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": True, "missing_cameras": ["c"] * 65}, "missing_cameras"),
 ])
 def test_pose_validation_names_key(bad, word):
     with pytest.raises(MessageError, match=word):

@@ -66,6 +66,8 @@ def test_live_missing_camera_lowers_cameras(tmp_path, rng, studio):
     assert frames == sorted(set(frames))  # live: newest only, never backwards, never twice
     # the tracker kept publishing without cam2, every set with both live cameras (they segment the demanded id)
     assert sum(p.get("cameras") == 2 for p in poses) >= 0.9 * len(poses)
+    # and each record names the camera it went without
+    assert all(p.get("missing_cameras") == ["cam2"] for p in poses if p.get("cameras") == 2)
 
 
 def test_assembler_rules():

@@ -133,3 +133,22 @@ if __name__ == "__main__":
         print("long docstring:", item)
     for item in figures:
         print("figure in docstring:", item)
+
+
+def face_shadows() -> list[str]:
+    """Names a lazy package face exports that are also the name of one of the package's submodules.
+
+    Python binds a submodule to its package's attribute when the submodule is first imported, so such a
+    name resolves to the function or to the module depending on import order.
+    """
+    mods = modules()
+    found = []
+    for name, path in mods.items():
+        if path.name != "__init__.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "_EXPORTS" for t in node.targets):
+                exports = ast.literal_eval(node.value)
+                found += [f"{name}.{n} (from {module})" for module, names in exports.items() for n in names
+                          if f"{name}.{n}" in mods]
+    return found

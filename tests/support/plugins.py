@@ -33,3 +33,13 @@ def fitter(frame_id, timestamp_ns, chamfer):
 def fitter_factory(cfg):
     return fitter
 
+
+
+def frame_ids_fitter(frame_id, timestamp_ns, chamfer):
+    """:func:`fitter`, plus ``camera_frames`` {camera: frame id of its chamfer}: what a mixed set would show."""
+    return {**fitter(frame_id, timestamp_ns, chamfer),
+            "camera_frames": {c: int(m.frame_id) for c, m in chamfer.items()}}
+
+
+def frame_ids_fitter_factory(cfg):
+    return frame_ids_fitter

@@ -39,7 +39,7 @@ from tracker.fitting.tracking import Tracker
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import initialise_any
 
-__all__ = ["SceneOptions", "SceneTracker"]
+__all__ = ["RecoveryBudget", "SceneOptions", "SceneTracker"]
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,10 @@ class SceneOptions:
     warmup_frames : frames after an initialisation with the reverse term off and no recovery
     recovery_gap, recovery_share : the CPU budget of recovery (a search costs tens of frames'
         fits): at least ``recovery_gap`` frames between two searches, and a search only while the
-        time spent in searches is at most ``recovery_share`` of the time spent tracking
+        cost of the searches is at most ``recovery_share`` of the cost of tracking
+    recovery_cost_frames : a search is charged as this many frames' fits, a frame as one, so that
+        the budget (and so the poses) do not depend on the machine's speed or load (None: both
+        charged their measured seconds)
     seated : the first pose is searched standing (T/A) and seated (``tracker.search.seated``)
     heights : subject heights (metres) the seated search also tries, the tracker's model re-sized
         to the best (None: only the model's own; a seated subject's height is not on the hull)
@@ -70,8 +73,33 @@ class SceneOptions:
     warmup_frames: int = 25
     recovery_gap: int = 25
     recovery_share: float = 0.2
+    recovery_cost_frames: float | None = 40.0
     seated: bool = True
     heights: tuple | None = None
+
+
+class RecoveryBudget:
+    """When a recovery search may run: ``SceneOptions``' ``recovery_gap``, ``recovery_share`` and
+    ``recovery_cost_frames`` (None: costs in measured seconds)."""
+
+    def __init__(self, gap: int, share: float, cost_frames: float | None) -> None:
+        self.gap, self.share, self.cost_frames = int(gap), float(share), cost_frames
+        self.since = self.gap  # frames since the last search or initialisation
+        self.tracking = 0.0    # cost of every frame's step (searches included)
+        self.searching = 0.0   # cost of the searches
+
+    def allows(self) -> bool:
+        """Whether a search may run on the next frame."""
+        return self.since >= self.gap and self.searching <= self.share * self.tracking
+
+    def frame(self, seconds: float, *, searched: bool, restart: bool) -> None:
+        """Charge one frame's step that took ``seconds``; ``searched``: it ran a search (charged as
+        one); ``restart``: a search or an initialisation ran (the gap starts again)."""
+        fixed = self.cost_frames is not None
+        self.tracking += 1.0 if fixed else float(seconds)
+        if searched:
+            self.searching += float(self.cost_frames) if fixed else float(seconds)
+        self.since = 0 if restart else self.since + 1
 
 
 class SceneTracker:
@@ -113,9 +141,7 @@ class SceneTracker:
         self._views = self._render_views()
         self._base_options = tracker.options
         self._since_init = 0
-        self._since_recovery = options.recovery_gap
-        self._tracking_s = 0.0
-        self._recovery_s = 0.0
+        self.budget = RecoveryBudget(options.recovery_gap, options.recovery_share, options.recovery_cost_frames)
         self._recover = tracker.recover
         self._inits = tracker.n_initialisations
         self._explained: dict[str, np.ndarray] = {}
@@ -157,20 +183,19 @@ class SceneTracker:
         tr = self.tracker
         if tr.params is None and self.options.seated:
             self._initialise(segs)
+        inits = tr.n_initialisations  # after this class's own start search (not a recovery)
         warm = self._since_init < self.options.warmup_frames and self.options.learn
         tr.options = replace(self._base_options, reverse_weight=0.0) if warm else self._base_options
-        tr.recover = (self._recover and not warm and self._since_recovery >= self.options.recovery_gap
-                      and self._recovery_s <= self.options.recovery_share * self._tracking_s)
+        tr.recover = self._recover and not warm and self.budget.allows()
         t0 = time.perf_counter()
         rec = tr.step(frame_id, timestamp_ns, {n: s.chamfer for n, s in segs.items()},
                       silhouettes={n: s.silhouette for n, s in segs.items()}, images=images)
         tr.options, tr.recover = self._base_options, self._recover
         dt = time.perf_counter() - t0
-        self._tracking_s += dt
-        self._since_recovery += 1
-        if tr.n_initialisations != self._inits:
-            self._inits, self._since_init, self._since_recovery = tr.n_initialisations, 0, 0
-            self._recovery_s += dt
+        restart = tr.n_initialisations != self._inits
+        self.budget.frame(dt, searched=tr.n_initialisations != inits, restart=restart)
+        if restart:
+            self._inits, self._since_init = tr.n_initialisations, 0
         else:
             self._since_init += 1
         if "params" not in rec:

@@ -16,10 +16,12 @@ _EXPORTS = {
                                'rendered_views'),
     "tracker.search.candidates": ('pose_candidates', 'feet_direction', 'estimate_height', 'sized_model',
                                   'limb_search', 'limb_chains', 'turn_about_vertical'),
-    "tracker.search.refine": ('InitResult', 'refine', 'refine_best', 'elbow_search'),
+    "tracker.search.refine": ('InitResult', 'refine_best', 'elbow_search'),
     "tracker.search.mirror": ('FrontBack', 'mirror_params', 'mirror_map', 'front_back_cost', 'hypothesis_cost',
                               'compare_front_back', 'resolve_front_back'),
-    "tracker.search.initialise": ('SearchOptions', 'initialise', 'search_candidates'),
+    "tracker.search.initialise": ('SearchOptions', 'search_candidates'),
     "tracker.search.recovery": ('LossMonitor', 'LossState', 'recover', 'local_search'),
 }
+# the functions ``refine`` and ``initialise`` share their modules' names, which Python binds on the package
+# when the module is imported: import them from their modules (``from tracker.search.refine import refine``).
 __all__, __getattr__, __dir__ = lazy_face(__name__, _EXPORTS)
