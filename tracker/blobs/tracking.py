@@ -37,6 +37,7 @@ from segmentation.background import BackgroundModel
 from tracker.blobs.blobset import BlobSet, blob_layout, learn_blobs
 from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zone_of_interest
 from tracker.blobs.em import expectation, maximisation
+from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
@@ -73,7 +74,9 @@ class BlobOptions:
     (0: no such test); max_unexplained : a frame is ``ok: false`` when more than this fraction of the
     hull's volume lies outside the fitted body (every part grown by a finest voxel,
     :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
-    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test).
+    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
+    floor_test : settle the hull's shadow-like samples by the multi-view floor test
+    (``tracker.blobs.floor_samples``; two cameras or more), so dark clothes on a dark floor stay in the hull.
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -102,6 +105,7 @@ class BlobOptions:
     max_goal_rms_m: float = 0.045
     min_part_support: float = 0.4
     max_unexplained: float = 0.4
+    floor_test: bool = True
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
@@ -160,16 +164,37 @@ def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m: float
 
 
 def initialise_from_images(model: BodyModel, cameras: Sequence[Camera], images: Mapping[str, np.ndarray],
-                           backgrounds: Mapping[str, BackgroundModel]) -> np.ndarray:
-    """A first pose from one frame set: segmentation and the contour tracker's silhouette search
-    (``tracker.search.initialise.initialise``); returns params (n_params,), raises ValueError on failure."""
+                           backgrounds: Mapping[str, BackgroundModel], *, refine: bool = True,
+                           floor_test: bool = True) -> np.ndarray:
+    """A first pose from one frame set, as the contour tracker finds its own; returns params (n_params,).
+
+    The frames are segmented with the multi-view floor test of shadow-like pixels
+    (``segmentation.floor``, when ``floor_test`` and there are at least two cameras: dark clothes on a
+    dark floor are otherwise taken for shadow), the silhouette search
+    (``tracker.search.initialise.initialise``) finds a pose, and with ``refine`` the contour tracker
+    fits it to the silhouettes' contours and settles front/back from the colours
+    (``tracker.fitting.tracking.Tracker``'s first frame with its front/back guard): the blobs are
+    learnt at this pose, so an error here persists.  Raises ValueError on failure.
+    """
+    from segmentation.floor import FloorShadows
     from segmentation.pipeline import segment_frame
+    from tracker.fitting.tracking import Tracker
     from tracker.search.initialise import initialise
 
-    segs = {c.name: segment_frame(backgrounds[c.name], images[c.name]) for c in cameras}
-    res = initialise(model, cameras, {n: s.silhouette for n, s in segs.items()},
-                     {n: s.chamfer for n, s in segs.items()})
-    return model.clamp(np.asarray(res.params, dtype=float))
+    floor = None
+    if floor_test and len(cameras) >= 2:
+        floor = FloorShadows(cameras, {c.name: backgrounds[c.name] for c in cameras})
+    segs = {c.name: segment_frame(backgrounds[c.name], images[c.name],
+                                  floor=None if floor is None else floor.for_camera(c.name, images))
+            for c in cameras}
+    sils = {n: s.silhouette for n, s in segs.items()}
+    chs = {n: s.chamfer for n, s in segs.items()}
+    if not refine:
+        return model.clamp(np.asarray(initialise(model, cameras, sils, chs).params, dtype=float))
+    record = Tracker(model, cameras).step(0, 0, chs, silhouettes=sils, images={c.name: images[c.name] for c in cameras})
+    if "params" not in record:
+        raise ValueError(record.get("reason", "no pose"))
+    return model.clamp(np.asarray(record["params"], dtype=float))
 
 
 class BlobTracker:
@@ -225,6 +250,8 @@ class BlobTracker:
                                                            for p in model.param_part])
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
         self._support_parts, self._support_part, self._support_local = _interior_samples(model)
+        self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
+                       if options.floor_test and len(self.cameras) >= 2 else None)
 
     def predict(self) -> np.ndarray | None:
         """Start pose for the next frame (n_params,) or None before initialisation."""
@@ -237,7 +264,8 @@ class BlobTracker:
     def _hull(self, cams, images, params) -> ColourHull:
         zone = zone_of_interest(self.model, params, margin_m=self.options.zone_margin_m)
         return coloured_hull(cams, [images[c.name] for c in cams], [self.backgrounds[c.name] for c in cams], zone,
-                             options=self.options.hull)
+                             options=self.options.hull,
+                             floor=None if self._floor is None else self._floor.for_frame(images))
 
     def _ik(self, params: np.ndarray, goals: np.ndarray, weights: np.ndarray) -> np.ndarray:
         o, lay, m = self.options, self.layout, self.model
