@@ -38,6 +38,7 @@ from tracker.blobs.blobset import BlobSet, blob_layout, learn_blobs
 from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zone_of_interest
 from tracker.blobs.em import expectation, maximisation
 from tracker.blobs.floor_samples import SampleFloorTest
+from tracker.blobs.start import StartPending
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
@@ -106,6 +107,8 @@ class BlobOptions:
     min_part_support: float = 0.4
     max_unexplained: float = 0.4
     floor_test: bool = True
+    offset_weight: float = 0.0
+    max_offset_m: float = 0.05
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
@@ -371,6 +374,13 @@ class BlobTracker:
                 return fail("no initial pose: pass initial_params or an initialiser")
             try:
                 start = self.model.clamp(np.asarray(self.initialiser(cams, images), dtype=float))
+            except StartPending as exc:  # the initialiser's own pose while it settles the first one
+                for key in ("params", "joints", "ok"):
+                    if key in exc.record:
+                        record[key] = exc.record[key]
+                record["start"] = "pending"
+                return fail(f"starting: {exc}") if not record.get("ok") else {
+                    **record, "latency_ms": 1e3 * (self.clock() - t0)}
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
         try:
@@ -383,7 +393,8 @@ class BlobTracker:
             self.previous = None
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
-            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout)
+            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
+                                     offset_weight=o.offset_weight, max_offset_m=o.max_offset_m)
         params, quality = self.fit(hull, start)
         joints = joint_centre_array(self.model, forward(self.model, params))
         why = self.judge(quality)
