@@ -126,3 +126,27 @@ def test_contour_start_hands_over_a_settled_pose():
     err = frame_errors(pred, sm.joints[f][None])
     assert not mirrored_frames(err).any()
     assert err["mpjpe"][0] < 0.13
+
+
+def test_damped_least_squares_with_the_root_lowers_the_trunk_into_a_crouch():
+    # goals of a crouch (hips and knees flexed, the trunk lower) from a standing start: with the
+    # root free every goal pulls the trunk down; with the joints only it stays at its height
+    from tracker.blobs import blob_layout, damped_least_squares
+    from tracker.body.kinematics import forward
+    from tracker.body.model import ROOT_TRANSLATION, load_model
+
+    model = load_model("knossow40", height_m=1.7)
+    lay = blob_layout(model)
+    target = model.zero()
+    for side in ("left", "right"):
+        target[model.param_index(f"{side}_thigh.flexion")] = np.radians(80.0)
+        target[model.param_index(f"{side}_shank.flexion")] = np.radians(110.0)
+    target[np.flatnonzero(model.param_kind == ROOT_TRANSLATION)[2]] -= 0.35
+    goals = forward(model, target).to_world(lay.part, lay.point)
+    err = {}
+    for root in (False, True):
+        out = damped_least_squares(model, model.zero(), lay.part, lay.point, goals, iterations=30, root=root)
+        assert model.within_limits(out)
+        err[root] = np.linalg.norm(forward(model, out).to_world(lay.part, lay.point) - goals, axis=1).mean()
+    assert err[True] < 0.01
+    assert err[False] > 0.1

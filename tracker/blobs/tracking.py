@@ -45,7 +45,7 @@ from tracker.body.model import JOINT_ROTATION, BodyModel
 
 __all__ = ["BlobOptions", "BlobTracker", "initialise_from_images"]
 
-_ROOT_BLOBS = ("pelvis", "abdomen", "torso.0", "left_thigh.0", "right_thigh.0")
+_ROOT_BLOBS = ("pelvis", "abdomen", "torso.0")
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,8 @@ class BlobOptions:
     max_unexplained: float = 0.4
     floor_test: bool = True
     offset_weight: float = 0.0
+    root_blobs: tuple = _ROOT_BLOBS
+    dls_root: bool = True
     max_offset_m: float = 0.05
 
     def __post_init__(self):
@@ -247,7 +249,7 @@ class BlobTracker:
             self.params = model.clamp(p)
         names = self.layout.names
         self._motion = options.motion_sigma_m**2 * np.eye(3)
-        self._root_blobs = np.array([any(n == r for r in _ROOT_BLOBS) for n in names])
+        self._root_blobs = np.array([any(n == r for r in options.root_blobs) for n in names])
         kind = model.param_kind
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
                                                            for p in model.param_part])
@@ -280,7 +282,7 @@ class BlobTracker:
                          attenuation=o.ccd_attenuation, damping=o.ccd_damping)
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
-                                          iterations=o.dls_iterations, damping=o.dls_damping)
+                                          iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root)
         return params
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
