@@ -11,13 +11,15 @@ Per frame set (camera name → BGR image):
    (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
    de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
    blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
-   a constraint, the limbs by damped least squares (or the paper's cyclic coordinate descent)
-   within the joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
+   a constraint, then the limbs and the root together by damped least squares (or the limbs by the
+   paper's cyclic coordinate descent) within the joint limits (``tracker.blobs.ik``); after the
+   last round, the floor contact;
 3. emit a DESIGN.md pose record (``"method": "blobs"``).
 
 The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
-pose an ``initialiser`` finds in the first frame, e.g. :func:`initialise_from_images`: the
-contour tracker's silhouette search).  A frame is ``ok: false`` when the hull in the zone is nearly
+pose an ``initialiser`` finds, e.g. ``tracker.blobs.start.ContourStart``: the contour tracker's
+first frames, whose poses are reported until it hands over, or :func:`initialise_from_images`).
+The hull's shadow-like samples go through the multi-view floor test (``BlobOptions.floor_test``).  A frame is ``ok: false`` when the hull in the zone is nearly
 empty, too few blobs are active, the active blobs' means are far from where the fitted model
 puts them, a part of the fitted model lies outside the hull (``BlobOptions.min_part_support``), or
 much of the hull lies outside the fitted model (``max_unexplained``); the fit is still the next
@@ -63,7 +65,9 @@ class BlobOptions:
     colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior
     each frame (skin blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps,
     ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
-    ``damped_least_squares``; orientation_weight, max_turn_deg : the root's orientation constraint
+    ``damped_least_squares``; dls_root : the root moves in it too (the legs' goals lower the trunk into
+    a crouch); root_blobs : the rigid root fit's blobs; offset_weight, max_offset_m : ``learn_blobs``'
+    learnt attachment offsets (0: none); orientation_weight, max_turn_deg : the root's orientation constraint
     (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
     velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
     1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
@@ -76,8 +80,7 @@ class BlobOptions:
     hull's volume lies outside the fitted body (every part grown by a finest voxel,
     :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
     reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
-    floor_test : settle the hull's shadow-like samples by the multi-view floor test
-    (``tracker.blobs.floor_samples``; two cameras or more), so dark clothes on a dark floor stay in the hull.
+    floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
