@@ -163,7 +163,7 @@ def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, 
         d, bgr = background_samples(background, image, cols.ravel(), rows.ravel())
     else:
         d, bgr, plain, ratio = background_samples(background, image, cols.ravel(), rows.ravel(), terms=True)
-        d = floor(cam.name, cols.ravel(), rows.ravel(), d, plain, ratio)
+        d = floor(cam.name, cols.ravel(), rows.ravel(), d, plain, ratio, np.repeat(np.arange(m), k * k))
     n = k * k
     d = d.reshape(m, n)
     n_bg = np.count_nonzero(d < options.low, axis=1)
@@ -224,7 +224,7 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
         ``[lower, upper]`` box to reconstruct, world metres; the grid is the world lattice of the
         coarse cube size that covers it.
     floor : callable, optional
-        ``(camera name, cols, rows, distance, plain, ratio) -> distance``: the samples' distances
+        ``(camera name, cols, rows, distance, plain, ratio, cube of each sample) -> distance``: the samples' distances
         after a floor test of shadow-like samples (``tracker.blobs.floor_samples.SampleFloorTest.for_frame``).
     """
     if not (len(cameras) == len(images) == len(backgrounds)) or not cameras:

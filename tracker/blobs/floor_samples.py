@@ -9,10 +9,11 @@ the same question of the samples the hull takes (a few per voxel projection), so
 the number of candidate samples, not the image size.
 
 For every *candidate* sample of camera i (plain distance ``> low``, shadow-relaxed distance
-``<= low``) the floor point behind it is projected into every other camera j, whose pixel there
-votes **body** (the unchanged floor: plain distance ``<= low`` and nearer than to the floor darkened
-by i's brightness ratio) or **shadow** (the darkened floor, nearer to it).  A candidate with more
-body than shadow votes, or whose floor point no other camera sees, takes its plain distance.
+``<= low``; one per cube when the hull groups them) the floor point behind it is projected into
+every other camera j, whose pixel there votes **body** (the unchanged floor: plain distance
+``<= low`` and nearer than to the floor darkened by i's brightness ratio) or **shadow** (the
+darkened floor, nearer to it).  A candidate with more body than shadow votes, or whose floor point
+no other camera sees, takes its plain distance (with its cube's other candidates).
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ class SampleFloorTest:
         self._floor = {n: floor_points(c) for n, c in self.cameras.items()}
 
     def resolve(self, name: str, images: Mapping[str, np.ndarray], cols: np.ndarray, rows: np.ndarray,
-                distance: np.ndarray, plain: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+                distance: np.ndarray, plain: np.ndarray, ratio: np.ndarray, group: np.ndarray | None = None
+                ) -> np.ndarray:
         """Camera ``name``'s sample distances with the shadow relaxation withdrawn where the floor
         test finds body.
 
@@ -69,6 +71,9 @@ class SampleFloorTest:
             The samples' pixels in camera ``name``'s image (inside it).
         distance, plain, ratio : ndarray, shape (m,)
             ``segmentation.samples.background_samples(..., terms=True)`` of those pixels.
+        group : ndarray of int, shape (m,), optional
+            A group per sample (the hull's cube): one candidate per group is tested (the first) and
+            its verdict applies to the group's candidates (the cost follows cubes, not samples).
 
         Returns
         -------
@@ -78,8 +83,14 @@ class SampleFloorTest:
         cand = np.flatnonzero((plain > self.low) & (distance <= self.low))
         if cand.size == 0:
             return distance
+        owner = None
+        if group is not None:
+            g = np.asarray(group)[cand]
+            _, first, owner = np.unique(g, return_index=True, return_inverse=True)
+            full, cand = cand, cand[first]
         xy = self._floor[name][np.asarray(rows)[cand], np.asarray(cols)[cand]]
         on_floor = np.isfinite(xy[:, 0])
+        kept = np.flatnonzero(on_floor)
         cand, xy = cand[on_floor], xy[on_floor].astype(np.float64)
         if cand.size == 0:
             return distance
@@ -104,7 +115,13 @@ class SampleFloorTest:
                 images[other], uv[idx, 1].astype(np.intp), uv[idx, 0].astype(np.intp), s[idx])
             body[idx] += (unchanged <= self.low) & (unchanged < darkened)
             shadow[idx] += (darkened <= self.low) & (darkened <= unchanged)
-        promote = cand[(body > shadow) | ~seen]
+        verdict = (body > shadow) | ~seen
+        if owner is None:
+            promote = cand[verdict]
+        else:  # every candidate of a group whose tested candidate is body
+            group_body = np.zeros(len(first), bool)
+            group_body[kept[verdict]] = True
+            promote = full[group_body[owner]]
         out = distance.copy()
         out[promote] = np.asarray(plain, np.float32)[promote]
         return out
@@ -112,5 +129,5 @@ class SampleFloorTest:
     def for_frame(self, images: Mapping[str, np.ndarray]) -> Callable:
         """``resolve`` bound to one frame set: ``(name, cols, rows, distance, plain, ratio) -> distance``
         (the ``floor`` argument of ``tracker.blobs.colour_hull.coloured_hull``)."""
-        return lambda name, cols, rows, distance, plain, ratio: self.resolve(name, images, cols, rows, distance,
-                                                                             plain, ratio)
+        return lambda name, cols, rows, distance, plain, ratio, group=None: self.resolve(
+            name, images, cols, rows, distance, plain, ratio, group)
