@@ -19,7 +19,7 @@ __all__ = ["background_samples"]
 
 
 def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.ndarray,
-                       rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                       rows: np.ndarray, *, terms: bool = False) -> tuple:
     """Background distance and colour of pixels ``(rows, cols)`` of ``image_bgr``.
 
     Parameters
@@ -30,6 +30,9 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
     cols, rows : ndarray of int, shape (m,)
         Pixel coordinates, already inside the image (``0 <= cols < w``, ``0 <= rows < h``); the
         caller clips them (this runs per voxel level, so it does not check every value).
+    terms : bool
+        Also return the plain distance (no shadow relaxation) and the brightness ratio, as
+        :meth:`BackgroundModel.distance_terms` does (for the floor test of shadow-like samples).
 
     Returns
     -------
@@ -37,6 +40,9 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
         Squared shadow-relaxed Mahalanobis distance, as ``model.distance`` with ``window_px=0`` gives.
     bgr : ndarray, shape (m, 3), float32
         The pixels' colours, BGR levels.
+    plain, ratio : ndarray, shape (m,), float32
+        With ``terms`` only: the squared distance without the shadow relaxation and the brightness
+        ratio ``B / A`` before clipping.
     """
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w = model.size[0]
@@ -54,4 +60,8 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
     s = np.clip(big_b * model._inv_a.reshape(-1)[flat], lo, hi)
     d = np.maximum(big_c + s * (s * big_a - 2.0 * big_b), 0.0)
     s1 = np.minimum(s, 1.0)
-    return (d / (s1 * s1)).astype(np.float32), bgr
+    if not terms:
+        return (d / (s1 * s1)).astype(np.float32), bgr
+    ratio = big_b * model._inv_a.reshape(-1)[flat]
+    plain = np.maximum(big_c - 2.0 * big_b + big_a, 0.0)
+    return (d / (s1 * s1)).astype(np.float32), bgr, plain.astype(np.float32), ratio.astype(np.float32)

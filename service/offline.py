@@ -144,10 +144,11 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
                  stream_check=None) -> Iterator[dict]:
-    from tracker.blobs import BlobOptions, BlobTracker, initialise_from_images
+    from tracker.blobs import BlobOptions, BlobTracker
+    from tracker.blobs.start import ContourStart
 
     tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
-                          initialiser=lambda cs, images: initialise_from_images(body, cs, images, backgrounds),
+                          initialiser=ContourStart(body, cams, backgrounds),
                           options=blob_options or BlobOptions(), clock=clock)
     for fid, group in _frame_sets(session, [c.name for c in cams], frames, stream_check):
         ts = next(iter(group.values())).timestamp_ns

@@ -13,8 +13,8 @@ demand: there is no segmentation to schedule).
 Background models: a replay camera's from its session (``service.backgrounds``, as the offline
 ``contourcap track`` does), a live camera's learnt from its first ``learn_frames`` frames (the
 studio must be empty at start-up, as for the segment worker).  The first pose comes from the
-contour tracker's silhouette search on the first set with a person
-(``tracker.blobs.initialise_from_images``), and again after ``reinit_after`` frames in a row that
+contour tracker's first frame sets with a person (``tracker.blobs.start.ContourStart``: its silhouette
+search, fit and front/back guard), and again after ``reinit_after`` frames in a row that
 were not ok.  After every fitted set the coloured hull is published on ``contourcap/<studio>/hull``
 (:class:`~service.wire.hull.HullMessage`, newest wins: a slow viewer never holds the tracker).
 """
@@ -108,12 +108,14 @@ class BlobFitter:
         return f"learning the background ({', '.join(waiting)})" if waiting else None
 
     def _tracker(self, start):
-        from tracker.blobs import BlobTracker, initialise_from_images
+        from tracker.blobs import BlobTracker
+        from tracker.blobs.start import ContourStart
 
         cams = [c for c in self.cameras if c.name in self.backgrounds]
         bgs = dict(self.backgrounds)
+        settle = min(30, self.reinit_after) if self.reinit_after > 0 else 30  # handed over before a restart
         return BlobTracker(self.model, cams, bgs, initial_params=start,
-                           initialiser=lambda cs, images: initialise_from_images(self.model, cs, images, bgs),
+                           initialiser=ContourStart(self.model, cams, bgs, max_frames=settle),
                            options=self.options, clock=self.clock)
 
     def __call__(self, frame_id: int, timestamp_ns: int, frames: Mapping[str, FrameMessage]) -> dict:

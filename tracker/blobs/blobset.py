@@ -139,7 +139,8 @@ class BlobSet:
 
 def learn_blobs(model: BodyModel, params: np.ndarray, centres: np.ndarray, sizes: np.ndarray,
                 colours: np.ndarray, *, layout: BlobLayout | None = None, skin_weight: float = 0.3,
-                shape_weight: float = 0.5, rounds: int = 2) -> BlobSet:
+                shape_weight: float = 0.5, rounds: int = 2, offset_weight: float = 0.0,
+                max_offset_m: float = 0.05) -> BlobSet:
     """Blobs learned from a coloured hull at a known pose.
 
     ``centres`` (n, 3), ``sizes`` (n,), ``colours`` (n, v, 3): the hull's voxels.  Voxels are first
@@ -174,6 +175,14 @@ def learn_blobs(model: BodyModel, params: np.ndarray, centres: np.ndarray, sizes
     got = np.isfinite(stats.cov).all((1, 2)) & (stats.count >= 10)
     learned = R.transpose(0, 2, 1) @ np.where(got[:, None, None], stats.cov, blobs.cov) @ R
     blobs.shape = shape_weight * layout.shape + (1 - shape_weight) * learned
+    if offset_weight > 0:
+        got_m = np.isfinite(stats.mean).all(1) & (stats.count >= 10)
+        t = pose.translation[layout.part]
+        local = np.einsum("bji,bj->bi", R, np.where(got_m[:, None], stats.mean, blobs.mean) - t)
+        shift = offset_weight * (local - layout.point)
+        norm = np.linalg.norm(shift, axis=1, keepdims=True)
+        shift *= np.minimum(1.0, max_offset_m / np.maximum(norm, 1e-12))
+        blobs.point = layout.point + shift
     blobs.colour_prior, blobs.colour_prior_cov = blobs.colour.copy(), blobs.colour_cov.copy()
     blobs.fill = stats.volume / layout.volume
     blobs.active = np.ones(b, bool)

@@ -27,6 +27,12 @@ coarse cube and are dropped by their background neighbours otherwise).  At the f
 cube is kept when, in every view, the mean of its samples' distances clipped at ``high`` reaches ``low`` (the paper's
 mean test; the clipping keeps one saturated sample from deciding: about a quarter of the samples
 certain, or most of them weakly foreground, as on clothing close to the background's colour).
+Camouflage (``HullOptions.camouflage``): a cube whose samples all fall below ``low`` in a view but
+whose mean distance does not is unknown there, not background, and an undecided finest cube then
+needs only ``camouflage_keep`` as its clipped mean: the voxel analogue of the segmentation's
+camouflage window (a cloth a little off the background's colour over the whole footprint).
+Shadow-like samples can be settled by the multi-view floor test (``floor``,
+``tracker.blobs.floor_samples``).
 
 Each kept cube stores its mean colour per view: the mean of its samples above ``low`` (all of them
 when none is), BGR levels.  There is no visibility test: the tracker uses the view whose colour
@@ -90,7 +96,11 @@ class HullOptions:
     ``min_voxel_m · 2**levels``); low, high : certainty thresholds on the squared background distance
     (``segmentation.pipeline.SegmentationParams`` uses the same pair for silhouettes); samples :
     samples per side of the pattern at each level from the coarsest (the last entry serves the finer
-    levels): ``k`` gives ``k²`` samples per cube and view.
+    levels): ``k`` gives ``k²`` samples per cube and view; camouflage : a cube whose samples are all
+    below ``low`` in a view but whose mean distance reaches this is unknown there rather than background
+    (clothing close to the background's colour differs a little over all its samples, noise does not;
+    0: off); camouflage_keep : with ``camouflage``, the mean clipped distance that keeps an undecided
+    finest cube (instead of ``low``; 0: ``low``).
     """
 
     min_voxel_m: float = 0.03
@@ -98,6 +108,8 @@ class HullOptions:
     low: float = 16.0
     high: float = 64.0
     samples: tuple = (4, 3, 3)
+    camouflage: float = 6.0
+    camouflage_keep: float = 10.0
 
     def __post_init__(self):
         if not (np.isfinite(self.min_voxel_m) and self.min_voxel_m > 0):
@@ -106,6 +118,9 @@ class HullOptions:
             raise ValueError(f"levels: expected 0..8, got {self.levels!r}")
         if not 0 <= self.low <= self.high:
             raise ValueError(f"low, high: expected 0 <= low <= high, got {self.low!r}, {self.high!r}")
+        if not (0 <= self.camouflage <= self.low and 0 <= self.camouflage_keep <= self.high):
+            raise ValueError(f"camouflage, camouflage_keep: expected 0..low and 0..high, got {self.camouflage!r}, "
+                             f"{self.camouflage_keep!r}")
         if not self.samples or any(int(k) < 1 for k in self.samples):
             raise ValueError(f"samples: expected positive samples per side, got {self.samples!r}")
 
@@ -131,7 +146,7 @@ def _pattern(k: int) -> np.ndarray:
 
 
 def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, centres: np.ndarray,
-                   size: float, k: int, options: HullOptions):
+                   size: float, k: int, options: HullOptions, floor=None):
     """Classes (m,) int8 of cubes ``centres`` (m, 3) of edge ``size`` in one view, with their samples'
     distances (m, k²) and colours (m, k², 3)."""
     m = len(centres)
@@ -144,7 +159,11 @@ def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, 
     inside = front & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= cam.width - 1) & (uv[:, 1] <= cam.height - 1)
     cols = np.clip(np.rint(uv[:, None, 0] + side[:, None] * pat[None, :, 0]), 0, cam.width - 1).astype(np.intp)
     rows = np.clip(np.rint(uv[:, None, 1] + side[:, None] * pat[None, :, 1]), 0, cam.height - 1).astype(np.intp)
-    d, bgr = background_samples(background, image, cols.ravel(), rows.ravel())
+    if floor is None:
+        d, bgr = background_samples(background, image, cols.ravel(), rows.ravel())
+    else:
+        d, bgr, plain, ratio = background_samples(background, image, cols.ravel(), rows.ravel(), terms=True)
+        d = floor(cam.name, cols.ravel(), rows.ravel(), d, plain, ratio, np.repeat(np.arange(m), k * k))
     n = k * k
     d = d.reshape(m, n)
     n_bg = np.count_nonzero(d < options.low, axis=1)
@@ -152,7 +171,10 @@ def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, 
     cls = np.full(m, UNKNOWN, np.int8)
     cls[(n_bg > 0) & (n_fg > 0)] = EDGE
     cls[n_fg == n] = FOREGROUND
-    cls[(n_bg == n) | ~inside] = BACKGROUND
+    bg = n_bg == n
+    if options.camouflage > 0:
+        bg &= d.mean(1) < options.camouflage
+    cls[bg | ~inside] = BACKGROUND
     return cls, d, bgr.reshape(m, n, 3)
 
 
@@ -190,7 +212,7 @@ def _neighbour_vote(cells: np.ndarray, cls: np.ndarray, todo: np.ndarray) -> np.
 
 
 def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backgrounds: Sequence[BackgroundModel],
-                  zone, *, options: HullOptions = HullOptions()) -> ColourHull:
+                  zone, *, options: HullOptions = HullOptions(), floor=None) -> ColourHull:
     """The coloured hull of the zone ``zone`` (module docstring).
 
     Parameters
@@ -201,6 +223,9 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
     zone : array_like, shape (2, 3)
         ``[lower, upper]`` box to reconstruct, world metres; the grid is the world lattice of the
         coarse cube size that covers it.
+    floor : callable, optional
+        ``(camera name, cols, rows, distance, plain, ratio, cube of each sample) -> distance``: the samples' distances
+        after a floor test of shadow-like samples (``tracker.blobs.floor_samples.SampleFloorTest.for_frame``).
     """
     if not (len(cameras) == len(images) == len(backgrounds)) or not cameras:
         raise ValueError(f"cameras, images, backgrounds: expected the same non-zero length, got "
@@ -229,7 +254,7 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
         for cam, img, bg in zip(cameras, images, backgrounds):
             if alive.size == 0:
                 break
-            c, d, bgr = _classify_view(cam, img, bg, centres[alive], size, k, options)
+            c, d, bgr = _classify_view(cam, img, bg, centres[alive], size, k, options, floor)
             n_samples += d.size
             seen.append((alive, d, bgr))
             prev = cls[alive]
@@ -251,7 +276,7 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
                 ok = np.ones(undecided.size, bool)
                 for idx, d, _ in seen:
                     row = np.searchsorted(idx, undecided)
-                    ok &= np.minimum(d[row], options.high).mean(1) >= options.low
+                    ok &= np.minimum(d[row], options.high).mean(1) >= (options.camouflage_keep or options.low)
                 keep[undecided[ok]] = True
         else:
             keep = cls == FOREGROUND

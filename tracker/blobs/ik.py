@@ -127,11 +127,15 @@ def ccd(model: BodyModel, params, part, point, goals, weights=None, *, free=None
 
 
 def damped_least_squares(model: BodyModel, params, part, point, goals, weights=None, *, free=None,
-                         iterations: int = 3, damping: float = 1e-3) -> np.ndarray:
-    """Damped Gauss–Newton on the free joint angles (module docstring); returns params within limits."""
+                         iterations: int = 3, damping: float = 1e-3, root: bool = False) -> np.ndarray:
+    """Damped Gauss–Newton on the free joint angles (module docstring); returns params within limits.
+
+    ``root``: the root's translation and rotation are free too (every goal then pulls the whole body,
+    e.g. the legs' goals lower the trunk into a crouch)."""
     params, part, point, goals, w = _check(model, params, part, point, goals, weights)
-    free = (model.param_kind == JOINT_ROTATION) if free is None else np.asarray(free, bool) & (
-        model.param_kind == JOINT_ROTATION)
+    kinds = (JOINT_ROTATION, ROOT_TRANSLATION, ROOT_ROTATION) if root else (JOINT_ROTATION,)
+    movable = np.isin(model.param_kind, kinds)
+    free = movable if free is None else (np.asarray(free, bool) | (movable & (model.param_kind != JOINT_ROTATION))) & movable
     idx = np.flatnonzero(free)
     out = model.clamp(params)
     sw = np.sqrt(w)[:, None]

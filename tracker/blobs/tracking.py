@@ -11,13 +11,15 @@ Per frame set (camera name → BGR image):
    (``maximisation``, eq. 4; ``BlobSet.absorb`` blends colour with its prior and
    de-activates blobs whose filling falls below ``min_fill``), and move the model onto the active
    blobs' means: the root by least squares on the trunk's blobs with the previous orientation as
-   a constraint, the limbs by damped least squares (or the paper's cyclic coordinate descent)
-   within the joint limits (``tracker.blobs.ik``); after the last round, the floor contact;
+   a constraint, then the limbs and the root together by damped least squares (or the limbs by the
+   paper's cyclic coordinate descent) within the joint limits (``tracker.blobs.ik``); after the
+   last round, the floor contact;
 3. emit a DESIGN.md pose record (``"method": "blobs"``).
 
 The blobs are learned from the first frame's hull at the initial pose (``initial_params``, or the
-pose an ``initialiser`` finds in the first frame, e.g. :func:`initialise_from_images`: the
-contour tracker's silhouette search).  A frame is ``ok: false`` when the hull in the zone is nearly
+pose an ``initialiser`` finds, e.g. ``tracker.blobs.start.ContourStart``: the contour tracker's
+first frames, whose poses are reported until it hands over, or :func:`initialise_from_images`).
+The hull's shadow-like samples go through the multi-view floor test (``BlobOptions.floor_test``).  A frame is ``ok: false`` when the hull in the zone is nearly
 empty, too few blobs are active, the active blobs' means are far from where the fitted model
 puts them, a part of the fitted model lies outside the hull (``BlobOptions.min_part_support``), or
 much of the hull lies outside the fitted model (``max_unexplained``); the fit is still the next
@@ -37,13 +39,15 @@ from segmentation.background import BackgroundModel
 from tracker.blobs.blobset import BlobSet, blob_layout, learn_blobs
 from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zone_of_interest
 from tracker.blobs.em import expectation, maximisation
+from tracker.blobs.floor_samples import SampleFloorTest
+from tracker.blobs.start import StartPending
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
 
 __all__ = ["BlobOptions", "BlobTracker", "initialise_from_images"]
 
-_ROOT_BLOBS = ("pelvis", "abdomen", "torso.0", "left_thigh.0", "right_thigh.0")
+_ROOT_BLOBS = ("pelvis", "abdomen", "torso.0")
 
 
 @dataclass(frozen=True)
@@ -61,7 +65,9 @@ class BlobOptions:
     colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior
     each frame (skin blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps,
     ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
-    ``damped_least_squares``; orientation_weight, max_turn_deg : the root's orientation constraint
+    ``damped_least_squares``; dls_root : the root moves in it too (the legs' goals lower the trunk into
+    a crouch); root_blobs : the rigid root fit's blobs; offset_weight, max_offset_m : ``learn_blobs``'
+    learnt attachment offsets (0: none); orientation_weight, max_turn_deg : the root's orientation constraint
     (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
     velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
     1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
@@ -73,7 +79,8 @@ class BlobOptions:
     (0: no such test); max_unexplained : a frame is ``ok: false`` when more than this fraction of the
     hull's volume lies outside the fitted body (every part grown by a finest voxel,
     :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
-    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test).
+    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
+    floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -102,6 +109,11 @@ class BlobOptions:
     max_goal_rms_m: float = 0.045
     min_part_support: float = 0.4
     max_unexplained: float = 0.4
+    floor_test: bool = True
+    offset_weight: float = 0.0
+    root_blobs: tuple = _ROOT_BLOBS
+    dls_root: bool = True
+    max_offset_m: float = 0.05
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
@@ -160,16 +172,37 @@ def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m: float
 
 
 def initialise_from_images(model: BodyModel, cameras: Sequence[Camera], images: Mapping[str, np.ndarray],
-                           backgrounds: Mapping[str, BackgroundModel]) -> np.ndarray:
-    """A first pose from one frame set: segmentation and the contour tracker's silhouette search
-    (``tracker.search.initialise.initialise``); returns params (n_params,), raises ValueError on failure."""
+                           backgrounds: Mapping[str, BackgroundModel], *, refine: bool = True,
+                           floor_test: bool = True) -> np.ndarray:
+    """A first pose from one frame set, as the contour tracker finds its own; returns params (n_params,).
+
+    The frames are segmented with the multi-view floor test of shadow-like pixels
+    (``segmentation.floor``, when ``floor_test`` and there are at least two cameras: dark clothes on a
+    dark floor are otherwise taken for shadow), the silhouette search
+    (``tracker.search.initialise.initialise``) finds a pose, and with ``refine`` the contour tracker
+    fits it to the silhouettes' contours and settles front/back from the colours
+    (``tracker.fitting.tracking.Tracker``'s first frame with its front/back guard): the blobs are
+    learnt at this pose, so an error here persists.  Raises ValueError on failure.
+    """
+    from segmentation.floor import FloorShadows
     from segmentation.pipeline import segment_frame
+    from tracker.fitting.tracking import Tracker
     from tracker.search.initialise import initialise
 
-    segs = {c.name: segment_frame(backgrounds[c.name], images[c.name]) for c in cameras}
-    res = initialise(model, cameras, {n: s.silhouette for n, s in segs.items()},
-                     {n: s.chamfer for n, s in segs.items()})
-    return model.clamp(np.asarray(res.params, dtype=float))
+    floor = None
+    if floor_test and len(cameras) >= 2:
+        floor = FloorShadows(cameras, {c.name: backgrounds[c.name] for c in cameras})
+    segs = {c.name: segment_frame(backgrounds[c.name], images[c.name],
+                                  floor=None if floor is None else floor.for_camera(c.name, images))
+            for c in cameras}
+    sils = {n: s.silhouette for n, s in segs.items()}
+    chs = {n: s.chamfer for n, s in segs.items()}
+    if not refine:
+        return model.clamp(np.asarray(initialise(model, cameras, sils, chs).params, dtype=float))
+    record = Tracker(model, cameras).step(0, 0, chs, silhouettes=sils, images={c.name: images[c.name] for c in cameras})
+    if "params" not in record:
+        raise ValueError(record.get("reason", "no pose"))
+    return model.clamp(np.asarray(record["params"], dtype=float))
 
 
 class BlobTracker:
@@ -219,12 +252,14 @@ class BlobTracker:
             self.params = model.clamp(p)
         names = self.layout.names
         self._motion = options.motion_sigma_m**2 * np.eye(3)
-        self._root_blobs = np.array([any(n == r for r in _ROOT_BLOBS) for n in names])
+        self._root_blobs = np.array([any(n == r for r in options.root_blobs) for n in names])
         kind = model.param_kind
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
                                                            for p in model.param_part])
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
         self._support_parts, self._support_part, self._support_local = _interior_samples(model)
+        self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
+                       if options.floor_test and len(self.cameras) >= 2 else None)
 
     def predict(self) -> np.ndarray | None:
         """Start pose for the next frame (n_params,) or None before initialisation."""
@@ -237,7 +272,8 @@ class BlobTracker:
     def _hull(self, cams, images, params) -> ColourHull:
         zone = zone_of_interest(self.model, params, margin_m=self.options.zone_margin_m)
         return coloured_hull(cams, [images[c.name] for c in cams], [self.backgrounds[c.name] for c in cams], zone,
-                             options=self.options.hull)
+                             options=self.options.hull,
+                             floor=None if self._floor is None else self._floor.for_frame(images))
 
     def _ik(self, params: np.ndarray, goals: np.ndarray, weights: np.ndarray) -> np.ndarray:
         o, lay, m = self.options, self.layout, self.model
@@ -249,7 +285,7 @@ class BlobTracker:
                          attenuation=o.ccd_attenuation, damping=o.ccd_damping)
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
-                                          iterations=o.dls_iterations, damping=o.dls_damping)
+                                          iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root)
         return params
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
@@ -343,6 +379,13 @@ class BlobTracker:
                 return fail("no initial pose: pass initial_params or an initialiser")
             try:
                 start = self.model.clamp(np.asarray(self.initialiser(cams, images), dtype=float))
+            except StartPending as exc:  # the initialiser's own pose while it settles the first one
+                for key in ("params", "joints", "ok"):
+                    if key in exc.record:
+                        record[key] = exc.record[key]
+                record["start"] = "pending"
+                return fail(f"starting: {exc}") if not record.get("ok") else {
+                    **record, "latency_ms": 1e3 * (self.clock() - t0)}
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
         try:
@@ -355,7 +398,8 @@ class BlobTracker:
             self.previous = None
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
-            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout)
+            self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
+                                     offset_weight=o.offset_weight, max_offset_m=o.max_offset_m)
         params, quality = self.fit(hull, start)
         joints = joint_centre_array(self.model, forward(self.model, params))
         why = self.judge(quality)
