@@ -35,7 +35,7 @@ from capture.camera import Camera
 from segmentation.background import BackgroundModel
 from segmentation.checks import check_image_bgr
 
-__all__ = ["FloorShadows", "floor_points"]
+__all__ = ["FloorShadows", "floor_points", "floor_votes"]
 
 
 def floor_points(camera: Camera) -> np.ndarray:
@@ -134,27 +134,8 @@ class FloorShadows:
         xy = self._floor[name][rows + y0, cols + x0]
         on_floor = np.isfinite(xy[:, 0])
         rows, cols, xy = rows[on_floor], cols[on_floor], xy[on_floor].astype(np.float64)
-        s = ratio[rows, cols]
-        body_votes = np.zeros(rows.size, np.int32)
-        shadow_votes = np.zeros(rows.size, np.int32)
-        seen = np.zeros(rows.size, bool)
         X = np.concatenate([xy, np.zeros((xy.shape[0], 1))], axis=1)
-        for other, cam in self.cameras.items():  # a loop over cameras, not pixels
-            if other == name or other not in images:
-                continue
-            image = images[other]
-            check_image_bgr(image, f"images[{other!r}]", size=cam.size)
-            w, h = cam.size
-            uv = np.rint(cam.project(X))
-            ok = _in_view(cam, X) & np.all(np.isfinite(uv), axis=1)
-            ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-            idx = np.flatnonzero(ok)
-            seen[idx] = True
-            unchanged, darkened = self.models[other].distance_at(
-                image, uv[idx, 1].astype(np.intp), uv[idx, 0].astype(np.intp), s[idx])
-            body_votes[idx] += (unchanged <= self.low) & (unchanged < darkened)
-            shadow_votes[idx] += (darkened <= self.low) & (darkened <= unchanged)
-        body = (body_votes > shadow_votes) | ~seen
+        body = floor_votes(self.cameras, self.models, name, images, X, ratio[rows, cols], self.low)
         votes = np.zeros(grid.shape, np.uint8)
         votes[rows[body] // step, cols[body] // step] = 255
         h, w = distance.shape
@@ -173,6 +154,53 @@ class FloorShadows:
         if name not in self.cameras:
             raise ValueError(f"no camera {name!r} in the floor test (have {sorted(self.cameras)})")
         return lambda box, distance, plain, ratio: self.refine(name, images, box, distance, plain, ratio)
+
+
+def floor_votes(cameras: Mapping[str, Camera], models: Mapping[str, BackgroundModel], name: str,
+                images: Mapping[str, np.ndarray], points: np.ndarray, ratio: np.ndarray, low: float) -> np.ndarray:
+    """The other cameras' vote on floor points seen darkened by camera ``name``: body or shadow.
+
+    Parameters
+    ----------
+    cameras, models : mapping of str to Camera / BackgroundModel
+        The studio, by camera name.
+    name : str
+        The camera whose shadow-like pixels are tested (it does not vote).
+    images : mapping of str to ndarray, each (h, w, 3) uint8
+        The frame set's BGR images; cameras missing here do not vote.
+    points : ndarray, shape (m, 3)
+        The floor points (z = 0) behind the candidates, world frame, metres.
+    ratio : ndarray, shape (m,)
+        Each candidate's brightness ratio to its background (the darkening a shadow would cast).
+    low : float
+        The foreground threshold on the squared distance.
+
+    Returns
+    -------
+    ndarray of bool, shape (m,)
+        Body: more cameras see the floor point unchanged than darkened alike, or none sees it.
+    """
+    body_votes = np.zeros(len(points), np.int32)
+    shadow_votes = np.zeros(len(points), np.int32)
+    seen = np.zeros(len(points), bool)
+    for other, cam in cameras.items():  # a loop over cameras, not pixels
+        if other == name or other not in images:
+            continue
+        image = images[other]
+        check_image_bgr(image, f"images[{other!r}]", size=cam.size)
+        w, h = cam.size
+        uv = np.rint(cam.project(points))
+        ok = _in_view(cam, points) & np.all(np.isfinite(uv), axis=1)
+        ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            continue
+        seen[idx] = True
+        unchanged, darkened = models[other].distance_at(
+            image, uv[idx, 1].astype(np.intp), uv[idx, 0].astype(np.intp), ratio[idx])
+        body_votes[idx] += (unchanged <= low) & (unchanged < darkened)
+        shadow_votes[idx] += (darkened <= low) & (darkened <= unchanged)
+    return (body_votes > shadow_votes) | ~seen
 
 
 def _in_view(camera: Camera, points: np.ndarray) -> np.ndarray:

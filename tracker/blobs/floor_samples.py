@@ -24,7 +24,7 @@ import numpy as np
 
 from capture.camera import Camera
 from segmentation.background import BackgroundModel
-from segmentation.floor import floor_points
+from segmentation.floor import floor_points, floor_votes
 
 __all__ = ["SampleFloorTest"]
 
@@ -95,27 +95,8 @@ class SampleFloorTest:
         if cand.size == 0:
             return distance
         X = np.column_stack([xy, np.zeros(len(xy))])
-        s = np.asarray(ratio, np.float32)[cand]
-        body = np.zeros(cand.size, np.int32)
-        shadow = np.zeros(cand.size, np.int32)
-        seen = np.zeros(cand.size, bool)
-        for other, cam in self.cameras.items():  # a loop over cameras, not samples
-            if other == name or other not in images:
-                continue
-            w, h = cam.size
-            Xc = cam.to_camera(X)
-            uv = np.rint(cam.project(X))
-            ok = (Xc[:, 2] > 1e-6) & np.all(np.isfinite(uv), axis=1)
-            ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-            idx = np.flatnonzero(ok)
-            if idx.size == 0:
-                continue
-            seen[idx] = True
-            unchanged, darkened = self.backgrounds[other].distance_at(
-                images[other], uv[idx, 1].astype(np.intp), uv[idx, 0].astype(np.intp), s[idx])
-            body[idx] += (unchanged <= self.low) & (unchanged < darkened)
-            shadow[idx] += (darkened <= self.low) & (darkened <= unchanged)
-        verdict = (body > shadow) | ~seen
+        verdict = floor_votes(self.cameras, self.backgrounds, name, images, X, np.asarray(ratio, np.float32)[cand],
+                              self.low)
         if owner is None:
             promote = cand[verdict]
         else:  # every candidate of a group whose tested candidate is body
