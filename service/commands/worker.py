@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import socket
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
                                      set_timeout_s=cfg.set_timeout_ms / 1e3, stop=stop,
                                      max_frames=args.max_frames, idle_exit_s=idle)
         finished = True
-        log.info("finished: %s", {k: v for k, v in sorted(stats.items())})
+        log.info("finished: %s", json.dumps(stats, sort_keys=True, default=str))  # one JSON object: machine-readable
         return 0
     except _setup_errors() as exc:
         print(f"contourcap worker {args.role}: {exc}", file=sys.stderr)

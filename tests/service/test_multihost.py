@@ -17,7 +17,6 @@ named missing, they rejoin, no set mixes frame ids, the tracker resumes, no proc
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import shutil
@@ -115,7 +114,7 @@ class Procs:
         """The counters a worker logs when it stops cleanly (``finished: {...}``)."""
         for line in (self.logs / f"{name}.log").read_text(errors="replace").splitlines()[::-1]:
             if " finished: {" in line:
-                return ast.literal_eval(line.split(" finished: ", 1)[1])
+                return json.loads(line.split(" finished: ", 1)[1])
         raise AssertionError(f"{name} logged no 'finished' line:\n{self.tails()}")
 
     def stop(self) -> None:
