@@ -5,7 +5,11 @@
 2. A studio config for it is written to ``out_dir`` (replay cameras, loopback peer hub, multicast
    off); the camera, segment and track workers run as processes under the :class:`Supervisor`.
    Lossless: every frame once, in order.  Live: the clip loops in real time for ``live_duration_s``
-   and the tracker takes the newest complete frame set (stale ones dropped).
+   and the tracker takes the newest complete frame set (stale ones dropped).  The clip plays its
+   motion forward then backward (``bounce``), so the loop is continuous: a plain looped clip makes
+   the subject jump from the last pose to the first (0.5–0.9 m for the hop) once per pass, which no
+   person does.  Live, the replay cameras hold the clip decoded in memory, as a camera delivers
+   decoded frames (``live_preload_mb``), when it fits.
 3. This process is the hub and the client: it records every pose (``poses.jsonl``), bridges poses,
    images and silhouettes to rerun (``demo.rrd``) and exports ``poses.bvh``.  Lossless, it taps
    every camera's frames; live, only the first ``live_image_cameras`` cameras' (a tap decodes every
@@ -46,8 +50,11 @@ class DemoOptions:
     Attributes
     ----------
     cameras, size, frames, fps, motion
-        The synthetic session: camera count, image size (w, h) in pixels, frame count, frames per
-        second, bundled CMU motion name.
+        The synthetic session: camera count, image size (w, h) in pixels, frames of motion, frames
+        per second, bundled CMU motion name.
+    bounce : bool
+        The session holds the motion forward then backward (``2 * frames - 2`` frames;
+        ``tracker.synthetic.retarget.palindrome``), else forward only.
     delivery : {"lossless", "live"}
     out_dir, cache_dir : Path
         Outputs (poses, BVH, rrd); rendered sessions, keyed by their options.
@@ -59,6 +66,9 @@ class DemoOptions:
         Live: seconds until session time 0 is due (the workers start meanwhile); seconds of replay.
     live_image_cameras : int
         Live: cameras whose frames are tapped for rerun.
+    live_preload_mb : float
+        Live: the replay cameras decode the clip into memory first when it takes at most this many
+        MB decoded (0: never; they then decode the session's videos while streaming).
     segment_plugin, fit_plugin : str or None
         ``module:callable`` replacing the segmenter or the tracker.
     """
@@ -68,6 +78,7 @@ class DemoOptions:
     frames: int = 90
     fps: float = 30.0
     motion: str = "scaled_131_03"
+    bounce: bool = True
     delivery: str = "lossless"
     out_dir: Path | None = None  # None: <cache_dir>/last-demo (never the working directory)
     cache_dir: Path = Path.home() / ".cache" / "contourcap"
@@ -76,6 +87,7 @@ class DemoOptions:
     live_start_delay_s: float = 8.0
     live_duration_s: float = 20.0
     live_image_cameras: int = 1
+    live_preload_mb: float = 1024.0
     segment_plugin: str | None = None
     fit_plugin: str | None = None
     port: int | None = None  # the loopback hub's TCP port (None: a free one)
@@ -115,19 +127,36 @@ class DemoSummary:
         return asdict(self)
 
 
+def session_frames(opts: DemoOptions) -> int:
+    """Frames in the demo session of ``opts`` (the motion's, doubled less two when it bounces)."""
+    return 2 * opts.frames - 2 if opts.bounce and opts.frames >= 3 else opts.frames
+
+
+def decoded_clip_mb(opts: DemoOptions) -> float:
+    """Megabytes (1e6 bytes) of the demo session's frames decoded (BGR, all cameras)."""
+    return session_frames(opts) * opts.cameras * opts.size[0] * opts.size[1] * 3 / 1e6
+
+
 def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> Path:
     """The cached synthetic session for ``opts`` (rendered on first use)."""
     from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.retarget import palindrome, retarget_bvh
     from tracker.synthetic.synth import bundled_motion
 
-    key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps], sort_keys=True)
+    key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps]
+                     + (["bounce"] if opts.bounce else []), sort_keys=True)
     root = Path(opts.cache_dir) / f"demo-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
     if (root / "ground_truth.jsonl").is_file() and (root / "session.toml").is_file():
         progress(f"demo session (cached): {root}")
         return root
-    progress(f"rendering the demo session ({opts.cameras} cameras, {opts.frames} frames) into {root} ...")
-    make_synthetic_session(bundled_motion(opts.motion), root, cameras=opts.cameras, size=tuple(opts.size),
-                           frames=opts.frames, fps=opts.fps, seed=0, name="demo",
+    bvh = bundled_motion(opts.motion)
+    motion = retarget_bvh(load_bvh(bvh), fps=opts.fps, frames=opts.frames)
+    if opts.bounce:
+        motion = palindrome(motion)
+    progress(f"rendering the demo session ({opts.cameras} cameras, {motion.n_frames} frames) into {root} ...")
+    make_synthetic_session(bvh, root, cameras=opts.cameras, size=tuple(opts.size), retargeted=motion,
+                           fps=opts.fps, seed=0, name="demo",
                            progress=lambda d, n: progress(f"  rendered {d}/{n}") if d % 10 == 0 or d == n else None)
     return root
 
@@ -200,7 +229,7 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     port = free_port() if opts.port is None else int(opts.port)
     cfg_path = write_studio(session_root, out, port=port, delivery=opts.delivery)
     cfg = load_config(cfg_path)
-    n_total = opts.frames
+    n_total = session_frames(opts)
     hub = open_session(ZenohSettings.loopback(port, listen=True))
     keys = Keys(STUDIO)
     poses_in = Inbox(hub, keys.pose, PoseRecord.from_bytes, mode="lossless", depth=1_000_000)
@@ -219,15 +248,20 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     # live: session time 0 is due once the workers are up (frames already late at a camera are skipped)
     epoch = time.time_ns() + int(opts.live_start_delay_s * 1e9) if live else None
     end_ns = None
+    decoded_mb = decoded_clip_mb(opts)
+    preload = live and 0 < decoded_mb <= opts.live_preload_mb
     specs = plan_host(cfg, str(cfg_path), HOST, hub=f"tcp/127.0.0.1:{port}", epoch_ns=epoch, idle_exit_s=5.0,
-                      segment_plugin=opts.segment_plugin, fit_plugin=opts.fit_plugin, loop_replay=live)
+                      segment_plugin=opts.segment_plugin, fit_plugin=opts.fit_plugin, loop_replay=live,
+                      preload_replay=preload)
     sup = Supervisor(specs, backoff_s=0.5, max_backoff_s=2.0)
     poses: list[PoseRecord] = []
     last_status: StatusMessage | None = None
     t0 = time.monotonic()
     cpu0 = _cpu_s()  # the rendering and set-up before t0 are not the pipeline's
     first_pose_t = last_pose_t = None
-    progress(f"starting {len(specs)} worker processes ({opts.delivery}), zenoh hub tcp/127.0.0.1:{port}")
+    progress(f"starting {len(specs)} worker processes ({opts.delivery}"
+             + (f", cameras holding the clip decoded: {decoded_mb:.0f} MB" if preload else "")
+             + f"), zenoh hub tcp/127.0.0.1:{port}")
     sup.start()
     try:
         last_report = 0.0

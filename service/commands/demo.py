@@ -15,7 +15,16 @@ HELP = "run the whole live pipeline over zenoh on loopback on a synthetic studio
 
 def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", type=int, default=6, help="cameras on a ring around the subject (default 6)")
-    parser.add_argument("--frames", type=int, default=90, help="frames of motion at --fps (default 90: a 3 s hop)")
+    parser.add_argument("--frames", type=int, default=90,
+                        help="frames of motion at --fps (default 90: a 3 s hop); the clip plays them forward then "
+                             "backward (2N-2 frames) unless --no-bounce")
+    parser.add_argument("--no-bounce", action="store_true",
+                        help="the clip plays the motion forward only: a looped live replay then jumps from the last "
+                             "pose to the first once per pass (a recovery test)")
+    parser.add_argument("--decode-live", action="store_true",
+                        help="live: the replay cameras decode the session's videos while streaming (default: they "
+                             "hold the clip decoded in memory when it takes at most 1 GB, as a camera delivers "
+                             "decoded frames)")
     parser.add_argument("--size", type=image_size, default=(320, 240), help="WIDTHxHEIGHT of the cameras")
     parser.add_argument("--fps", type=positive_float, default=30.0)
     parser.add_argument("--motion", default="scaled_131_03", help="bundled CMU clip (tracker/data)")
@@ -41,7 +50,10 @@ def options_from_args(args: argparse.Namespace):
               delivery="live" if args.live else "lossless", out_dir=None if args.out is None else Path(args.out),
               timeout_s=args.timeout_s,
               segment_plugin=args.segment_plugin, fit_plugin=args.fit_plugin,
-              live_duration_s=args.duration_s, live_image_cameras=args.image_cameras)
+              live_duration_s=args.duration_s, live_image_cameras=args.image_cameras,
+              bounce=not args.no_bounce)
+    if args.decode_live:
+        kw["live_preload_mb"] = 0.0
     if args.cache:
         kw["cache_dir"] = Path(args.cache)
     return DemoOptions(**kw)

@@ -56,8 +56,8 @@ class _Child:
 
 def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None = None,
               epoch_ns: int | None = None, idle_exit_s: float | None = None, segment_plugin: str | None = None,
-              fit_plugin: str | None = None, loop_replay: bool = False, camera_processes: str | None = None,
-              python: str = sys.executable) -> list[ProcessSpec]:
+              fit_plugin: str | None = None, loop_replay: bool = False, preload_replay: bool = False,
+              camera_processes: str | None = None, python: str = sys.executable) -> list[ProcessSpec]:
     """The processes ``contourcap run`` starts on ``host`` (see the module docstring).
 
     Parameters
@@ -76,6 +76,8 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         ``module:callable`` replacing the segmenter / the tracker.
     loop_replay : bool
         Replay cameras loop the session.
+    preload_replay : bool
+        Replay cameras decode the session into memory before streaming it (``worker camera --preload``).
     camera_processes : {"per-camera", "one"}, optional
         One camera process per camera, or one for all the host's cameras; default: one on a host
         of at most :data:`SMALL_HOST_CPUS` CPUs (each process costs its start-up and scheduling
@@ -94,6 +96,7 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         specs.append(ProcessSpec("router", (python, "-m", "service.commands.router", "--config", str(config_path))))
     cams = [c.name for c in cfg.cameras_on(host)]
     extra = (("--epoch-ns", str(epoch_ns)) if epoch_ns is not None else ()) + (("--loop",) if loop_replay else ())
+    extra += ("--preload",) if preload_replay else ()
     one = needs_trigger(cfg, cams) or (camera_processes == "one" or camera_processes is None
                                        and (os.cpu_count() or 1) <= SMALL_HOST_CPUS)
     if one:  # a USB trigger box (one process owns it) or a small host: all the host's cameras in one

@@ -17,7 +17,7 @@ from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
 from segmentation.pipeline import segment_frame  # noqa: E402
 from service.workers.components import chamfer_to_message  # noqa: E402
-from service.demo import DemoOptions, run_demo  # noqa: E402
+from service.demo import DemoOptions, decoded_clip_mb, run_demo, session_frames  # noqa: E402
 from service.offline import background_models  # noqa: E402
 
 from tests.support.plugins import fitter  # noqa: E402
@@ -28,7 +28,7 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
                        cache_dir=tmp_path / "cache", timeout_s=120.0,
                        fit_plugin="tests.support.plugins:fitter_factory")
     summary = run_demo(opts, progress=lambda m: None)
-    assert summary.frames == 6 and summary.ok == 6
+    assert summary.frames == 10 and summary.ok == 10  # 6 frames of motion forward, then 4 back
     poses = [json.loads(line) for line in (tmp_path / "out" / "poses.jsonl").read_text().splitlines()]
     session = load_session(summary.session)
     models, _ = background_models(session, list(session.camera_names))
@@ -43,6 +43,29 @@ def test_demo_lossless_equals_offline_segmentation(tmp_path):
     assert summary.mean_joint_error_m is not None and np.isfinite(summary.mean_joint_error_m)
     assert (tmp_path / "out" / "demo.rrd").stat().st_size > 0
     assert summary.poses_per_s is None and summary.demand_timeouts is None and summary.missing_cameras is None
+
+
+def test_live_demo_cameras_hold_the_clip_decoded_only_when_it_fits(tmp_path):
+    import argparse
+
+    from service.commands.worker import add_args
+    from service.config import parse_config
+    from service.flow.supervisor import plan_host
+
+    opts = DemoOptions()
+    assert session_frames(opts) == 178 and session_frames(DemoOptions(bounce=False)) == 90
+    assert decoded_clip_mb(opts) == pytest.approx(178 * 6 * 320 * 240 * 3 / 1e6)  # ~246 MB: fits the default
+    assert decoded_clip_mb(DemoOptions(size=(800, 600))) > opts.live_preload_mb  # 1.5 GB: decoded while streaming
+    cfg_path = tmp_path / "studio.toml"
+    cfg = parse_config({"studio": {"name": "s"}, "tracker": {"host": "demo"},
+                        "camera": [{"name": "cam0", "host": "demo", "backend": "opencv", "source": "0"}]})
+    parser = argparse.ArgumentParser()
+    add_args(parser)
+    for preload in (False, True):
+        specs = plan_host(cfg, str(cfg_path), "demo", loop_replay=True, preload_replay=preload)
+        camera = next(s for s in specs if s.name.startswith("camera"))
+        args = parser.parse_args(list(camera.argv[3:]))  # after python -m service.commands.worker
+        assert args.loop and args.preload == preload
 
 
 def test_demo_live_summary_and_rrd(tmp_path):
@@ -102,7 +125,7 @@ def test_demo_lossless_real_tracker_equals_offline(tmp_path):
     from service.offline import track_session
 
     opts = DemoOptions(cameras=3, size=(200, 150), frames=4, fps=30.0, out_dir=tmp_path / "out",
-                       cache_dir=tmp_path / "cache", timeout_s=300.0)
+                       cache_dir=tmp_path / "cache", timeout_s=300.0, bounce=False)
     summary = run_demo(opts, progress=lambda m: None)
     live = [json.loads(line) for line in (tmp_path / "out" / "poses.jsonl").read_text().splitlines()]
     offline = list(track_session(load_session(summary.session)))

@@ -9,7 +9,7 @@ from tracker.synthetic.bvh import load_bvh
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import load_model
 from tracker.imaging.render import body_points
-from tracker.synthetic.retarget import BVH_TO_WORLD, _solve_frame, estimate_size, retarget_bvh
+from tracker.synthetic.retarget import BVH_TO_WORLD, _solve_frame, estimate_size, palindrome, retarget_bvh
 
 LIMB = ("left_shoulder", "left_elbow", "left_wrist", "right_shoulder", "right_elbow", "right_wrist",
         "left_knee", "left_ankle", "right_knee", "right_ankle")  # fmt: skip
@@ -97,3 +97,23 @@ def test_bad_arguments(cmu):
         retarget_bvh(cmu, frames=100000)
     with pytest.raises(ValueError, match="start_s"):
         retarget_bvh(cmu, start_s=-1)
+
+
+def test_palindrome_loops_without_a_jump():
+    from tracker.synthetic.synth import bundled_motion
+
+    bvh = load_bvh(bundled_motion("scaled_131_03"))  # bundled with the package: no shared data needed
+    r = retarget_bvh(bvh, fps=30, frames=8, start_s=1.0)
+    p = palindrome(r)
+    n = r.n_frames
+    assert p.n_frames == 2 * n - 2 and p.model is r.model
+    for k in range(1, n - 1):  # the way back is the way there, reversed
+        np.testing.assert_array_equal(p.params[2 * n - 2 - k], r.params[k])
+        np.testing.assert_array_equal(p.targets[2 * n - 2 - k], r.targets[k])
+    np.testing.assert_array_equal(p.params[:n], r.params)
+    # looped, the step from the last frame to the first is one of the clip's own steps (a plain loop jumps)
+    steps = np.linalg.norm(np.diff(p.targets, axis=0), axis=2).max(axis=1)
+    wrap = np.linalg.norm(p.targets[0] - p.targets[-1], axis=1).max()
+    assert wrap == pytest.approx(np.linalg.norm(r.targets[1] - r.targets[0], axis=1).max())
+    assert wrap <= steps.max()
+    assert palindrome(retarget_bvh(bvh, fps=30, frames=2, start_s=1.0)).n_frames == 2

@@ -42,7 +42,7 @@ from tracker.body.kinematics import forward, joint_centre_array, point_jacobian
 from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel, load_model
 from tracker.imaging.render import body_points
 
-__all__ = ["JOINT_MAP", "Retargeted", "retarget_bvh", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
+__all__ = ["JOINT_MAP", "Retargeted", "retarget_bvh", "palindrome", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
 
 #: BVH (Y up) -> world (Z up): x_w = z_b, y_w = x_b, z_w = y_b (a proper rotation).
 BVH_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -114,6 +114,23 @@ class Retargeted:
     @property
     def n_frames(self) -> int:
         return self.params.shape[0]
+
+
+def palindrome(motion: Retargeted) -> Retargeted:
+    """The motion forward then backward: frames ``0 … n-1, n-2 … 1`` (``2n - 2`` frames).
+
+    Played in a loop it never jumps: after the last frame (motion frame 1) comes frame 0, one
+    frame's motion away, as between any two neighbours.  ``times_s`` follow the frames (clip times,
+    not increasing).  A motion of fewer than 3 frames is returned as it is.
+    """
+    n = motion.n_frames
+    if n < 3:
+        return motion
+    idx = np.concatenate([np.arange(n), np.arange(n - 2, 0, -1)])
+    return Retargeted(model=motion.model, params=motion.params[idx], targets=motion.targets[idx],
+                      residual_m=motion.residual_m[idx], times_s=motion.times_s[idx], fps=motion.fps,
+                      height_m=motion.height_m, segment_lengths=dict(motion.segment_lengths),
+                      joint_names=motion.joint_names)
 
 
 def _resolve_map(bvh: Bvh, joint_names) -> list[list[int]]:
