@@ -24,6 +24,8 @@ def warm_up() -> float:
     from tracker.fitting.tracking import TrackerOptions, fit_frame
 
     t0 = time.perf_counter()
+    import scipy.ndimage  # noqa: F401  (the searches' hull labelling: a first import mid-initialisation delays it)
+
     model = load_model("knossow40")
     cams = ring_cameras(2, size=(160, 120))
     p = model.zero()
