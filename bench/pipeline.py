@@ -12,9 +12,9 @@ back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plu
 measures the transport and segmentation without the tracker.  ``cpu_ms_per_pose``: CPU of the
 whole pipeline (workers and this process) per pose, and ``fit_ms_p50``: the median fit time (pose
 records' ``fit_ms``) — figures that a machine shared with other work changes less than the
-wall-clock ones.  ``--preload``: replay cameras decode
-the session into memory before streaming (``cpu_by_component.camera`` is then the cost of
-publishing frames, not of decoding the session's videos).
+wall-clock ones.  Live, the replay cameras hold the clip decoded in memory as the demo's do (when
+it takes at most 1 GB decoded; ``--preload``: whatever its size; ``--decode-live``: never), so
+``cpu_by_component.camera`` is the cost of publishing frames, not of decoding the session's videos.
 """
 
 from __future__ import annotations
@@ -44,7 +44,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from machine_ref import machine_ref_ms  # noqa: E402
 
 from service.commands import demo as demo_cmd  # noqa: E402
-from service.commands.worker import PRELOAD_ENV  # noqa: E402
 from service.demo import run_demo  # noqa: E402
 
 KEYS = ("cameras", "fps_in", "fps_out", "realtime_factor", "latency_ms_p50", "latency_ms_p99", "dropped_sets",
@@ -137,8 +136,6 @@ def main(argv=None) -> int:
                              "a loaded machine needs longer to start large studios")
     opts = parser.parse_args(argv)
     ref_ms = machine_ref_ms()
-    if opts.preload:  # inherited by the worker processes (service/commands/worker.py --preload)
-        os.environ[PRELOAD_ENV] = "1"
     with tempfile.TemporaryDirectory() as tmp:
         if opts.out is None:
             opts.out = tmp
@@ -146,6 +143,8 @@ def main(argv=None) -> int:
             demo_opts = demo_cmd.options_from_args(opts)
             if opts.start_delay_s is not None:
                 demo_opts = replace(demo_opts, live_start_delay_s=opts.start_delay_s)
+            if opts.preload:  # whatever the decoded clip's size (the demo's own limit is 1 GB)
+                demo_opts = replace(demo_opts, live_preload_mb=float("inf"))
             summary = run_demo(demo_opts, progress=lambda m: print(m, file=sys.stderr))
         fits = [r["fit_ms"] for r in map(json.loads, Path(summary.poses).read_text().splitlines())
                 if r.get("fit_ms") is not None]

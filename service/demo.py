@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import resource
 import time
 from dataclasses import asdict, dataclass
@@ -137,6 +138,21 @@ def decoded_clip_mb(opts: DemoOptions) -> float:
     return session_frames(opts) * opts.cameras * opts.size[0] * opts.size[1] * 3 / 1e6
 
 
+def preload_seconds(session, opts: DemoOptions) -> float:
+    """Seconds the replay cameras take to decode the demo clip into memory (side by side, one per
+    CPU), estimated by decoding the first frames of one camera here."""
+    from itertools import islice
+
+    from capture.replay import read_frames
+
+    frames = read_frames(session, session.camera_names[0])
+    t0 = time.perf_counter()
+    n = sum(1 for _ in islice(frames, 3))
+    per_frame = (time.perf_counter() - t0) / max(1, n)
+    frames.close()
+    return per_frame * session_frames(opts) * opts.cameras / min(opts.cameras, os.cpu_count() or 1)
+
+
 def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> Path:
     """The cached synthetic session for ``opts`` (rendered on first use)."""
     from service.synthetic_session import make_synthetic_session
@@ -245,11 +261,13 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
             for c in imaged]
     taps.append((Inbox(hub, keys.chamfer("*"), ChamferMessage.from_bytes, depth=2 * opts.cameras),
                  bridge.on_chamfer))
-    # live: session time 0 is due once the workers are up (frames already late at a camera are skipped)
-    epoch = time.time_ns() + int(opts.live_start_delay_s * 1e9) if live else None
-    end_ns = None
     decoded_mb = decoded_clip_mb(opts)
     preload = live and 0 < decoded_mb <= opts.live_preload_mb
+    # live: session time 0 is due once the workers are up and the cameras hold the clip (frames already
+    # late at a camera are skipped)
+    delay_s = opts.live_start_delay_s + (1.5 * preload_seconds(session, opts) if preload else 0.0)
+    epoch = time.time_ns() + int(delay_s * 1e9) if live else None
+    end_ns = None
     specs = plan_host(cfg, str(cfg_path), HOST, hub=f"tcp/127.0.0.1:{port}", epoch_ns=epoch, idle_exit_s=5.0,
                       segment_plugin=opts.segment_plugin, fit_plugin=opts.fit_plugin, loop_replay=live,
                       preload_replay=preload)
@@ -261,6 +279,7 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     first_pose_t = last_pose_t = None
     progress(f"starting {len(specs)} worker processes ({opts.delivery}"
              + (f", cameras holding the clip decoded: {decoded_mb:.0f} MB" if preload else "")
+             + (f", session time 0 in {delay_s:.1f} s" if live else "")
              + f"), zenoh hub tcp/127.0.0.1:{port}")
     sup.start()
     try:

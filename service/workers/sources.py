@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 from capture.backends import SourceSpec, open_source
@@ -19,16 +21,33 @@ def build_sources(cfg: StudioConfig, cameras: tuple[str, ...], *, mode: str, pac
                   preload: bool = False) -> dict[str, SourceBase]:
     """Open the sources of ``cameras`` (see :func:`open_camera`); if one fails, those opened are closed.
 
+    Preloaded replays decode side by side in threads (one per CPU at most).
+
     Returns
     -------
     dict
         Camera name -> open source.
     """
     out: dict = {}
+
+    def one(name: str) -> SourceBase:
+        return open_camera(cfg, name, mode=mode, paced=paced, frame_id_at=frame_id_at, loop=loop, preload=preload)
+
     try:
-        for name in cameras:
-            out[name] = open_camera(cfg, name, mode=mode, paced=paced, frame_id_at=frame_id_at, loop=loop,
-                                    preload=preload)
+        if preload and paced and len(cameras) > 1:  # decoding releases the GIL: the cameras side by side
+            with ThreadPoolExecutor(max_workers=min(len(cameras), os.cpu_count() or 1)) as pool:
+                futures = {name: pool.submit(one, name) for name in cameras}
+            errors = []
+            for name, fut in futures.items():
+                if fut.exception() is None:
+                    out[name] = fut.result()
+                else:
+                    errors.append(fut.exception())
+            if errors:
+                raise errors[0]
+        else:
+            for name in cameras:
+                out[name] = one(name)
     except BaseException:  # release the cameras already opened
         for src in out.values():
             src.close()

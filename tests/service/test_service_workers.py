@@ -295,3 +295,29 @@ def test_free_running_cameras_share_frame_ids_across_processes_and_restarts(tmp_
         first.close()
         if second is not None:
             second.close()
+
+
+def test_preloaded_replay_cameras_decode_side_by_side_and_read_as_streamed(tmp_path, rng):
+    """A live replay's cameras decoded into memory in threads read exactly what reading replays read; a
+    camera whose video is missing fails the whole set with its name."""
+    from service.config import load_config
+    from service.demo import write_studio
+    from service.workers.sources import build_sources
+    from tests.support.sessions import make_session
+
+    cams = ("cam0", "cam1", "cam2")
+    session, expected = make_session(tmp_path / "s", rng, cams=cams, n_frames=6)
+    cfg = load_config(write_studio(tmp_path / "s", tmp_path / "out", port=free_port(), delivery="live"))
+    sources = build_sources(cfg, cams, mode="live", paced=True, preload=True)
+    try:
+        for name in cams:
+            got = [sources[name].read() for _ in range(6)]
+            assert [f.frame_id for f in got] == list(range(6))
+            for f in got:
+                np.testing.assert_array_equal(f.image, expected[name][f.frame_id])
+    finally:
+        for src in sources.values():
+            src.close()
+    (tmp_path / "s" / "cam1.avi").unlink()
+    with pytest.raises(Exception, match="cam1"):
+        build_sources(cfg, cams, mode="live", paced=True, preload=True)
