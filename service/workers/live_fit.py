@@ -122,8 +122,16 @@ class ThreadSearches:
         self._thread: threading.Thread | None = None
 
     def start(self, fn: Callable[[], None], name: str) -> None:
-        """Run ``fn()`` beside the caller."""
-        self._thread = threading.Thread(target=fn, name=name, daemon=True)
+        """Run ``fn()`` beside the caller (its wall and CPU seconds logged at INFO)."""
+        def timed() -> None:
+            w0, c0 = time.perf_counter(), time.thread_time()
+            try:
+                result = fn()
+            finally:
+                log.info("%s: %.2f s wall, %.2f s CPU", name, time.perf_counter() - w0, time.thread_time() - c0)
+            return result
+
+        self._thread = threading.Thread(target=timed, name=name, daemon=True)
         self._thread.start()
 
     def busy(self) -> bool:
