@@ -74,10 +74,8 @@ def plan_host(cfg: StudioConfig, config_path: str, host: str, *, hub: str | None
         Segment and track workers exit after this long without input (replays).
     segment_plugin, fit_plugin : str, optional
         ``module:callable`` replacing the segmenter / the tracker.
-    loop_replay : bool
-        Replay cameras loop the session.
-    preload_replay : bool
-        Replay cameras decode the session into memory before streaming it (``worker camera --preload``).
+    loop_replay, preload_replay : bool
+        Replay cameras loop the session; decode it into memory before streaming (``--preload``).
     camera_processes : {"per-camera", "one"}, optional
         One camera process per camera, or one for all the host's cameras; default: one on a host
         of at most :data:`SMALL_HOST_CPUS` CPUs (each process costs its start-up and scheduling
