@@ -28,6 +28,9 @@ Layout (the DESIGN.md contract)::
     timestamps = "cam0.csv"              # optional
     ignore = [[x, y, w, h]]              # optional: pixel boxes that are never body (segmentation.clutter)
 
+    [[prop]]                      # optional, repeatable: a world box that is never body (a chair)
+    box = [x0, y0, z0, x1, y1, z1]   # metres, calibration frame (tracker.fitting.props)
+
 Frame numbering: row ``i`` of a camera's CSV describes the ``i``-th frame
 stored in its video; for an image sequence the file number *is* the frame id.
 Without a CSV, video frame ``k`` has frame id ``k`` and
@@ -119,6 +122,8 @@ class Session:
     cameras: tuple[SessionCamera, ...]
     calibration: tuple[Camera, ...]
     subject_file: Path | None = None
+    #: ``[[prop]]`` boxes, each (x0, y0, z0, x1, y1, z1) metres with x0 < x1, y0 < y1, z0 < z1
+    props: tuple[tuple[float, ...], ...] = ()
 
     @property
     def camera_names(self) -> tuple[str, ...]:
@@ -286,6 +291,36 @@ def _parse_subject(subject, where: str) -> tuple[float | None, dict[str, float] 
     return height, lengths
 
 
+MAX_PROPS = 16
+"""At most this many ``[[prop]]`` tables."""
+
+
+def _parse_props(tables, where: str) -> tuple[tuple[float, ...], ...]:
+    """The ``[[prop]]`` tables' boxes, validated (six finite numbers within 100 m, each side
+    0-10 m), each ordered as (x0, y0, z0, x1, y1, z1) with x0 < x1, y0 < y1, z0 < z1."""
+    if tables is None:
+        return ()
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise SessionError(f"{where}: 'prop' must be [[prop]] tables")
+    if len(tables) > MAX_PROPS:
+        raise SessionError(f"{where}: at most {MAX_PROPS} [[prop]] tables, got {len(tables)}")
+    out = []
+    for i, t in enumerate(tables):
+        box = t.get("box")
+        key = f"{where} [[prop]] #{i + 1} key 'box'"
+        if (not isinstance(box, list) or len(box) != 6
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in box)):
+            raise SessionError(f"{key}: expected [x0, y0, z0, x1, y1, z1] in metres, got {box!r}")
+        if not all(math.isfinite(v) and abs(v) <= 100.0 for v in box):
+            raise SessionError(f"{key}: coordinates must be finite and within 100 m, got {box!r}")
+        lo = [min(box[k], box[k + 3]) for k in range(3)]
+        hi = [max(box[k], box[k + 3]) for k in range(3)]
+        if not all(0.0 < h - l <= 10.0 for l, h in zip(lo, hi)):
+            raise SessionError(f"{key}: every side must be > 0 and <= 10 m, got {box!r}")
+        out.append(tuple(float(v) for v in lo + hi))
+    return tuple(out)
+
+
 def load_session(path, *, require_calibration: bool = True) -> Session:
     """Load and validate a session directory (or its ``session.toml``).
 
@@ -335,7 +370,8 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
             raise SessionError(f"{calib_path}: no calibration for camera(s) {missing} (has {sorted(by_name)})")
         calibration = tuple(by_name[n] for n in names)
     subject_file = _optional_path(root, data.get("subject", {}), "file", f"{toml_path} [subject]")
-    return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file)
+    props = _parse_props(data.get("prop"), str(toml_path))
+    return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file, props)
 
 
 def write_session_toml(

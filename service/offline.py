@@ -79,7 +79,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   blob_options=None, scene: SceneOptions | None = None,
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
-                  stream_check: StreamCheck | None = None) -> Iterator[dict]:
+                  stream_check: StreamCheck | None = None, props=None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -99,11 +99,11 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``).
     scene : SceneOptions, optional
         Contours only: decide which foreground is body (``tracker.fitting.scene``).
-    ignore : dict, optional
-        Camera name -> (h, w) bool mask of pixels that are never body (with ``scene``).
+    ignore : dict, optional, camera name -> (h, w) bool mask of pixels never body (with ``scene``)
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
     stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
+    props : sequence of PropBox, optional, world boxes never body (with ``scene``; ``tracker.fitting.props``)
 
     Yields
     ------
@@ -125,7 +125,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                       options=options, clock=clock, front_back=front_back)
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
-                          segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation))
+                          segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation), props=props)
         for fid, group in _frame_sets(session, names, frames, stream_check):
             ts = next(iter(group.values())).timestamp_ns
             yield st.step(fid, ts, {n: f.image for n, f in group.items()})

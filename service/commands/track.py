@@ -16,6 +16,7 @@ from capture.session import SessionError, load_session
 from service.atomic import JsonlWriter
 from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
+from tracker.fitting.props import PropBox, parse_prop
 from service.offline import background_models, session_model, summarise, track_session
 from segmentation.pipeline import SegmentationParams
 from tracker.fitting.scene import SceneOptions
@@ -38,6 +39,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ignore-region", action="append", default=[], metavar="CAM:x,y,w,h",
                         help="pixels of camera CAM that are never body (repeatable; adds to session.toml's "
                              "[[camera]] ignore lists)")
+    parser.add_argument("--prop", action="append", default=[], metavar="x0,y0,z0,x1,y1,z1",
+                        help="a world box (metres, the calibration's frame) that is never body, e.g. a chair: "
+                             "clutter where the body does not cover it, and the fit keeps the body out of it "
+                             "(repeatable; adds to session.toml's [[prop]] boxes)")
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--allow-missing-cameras", action="store_true",
@@ -91,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
     names = list(session.camera_names if cameras is None else cameras)
     ignore = _ignore_masks(session, args.ignore_region)
+    props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+    props += [parse_prop(t) for t in args.prop]
     media = check_media(session, names, frames=frames)  # unreadable, wrong size, range past the end: exit 2
     check = StreamCheck(media, allow_missing=args.allow_missing_cameras)
     for line in check.check_lengths():
@@ -109,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
                                  frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
-                                 method=args.method, stream_check=check, ignore=ignore,
+                                 method=args.method, stream_check=check, ignore=ignore, props=props,
                                  segmentation=SegmentationParams(floor_test=args.floor_test),
                                  scene=None if args.no_scene or args.method != "contours" else SceneOptions()):
             out.write(json.dumps(rec).encode())

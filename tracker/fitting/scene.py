@@ -17,7 +17,9 @@ and the clutter of ``segmentation.clutter``:
    onto the outline of a prop; the model → image terms alone keep a good start where it is;
    recovery searches wait too, and later keep to a CPU budget (``recovery_gap``,
    ``recovery_share``);
-5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``).
+5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``);
+6. operator props (``tracker.fitting.props``: world boxes such as the chair) are clutter where the
+   body's projection does not cover them, and the fit may not put the body inside them.
 
 The bound on the unexplained share is the only guard against a wrong fit teaching the learner
 the real body as clutter; a fit that starts on the prop and stays there can learn the person.
@@ -35,6 +37,7 @@ import numpy as np
 from segmentation.background import BackgroundModel
 from segmentation.clutter import StaticClutter, segment_without_clutter
 from segmentation.pipeline import SegmentationParams
+from tracker.fitting.props import PropBox, PropPenalty, prop_masks
 from tracker.fitting.tracking import Tracker
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import initialise_any
@@ -76,6 +79,9 @@ class SceneOptions:
     recovery_cost_frames: float | None = 40.0
     seated: bool = True
     heights: tuple | None = None
+    #: ``PropPenalty``'s weight (pixels per metre of intrusion) and clearance (× a part's radius)
+    prop_weight: float = 2000.0
+    prop_clearance: float = 0.5
 
 
 class RecoveryBudget:
@@ -113,6 +119,7 @@ class SceneTracker:
     options : SceneOptions
     segmentation : SegmentationParams for every camera
     floor : segmentation.floor.FloorShadows or None, the multi-view floor test of shadow-like pixels
+    props : sequence of ``tracker.fitting.props.PropBox``, the operator's props (optional)
 
     Attributes
     ----------
@@ -122,8 +129,13 @@ class SceneTracker:
 
     def __init__(self, tracker: Tracker, backgrounds: Mapping[str, BackgroundModel], *,
                  ignore: Mapping[str, np.ndarray] | None = None, options: SceneOptions = SceneOptions(),
-                 segmentation: SegmentationParams | None = None, floor=None) -> None:
+                 segmentation: SegmentationParams | None = None, floor=None,
+                 props: "list[PropBox] | None" = None) -> None:
         self.tracker = tracker
+        self.props = list(props or ())
+        self.prop_masks = prop_masks(tracker.cameras.values(), self.props) if self.props else {}
+        if self.props:
+            tracker.penalty = PropPenalty(self.props, weight=options.prop_weight, clearance=options.prop_clearance)
         self.floor = floor
         self.backgrounds = dict(backgrounds)
         self.options = options
@@ -152,10 +164,15 @@ class SceneTracker:
         return ScoreViews(self.tracker.model, cams, [np.zeros((c.height, c.width), np.uint8) for c in cams], scale=0.5)
 
     def clutter(self, name: str) -> np.ndarray | None:
-        """Camera ``name``'s learned clutter (h, w) bool, or None (the ignore regions are apart:
-        ``ignore``)."""
+        """Camera ``name``'s clutter (h, w) bool: learned, and the props' projection once there is a
+        fit (the start search sees them: cut without a body to keep, they would cut it); or None
+        (the ignore regions are apart: ``ignore``)."""
         learner = self.learners.get(name)
-        return None if learner is None else learner.mask
+        learned = None if learner is None else learner.mask
+        prop = self.prop_masks.get(name) if name in self._explained else None
+        if prop is None:
+            return learned
+        return prop if learned is None else (learned | prop)
 
     def explained(self, params: np.ndarray) -> dict[str, np.ndarray]:
         """The body's projection at ``params`` per camera, (h, w) bool, grown by ``margin_m``."""

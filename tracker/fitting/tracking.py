@@ -173,7 +173,7 @@ def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
 
 def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
               prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
-              options: TrackerOptions = TrackerOptions()) -> tuple[SolverResult, ChamferCost]:
+              options: TrackerOptions = TrackerOptions(), penalty=None) -> tuple[SolverResult, ChamferCost]:
     """Fit one frame from ``start`` with the prior term towards ``prediction``.
 
     Parameters
@@ -190,6 +190,8 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
     solver : {"lm", "lsq"}
         Analytic LM, or scipy with finite differences.
     options : TrackerOptions
+    penalty : object with ``residuals(model, params, jacobian=, pose=)`` -> (r, J or None), optional
+        Extra residuals stacked under the cost's (``tracker.fitting.props.PropPenalty``).
 
     Returns
     -------
@@ -206,12 +208,25 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
               max_iterations=options.max_iterations, ftol=options.ftol, xtol=options.xtol)
     lm_only = dict(damping=options.damping, diagonal_floor=options.diagonal_floor, rtol=options.rtol)
     if solver == "lm":
-        res = levenberg_marquardt(cost.residual_fn(compact=True), start, **lm_only, **kw)
+        res = levenberg_marquardt(_with_penalty(cost, model, penalty, compact=True), start, **lm_only, **kw)
     elif solver == "lsq":
-        res = least_squares_fd(cost.residual_fn(compact=False), start, **kw)
+        res = least_squares_fd(_with_penalty(cost, model, penalty, compact=False), start, **kw)
     else:
         raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
     return res, cost
+
+
+def _with_penalty(cost: ChamferCost, model: BodyModel, penalty, *, compact: bool):
+    """``cost.residual_fn(compact=...)`` with ``penalty``'s residuals stacked under (None: as is)."""
+    if penalty is None:
+        return cost.residual_fn(compact=compact)
+
+    def fun(x, jacobian):
+        t = cost.evaluate(x, jacobian=jacobian, compact=compact)
+        r, J = penalty.residuals(model, x, jacobian=jacobian, pose=t.pose)
+        return np.concatenate([t.residuals, r]), (np.vstack([t.jacobian, J]) if jacobian else None)
+
+    return fun
 
 
 def _silhouette_empty(chamfer, silhouette) -> bool:
@@ -272,6 +287,8 @@ class Tracker:
         self.solver = solver
         self.options = options
         self.recover = bool(recover)
+        #: extra residuals of every frame's fit (``fit_frame``'s ``penalty``; None: none)
+        self.penalty = None
         self.clock = clock
         # the frame's own RMS limit (``rms_limit``) is applied by ``_bad``; the monitor counts bad frames
         self.monitor = LossMonitor(max_rms_px=max(options.max_rms_px, options.max_rms_ceiling_px),
@@ -335,7 +352,7 @@ class Tracker:
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
         res, cost = fit_frame(self.model, cams, chs, start, prediction=prior, sliding=self.sliding,
-                              solver=self.solver, options=self.options)
+                              solver=self.solver, options=self.options, penalty=self.penalty)
         terms = cost.evaluate(np.asarray(res.params))
         return res, terms, terms.rms_px(), terms.inside_fraction()
 
@@ -407,7 +424,7 @@ class Tracker:
         p = np.asarray(res.params)
         mp = self.model.clamp(mirror_params(self.model, p))
         res_m, cost_m = fit_frame(self.model, cams, chs, mp, sliding=self.sliding, solver=self.solver,
-                                  options=replace(o, max_iterations=o.front_back_iterations))
+                                  options=replace(o, max_iterations=o.front_back_iterations), penalty=self.penalty)
         pm = np.asarray(res_m.params)
         v = views()
         iou = self._last_iou if self._last_iou is not None else float(v.score(p))
@@ -417,7 +434,8 @@ class Tracker:
             return None
         # turned: converge fully from there (the mirror of a contorted fit is itself off)
         res_t, cost_t = fit_frame(self.model, cams, chs, pm, sliding=self.sliding, solver=self.solver,
-                                  options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0))
+                                  options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0),
+                                  penalty=self.penalty)
         return res_t, cost_t.evaluate(np.asarray(res_t.params))
 
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
@@ -428,7 +446,7 @@ class Tracker:
             opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
                                                                       ftol=min(self.options.ftol, 2e-3))
             r, cost = fit_frame(self.model, cams, chs, start, prediction=prediction, sliding=self.sliding,
-                                solver=self.solver, options=opts)
+                                solver=self.solver, options=opts, penalty=self.penalty)
             return r, cost.evaluate(np.asarray(r.params))
 
         iou = (lambda p: float(views().score(p))) if views is not None else None

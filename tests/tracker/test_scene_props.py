@@ -1,0 +1,112 @@
+"""Operator props (``tracker.fitting.props``): parsing, masks, the fit's limit and its Jacobian."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tracker.body.kinematics import forward
+from tracker.body.model import load_model
+from tracker.fitting.props import PropBox, PropError, PropPenalty, parse_prop, prop_masks
+from tracker.synthetic.scene import ring_cameras
+
+
+def test_parse_and_validate():
+    box = parse_prop(" 0.2, -0.1,0, -0.3,0.5,0.45 ")
+    assert np.allclose(box.lo, [-0.3, -0.1, 0.0]) and np.allclose(box.hi, [0.2, 0.5, 0.45])
+    for bad in ["1,2,3", "a,b,c,d,e,f", "0,0,0,0,1,1", "0,0,0,11,1,1", "0,0,0,1,1,1e9"]:
+        with pytest.raises(PropError):
+            parse_prop(bad)
+    with pytest.raises(PropError, match="session.toml"):
+        PropBox.from_values([0, 0, 0, 1, 1, True], where="session.toml [[prop]]")
+
+
+def test_signed_distance_matches_brute_force():
+    rng = np.random.default_rng(3)
+    box = PropBox.from_values([-0.2, -0.3, 0.0, 0.3, 0.2, 0.5])
+    X = rng.uniform(-0.6, 0.8, size=(500, 3))
+    d, g = box.signed_distance(X)
+    inside = np.all((X > box.lo) & (X < box.hi), axis=1)
+    assert np.all((d < 0) == inside)
+    outside = ~inside
+    closest = np.clip(X, box.lo, box.hi)
+    assert np.allclose(d[outside], np.linalg.norm(X - closest, axis=1)[outside])
+    assert np.allclose(-d[inside], np.min(np.concatenate([X - box.lo, box.hi - X], axis=1), axis=1)[inside])
+    # the gradient is the derivative of the distance (away from the box's medial planes and edges)
+    h = 1e-6
+    for axis in range(3):
+        e = np.zeros(3)
+        e[axis] = h
+        fd = (box.signed_distance(X + e)[0] - box.signed_distance(X - e)[0]) / (2 * h)
+        smooth = np.abs(fd - g[:, axis]) < 1e-4
+        assert smooth.mean() > 0.97
+
+
+def test_masks_cover_the_projected_box():
+    cams = ring_cameras(4, size=(160, 120))
+    box = PropBox.from_values([-0.2, -0.2, 0.0, 0.2, 0.2, 0.45])
+    masks = prop_masks(cams, [box])
+    for cam in cams:
+        uv = np.round(cam.project(np.array([[0.0, 0.0, 0.2]]))[0]).astype(int)
+        assert masks[cam.name][uv[1], uv[0]]
+        assert 0 < masks[cam.name].mean() < 0.5
+
+
+def test_penalty_jacobian_matches_finite_differences():
+    model = load_model("knossow40")
+    rng = np.random.default_rng(11)
+    pen = PropPenalty([PropBox.from_values([-0.3, -0.3, 0.0, 0.3, 0.3, 1.0])], weight=100.0)
+    checked = 0
+    for _ in range(5):
+        p = model.clamp(model.zero() + rng.normal(0, 0.15, model.n_params))
+        p[:3] += rng.normal(0, 0.05, 3)
+        r, J = pen.residuals(model, p, jacobian=True)
+        assert r.shape == (J.shape[0],) and J.shape[1] == model.n_params
+        assert np.all(r >= 0) and np.any(r > 0)  # the standing body stands in the box
+        h = 1e-6
+        fd = np.zeros_like(J)
+        for k in range(model.n_params):
+            e = np.zeros(model.n_params)
+            e[k] = h
+            fd[:, k] = (pen.residuals(model, p + e)[0] - pen.residuals(model, p - e)[0]) / (2 * h)
+        # rows at a kink (a face switch or the box's edge) are not differentiable there
+        good = np.all(np.abs(fd - J) < 1e-3 * (1 + np.abs(J)), axis=1)
+        assert good.mean() > 0.9
+        checked += int(good.sum())
+    assert checked > 0
+
+
+def test_penalty_is_zero_away_from_the_box_and_pushes_out():
+    model = load_model("knossow40")
+    p = model.zero()
+    far = PropPenalty([PropBox.from_values([3.0, 3.0, 0.0, 3.5, 3.5, 0.5])])
+    assert not np.any(far.residuals(model, p)[0])
+    # a box at the right leg: the gradient step moves the leg out (the residuals fall)
+    pose = forward(model, p)
+    knee = pose.translation[model.part_names.index(next(n for n in model.part_names if "shank" in n or "calf" in n))]
+    box = PropBox.from_values(list(knee - 0.05) + list(knee + 0.05))
+    pen = PropPenalty([box])
+    r, J = pen.residuals(model, p, jacobian=True)
+    assert r.sum() > 0
+    step = -np.linalg.lstsq(J, r, rcond=None)[0]
+    r2 = pen.residuals(model, p + 0.3 * step)[0]
+    assert r2.sum() < r.sum()
+
+
+def test_session_prop_tables_validated(tmp_path, rng):
+    from capture.session import SessionError, load_session
+    from tests.support.sessions import make_session
+
+    make_session(tmp_path, rng, n_frames=2)
+    path = tmp_path / "session.toml"
+    text = path.read_text()
+    path.write_text(text + "\n[[prop]]\nbox = [0.2, 0.1, 0.0, -0.3, 0.6, 0.46]\n")
+    session = load_session(tmp_path)
+    assert session.props == ((-0.3, 0.1, 0.0, 0.2, 0.6, 0.46),)
+    assert np.allclose(PropBox.from_values(session.props[0]).hi, [0.2, 0.6, 0.46])
+    for bad, needle in [("[0, 0, 0, 1, 1]", "expected"), ("[0, 0, 0, 1, 1, 0]", "side"),
+                        ('[0, 0, 0, 1, 1, "a"]', "expected"), ("[0, 0, 0, 1e3, 1, 1]", "within")]:
+        path.write_text(text + f"\n[[prop]]\nbox = {bad}\n")
+        with pytest.raises(SessionError, match=needle) as info:
+            load_session(tmp_path)
+        assert "session.toml" in str(info.value) and "prop" in str(info.value)

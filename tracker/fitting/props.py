@@ -1,0 +1,189 @@
+"""Props: operator-given world boxes (a chair, a stool) that are never body.
+
+A prop is an axis-aligned box in world coordinates (metres, the calibration's frame; z up from
+the floor), ``--prop x0,y0,z0,x1,y1,z1`` or ``[[prop]] box = [x0, y0, z0, x1, y1, z1]`` in
+``session.toml``.  It acts twice:
+
+* **clutter**: its projection in each camera (``prop_masks``) is cut from the silhouette where
+  the body's projection does not cover it (``tracker.fitting.scene``), so it neither pulls
+  through the reverse term nor counts in the IoU gate;
+* **a limit in the fit** (``PropPenalty``): points along every part's axis may not come nearer
+  to the box than ``clearance`` × the part's smaller radius there (the root part, the pelvis,
+  whose cone reaches below the hip joints onto a seat, ``root_clearance`` ×).  Each point contributes one
+  residual ``weight × max(0, clearance × r − s(X))`` (pixels), ``s`` the signed distance of the
+  point to the box (negative inside); its Jacobian is the box's outward direction times the
+  point's Jacobian (``tracker.body.kinematics.point_jacobian``).  A limb can then not be fitted
+  into the chair, whatever the chair's pixels say.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Iterable, Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from tracker.body.kinematics import forward, point_jacobian
+from tracker.body.model import BodyModel
+
+__all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks"]
+
+_MAX_COORD_M = 100.0
+_MAX_SIZE_M = 10.0
+_NUMBER = r"\s*(-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
+_PROP = re.compile(r"^" + ",".join([_NUMBER] * 6) + r"$")
+
+
+class PropError(ValueError):
+    """A bad prop box; the message names it."""
+
+
+@dataclass(frozen=True, eq=False)
+class PropBox:
+    """An axis-aligned world box.
+
+    Attributes
+    ----------
+    lo, hi : ndarray, shape (3,)
+        Opposite corners, metres, ``lo < hi`` on every axis.
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @classmethod
+    def from_values(cls, values: Sequence, where: str = "prop") -> "PropBox":
+        """A box from ``[x0, y0, z0, x1, y1, z1]`` (metres, the corners in any order per axis);
+        PropError naming ``where`` unless six finite numbers within 100 m, each side 0-10 m."""
+        if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or len(values) != 6:
+            raise PropError(f"{where}: expected [x0, y0, z0, x1, y1, z1] in metres, got {values!r}")
+        if any(isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) for v in values):
+            raise PropError(f"{where}: expected six numbers, got {values!r}")
+        v = np.asarray(values, dtype=float)
+        if not np.all(np.isfinite(v)) or np.any(np.abs(v) > _MAX_COORD_M):
+            raise PropError(f"{where}: coordinates must be finite and within {_MAX_COORD_M} m, got {values!r}")
+        lo, hi = np.minimum(v[:3], v[3:]), np.maximum(v[:3], v[3:])
+        size = hi - lo
+        if np.any(size <= 0) or np.any(size > _MAX_SIZE_M):
+            raise PropError(f"{where}: every side must be > 0 and <= {_MAX_SIZE_M} m, got {values!r}")
+        lo.setflags(write=False)
+        hi.setflags(write=False)
+        return cls(lo, hi)
+
+    def corners(self) -> np.ndarray:
+        """The eight corners, (8, 3) metres."""
+        return np.array([[x, y, z] for x in (self.lo[0], self.hi[0]) for y in (self.lo[1], self.hi[1])
+                         for z in (self.lo[2], self.hi[2])])
+
+    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance of ``points`` (n, 3) to the box (metres, negative inside) and its
+        gradient (n, 3), the unit outward direction (inside: the nearest face's normal)."""
+        X = np.asarray(points, dtype=float).reshape(-1, 3)
+        below, above = self.lo - X, X - self.hi
+        out = np.maximum(np.maximum(below, above), 0.0)
+        d_out = np.linalg.norm(out, axis=1)
+        grad = np.where(above > 0, 1.0, 0.0) * out - np.where(below > 0, 1.0, 0.0) * out
+        outside = d_out > 0
+        grad[outside] /= d_out[outside, None]
+        # inside: distance to the nearest face
+        gaps = np.concatenate([-below, -above], axis=1)  # (n, 6) >= 0 inside: X - lo, hi - X
+        face = np.argmin(gaps, axis=1)
+        inside = ~outside
+        if np.any(inside):
+            normals = np.concatenate([-np.eye(3), np.eye(3)])
+            grad[inside] = normals[face[inside]]
+        dist = np.where(outside, d_out, -gaps[np.arange(len(X)), face])
+        return dist, grad
+
+
+def parse_prop(text: str) -> PropBox:
+    """``"x0,y0,z0,x1,y1,z1"`` (metres) -> PropBox; PropError otherwise."""
+    m = _PROP.match(str(text))
+    if m is None:
+        raise PropError(f"--prop: expected x0,y0,z0,x1,y1,z1 in metres, got {text!r}")
+    return PropBox.from_values([float(g) for g in m.groups()], where=f"--prop {text!r}")
+
+
+def prop_masks(cameras: Iterable, props: Sequence[PropBox]) -> dict[str, np.ndarray]:
+    """Per camera name, the (h, w) bool mask of the props' projections (each box the convex hull
+    of its projected corners; a box with a corner behind the camera covers the whole image)."""
+    out = {}
+    for cam in cameras:
+        mask = np.zeros((cam.height, cam.width), np.uint8)
+        for box in props:
+            corners = box.corners()
+            if np.any(cam.depth(corners) <= 1e-3):
+                mask[:] = 1
+                continue
+            uv = np.clip(cam.project(corners), -1e4, 1e4)
+            hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 1, shift=4)
+        out[cam.name] = mask.astype(bool)
+    return out
+
+
+class PropPenalty:
+    """The fit's limit keeping the body out of the props (module docstring).
+
+    Parameters
+    ----------
+    props : sequence of PropBox
+    weight : residual per metre of intrusion, pixels per metre
+    samples : points per part along its cone's axis (ends included)
+    clearance : the axis keeps this many times the part's smaller radius from a box
+    root_clearance : the same for the root part (the pelvis: it rests on a seat)
+    """
+
+    def __init__(self, props: Sequence[PropBox], *, weight: float = 2000.0, samples: int = 5,
+                 clearance: float = 0.5, root_clearance: float = 0.0) -> None:
+        if samples < 2:
+            raise PropError(f"samples: expected >= 2, got {samples!r}")
+        self.props = list(props)
+        self.weight = float(weight)
+        self.samples = int(samples)
+        self.clearance = float(clearance)
+        self.root_clearance = float(root_clearance)
+        self._points: dict[int, tuple] = {}
+
+    def _model_points(self, model: BodyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Part index (m,), part-frame axis points (m, 3), required clearance (m,) metres."""
+        key = id(model)
+        if key not in self._points or self._points[key][0] is not model:
+            a, b, k, z1, z2 = (model.cones[:, i] for i in range(5))
+            t = np.linspace(0.0, 1.0, self.samples)
+            z = z1[:, None] + (z2 - z1)[:, None] * t[None, :]  # (n_parts, samples)
+            radius = np.minimum(a, b)[:, None] * np.maximum(1.0 + k[:, None] * z, 0.0)
+            part = np.repeat(np.arange(model.n_parts), self.samples)
+            pts = np.zeros((part.size, 3))
+            pts[:, 2] = z.ravel()
+            factor = np.where(model.parent < 0, self.root_clearance, self.clearance)
+            self._points = {key: (model, part, pts, (factor[:, None] * radius).ravel())}
+        return self._points[key][1:]
+
+    def residuals(self, model: BodyModel, params: np.ndarray, *, jacobian: bool = False, pose=None):
+        """Residuals (m × n_props,) in pixels and, with ``jacobian``, their Jacobian
+        (m × n_props, n_params); ``pose``: ``forward(model, params)`` when already made."""
+        part, pts, clear = self._model_points(model)
+        pose = forward(model, np.asarray(params, dtype=float)) if pose is None else pose
+        X = pose.to_world(part, pts)
+        rs, gs = [], []
+        for box in self.props:
+            dist, grad = box.signed_distance(X)
+            depth = clear - dist
+            active = depth > 0
+            rs.append(self.weight * np.where(active, depth, 0.0))
+            gs.append(np.where(active[:, None], -self.weight * grad, 0.0))
+        r = np.concatenate(rs) if rs else np.zeros(0)
+        if not jacobian:
+            return r, None
+        J = np.zeros((r.size, model.n_params))
+        G = np.concatenate(gs) if gs else np.zeros((0, 3))
+        rows = np.flatnonzero(np.any(G != 0, axis=1))
+        if rows.size:
+            idx = rows % len(part)
+            PJ = point_jacobian(model, pose, part[idx], X[idx])  # (n, 3, n_params)
+            J[rows] = np.einsum("ni,nip->np", G[rows], PJ)
+        return r, J
+
