@@ -137,7 +137,7 @@ class PropPenalty:
     """
 
     def __init__(self, props: Sequence[PropBox], *, weight: float = 2000.0, samples: int = 5,
-                 clearance: float = 0.5, root_clearance: float = 0.0) -> None:
+                 clearance: float = 1.0, root_clearance: float = 0.0) -> None:
         if samples < 2:
             raise PropError(f"samples: expected >= 2, got {samples!r}")
         self.props = list(props)

@@ -81,7 +81,10 @@ class SceneOptions:
     heights: tuple | None = None
     #: ``PropPenalty``'s weight (pixels per metre of intrusion) and clearance (× a part's radius)
     prop_weight: float = 2000.0
-    prop_clearance: float = 0.5
+    prop_clearance: float = 1.0
+    #: a prop's pixels are body where the body's projection grown by this covers them (metres;
+    #: None: ``margin_m``, as learned clutter)
+    prop_margin_m: float | None = None
 
 
 class RecoveryBudget:
@@ -157,6 +160,7 @@ class SceneTracker:
         self._recover = tracker.recover
         self._inits = tracker.n_initialisations
         self._explained: dict[str, np.ndarray] = {}
+        self._prop_keep: dict[str, np.ndarray] = {}  # with prop_margin_m: the body's projection so grown
         self.last_segmentation: dict = {}
 
     def _render_views(self) -> ScoreViews:
@@ -170,19 +174,31 @@ class SceneTracker:
         learner = self.learners.get(name)
         learned = None if learner is None else learner.mask
         prop = self.prop_masks.get(name) if name in self._explained else None
-        if prop is None:
+        if prop is None or self.options.prop_margin_m is not None:
             return learned
         return prop if learned is None else (learned | prop)
 
-    def explained(self, params: np.ndarray) -> dict[str, np.ndarray]:
-        """The body's projection at ``params`` per camera, (h, w) bool, grown by ``margin_m``."""
+    def _ignore(self, name: str) -> np.ndarray | None:
+        """The pixels cut whatever the body covers: the operator's ignore regions, and with
+        ``prop_margin_m`` the props' pixels the body's projection grown by it does not cover."""
+        ignore = self.ignore.get(name)
+        keep = self._prop_keep.get(name)
+        if keep is None:
+            return ignore
+        prop = self.prop_masks[name] & ~keep
+        return prop if ignore is None else (ignore | prop)
+
+    def explained(self, params: np.ndarray, margin_m: float | None = None) -> dict[str, np.ndarray]:
+        """The body's projection at ``params`` per camera, (h, w) bool, grown by ``margin_m``
+        (None: ``SceneOptions.margin_m``)."""
+        margin_m = self.options.margin_m if margin_m is None else float(margin_m)
         out = {}
         pelvis = np.asarray(params[:3], dtype=float)
         for small, (name, cam) in zip(self._views.render(np.asarray(params, dtype=float)),
                                        self.tracker.cameras.items()):
             full = cv2.resize(small.astype(np.uint8), (cam.width, cam.height), interpolation=cv2.INTER_NEAREST)
             depth = max(float(cam.depth(pelvis[None])[0]), 0.3)
-            r = int(np.ceil(self.options.margin_m * cam.matrix[0, 0] / depth))
+            r = int(np.ceil(margin_m * cam.matrix[0, 0] / depth))
             if r > 0:
                 full = cv2.dilate(full, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
             out[name] = full.astype(bool)
@@ -194,7 +210,7 @@ class SceneTracker:
         for name, img in images.items():
             segs[name], raws[name] = segment_without_clutter(
                 self.backgrounds[name], img, self.clutter(name), keep=self._explained.get(name),
-                ignore=self.ignore.get(name), params=self.segmentation,
+                ignore=self._ignore(name), params=self.segmentation,
                 floor=None if self.floor is None else self.floor.for_camera(name, images))
         self.last_segmentation = segs
         tr = self.tracker
@@ -216,10 +232,12 @@ class SceneTracker:
         else:
             self._since_init += 1
         if "params" not in rec:
-            self._explained = {}
+            self._explained, self._prop_keep = {}, {}
             return rec
         params = np.asarray(rec["params"], dtype=float)
         self._explained = self.explained(params)
+        if self.props and self.options.prop_margin_m is not None:
+            self._prop_keep = self.explained(params, self.options.prop_margin_m)
         if self.learners and self._trusted(rec):
             fg = {n: raws[n] > 0 for n in images}
             n_fg = sum(int(np.count_nonzero(m)) for m in fg.values())

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from tracker.synthetic.bvh import Bvh, bvh_forward
 
-__all__ = ["BVH_TO_WORLD", "BONES", "PoseTrack", "motion_to_bvh", "MOTIONS", "make_motion", "standing_track",
+__all__ = ["BVH_TO_WORLD", "BONES", "PoseTrack", "bone_direction", "motion_to_bvh", "MOTIONS", "make_motion", "standing_track",
            "resample_bvh"]
 
 #: BVH (Y up) -> world (Z up): x_w = z_b, y_w = x_b, z_w = y_b (a proper rotation).
@@ -103,6 +103,10 @@ def _dir(forward_deg, left_deg=0.0, down=True) -> np.ndarray:
     z = -1.0 if down else 1.0
     v = np.stack([np.tan(f), np.tan(s), np.full(f.shape, z)], axis=-1)
     return _unit(v)
+
+
+bone_direction = _dir
+"""Public name of the bone-direction helper (for procedural tracks in other modules)."""
 
 
 def _min_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:

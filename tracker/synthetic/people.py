@@ -41,7 +41,7 @@ from tracker.synthetic.motions import BVH_TO_WORLD, motion_to_bvh, standing_trac
 
 __all__ = ["JOINT_NAMES", "SEGMENTS", "Subject", "make_subject", "subject_skeleton", "SubjectMotion",
            "subject_motion", "Primitives", "body_primitives", "subject_height", "Studio", "joint_truth",
-           "MATERIALS"]
+           "MATERIALS", "box_hits"]
 
 #: contourcap joint names (DESIGN.md pose record), the order of ``SubjectMotion.joints``
 JOINT_NAMES = (
@@ -344,6 +344,20 @@ def subject_height(skeleton: Bvh, subject: Subject) -> float:
 # --------------------------------------------------------------------------- ray casting
 
 
+def box_hits(origin: np.ndarray, rays: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ray parameter of the first hit of rays ``origin + t d`` (``rays`` (..., 3) unit) with the box
+    ``lo``-``hi`` ((...) inf: missed, or the origin inside) and the outward face normal there (..., 3)."""
+    d = np.where(np.abs(rays) < 1e-12, 1e-12, rays)
+    t1, t2 = (lo - origin) / d, (hi - origin) / d
+    tmin, tmax = np.minimum(t1, t2), np.maximum(t1, t2)
+    t_in, t_out = tmin.max(axis=-1), tmax.min(axis=-1)
+    hit = (t_in <= t_out) & (t_in > 0)
+    axis = np.argmax(tmin, axis=-1)
+    normal = np.zeros(rays.shape)
+    np.put_along_axis(normal, axis[..., None], -np.sign(np.take_along_axis(d, axis[..., None], axis=-1)), axis=-1)
+    return np.where(hit, t_in, np.inf), normal
+
+
 def _sphere_t(o, d, od, oo, c, r):
     """Nearest positive ray-sphere parameter (n, m); inf on a miss.
 
@@ -533,8 +547,11 @@ class Studio:
             soft = cv2.GaussianBlur(soft, (0, 0), self.shadow_blur_px)
         return soft
 
-    def render(self, prim: Primitives, frame: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Clean images (BGR uint8, one per camera) and true silhouettes ((h, w) bool) of ``frame``."""
+    def render(self, prim: Primitives, frame: int, *, boxes=()) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Clean images (BGR uint8, one per camera) and true silhouettes ((h, w) bool) of ``frame``;
+        ``boxes``: props drawn with the body, occluding it where nearer, each ``(lo (3,), hi (3,),
+        BGR colour)`` an axis-aligned world box (metres), Lambert-shaded, no shadow (the
+        silhouettes stay the body's)."""
         if not 0 <= frame < prim.n_frames:
             raise ValueError(f"frame {frame} outside 0..{prim.n_frames - 1}")
         images, masks = [], []
@@ -546,6 +563,13 @@ class Studio:
             if np.any(hit):
                 d = self._rays[k][hit]
                 img[hit] = np.clip(np.rint(self._shade(cam, d, t[hit], which[hit], prim, frame)), 0, 255)
+            for lo, hi, colour in boxes:
+                tb, normal = box_hits(cam.center, self._rays[k], np.asarray(lo, float), np.asarray(hi, float))
+                front = tb < t
+                if np.any(front):
+                    lam = np.clip(normal[front] @ self.light, 0.0, None)
+                    img[front] = np.clip(np.rint(np.asarray(colour, np.float32)[None] * (0.55 + 0.45 * lam)[:, None]),
+                                         0, 255)
             images.append(img)
             masks.append(hit)
         return images, masks
