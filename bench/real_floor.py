@@ -1,6 +1,7 @@
 """How near can the body model come to the real-footage reference, and does the fit prefer that pose?
 
-    python bench/real_floor.py SESSION REFERENCE.jsonl [--frames A:B] [--every K] [--height H] [--model M] [--json]
+    python bench/real_floor.py SESSION REFERENCE.jsonl [--frames A:B] [--every K] [--height H] [--model M]
+                               [--prop x0,y0,z0,x1,y1,z1 ...] [--json]
 
 Splits contourcap's error against ``bench/real_reference.py`` into what the tracker could fix and
 what it cannot.  ``contourcap track``'s scene tracker (``tracker.fitting.scene``: clutter learned,
@@ -122,12 +123,14 @@ def _means(rows: list[dict[str, float]]) -> dict:
 
 
 def run(session_dir: Path, reference_path: Path, *, frames: range | None, every: int,
-        height_m: float | None, model_name: str | None = None) -> dict:
+        height_m: float | None, model_name: str | None = None, props: Sequence[str] = ()) -> dict:
     """Track ``frames`` with the scene tracker; floor, objective and basin at every ``every``-th.
-    ``model_name``: a bundled model or a model TOML file (default: the session's knossow40)."""
+    ``model_name``: a bundled model or a model TOML file (default: the session's knossow40);
+    ``props``: ``--prop`` boxes (with the session's ``[[prop]]`` ones: as ``contourcap track``)."""
     from service.offline import background_models, session_model
     from tracker.body.model import load_model
     from tracker.fitting.cost import ChamferCost
+    from tracker.fitting.props import PropBox, parse_prop
     from tracker.fitting.scene import SceneOptions, SceneTracker
     from tracker.fitting.tracking import Tracker, TrackerOptions, fit_frame
     from tracker.search.scoring import ScoreViews
@@ -140,7 +143,8 @@ def run(session_dir: Path, reference_path: Path, *, frames: range | None, every:
         model = model.with_height(height_m)
     cams = [session.camera_model(n) for n in names]
     backgrounds, _ = background_models(session, names, frames=frames)
-    scene = SceneTracker(Tracker(model, cams), backgrounds, options=SceneOptions())
+    boxes = [PropBox.from_values(b) for b in session.props] + [parse_prop(t) for t in props]
+    scene = SceneTracker(Tracker(model, cams), backgrounds, options=SceneOptions(), props=boxes)
     rows = {"tracker": [], "floor": [], "basin": []}
     objective = {k: {"iou": [], "rms_px": []} for k in rows}
     n = 0
@@ -158,7 +162,7 @@ def run(session_dir: Path, reference_path: Path, *, frames: range | None, every:
         p_track = np.asarray(rec["params"], float)
         p_floor, _ = fit_to_joints(m, ref, reference_starts(m, ref, [p_track]))
         res, _ = fit_frame(m, cams, {c: segs[c].chamfer for c in names}, p_floor,
-                           options=TrackerOptions(max_iterations=30))
+                           options=TrackerOptions(max_iterations=30), penalty=scene.tracker.penalty)
         for key, p in (("tracker", p_track), ("floor", p_floor), ("basin", np.asarray(res.params))):
             rows[key].append(judged_error(m, p, ref))
             objective[key]["iou"].append(float(views.score(p)))
@@ -181,6 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--every", type=int, default=25, help="sample every K-th tracked frame (default 25)")
     ap.add_argument("--height", type=float, default=None, help="subject height in metres (default: the session's)")
     ap.add_argument("--model", default=None, help="body model name or TOML file (default: the session's knossow40)")
+    ap.add_argument("--prop", action="append", default=[], metavar="x0,y0,z0,x1,y1,z1",
+                    help="a prop box, metres (as contourcap track --prop; repeatable)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.every < 1:
@@ -189,7 +195,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     ref_ms = machine_ref_ms()
     frames = parse_frame_range(args.frames)
-    out = run(args.session, args.reference, frames=frames, every=args.every, height_m=args.height, model_name=args.model)
+    out = run(args.session, args.reference, frames=frames, every=args.every, height_m=args.height, model_name=args.model,
+              props=args.prop)
     out["machine_ref_ms"] = round(ref_ms, 2)
     if args.json:
         print(json.dumps(out))

@@ -187,3 +187,55 @@ class PropPenalty:
             J[rows] = np.einsum("ni,nip->np", G[rows], PJ)
         return r, J
 
+
+
+def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained: Mapping[str, np.ndarray],
+             joints: Mapping[str, np.ndarray], *, voxel_m: float = 0.02, behind_knee_m: float = 0.10,
+             behind_hip_m: float = 0.35, side_m: float = 0.35, quantile: float = 2.0) -> PropBox | None:
+    """The seat under a seated subject, learned from one frame set: a seated prior, no operator.
+
+    The foreground's visual hull (``tracker.search.hull``, ``voxel_m`` cubes) minus the voxels
+    every camera's ``explained`` mask (the fitted body's grown projection, camera name -> (h, w)
+    bool) covers, kept below the hip joints, along the thighs' forward direction from
+    ``behind_hip_m`` behind the hips to ``behind_knee_m`` short of the knees (the shanks hang in
+    front of a seat), within ``side_m`` of the hips sideways; the box is those voxels'
+    ``quantile``–(100 − ``quantile``) % extent, down to the floor.  ``joints``: the fit's joint
+    centres (name -> (3,) metres).  None when the fit is not seated (a thigh more than 35° off
+    the horizontal) or fewer than 50 voxels are left."""
+    from tracker.search.hull import visual_hull
+
+    hips = 0.5 * (np.asarray(joints["left_hip"], float) + np.asarray(joints["right_hip"], float))
+    knees = 0.5 * (np.asarray(joints["left_knee"], float) + np.asarray(joints["right_knee"], float))
+    for side in ("left", "right"):
+        thigh = np.asarray(joints[f"{side}_knee"], float) - np.asarray(joints[f"{side}_hip"], float)
+        if abs(thigh[2]) > np.sin(np.radians(35.0)) * np.linalg.norm(thigh):
+            return None
+    fwd = np.array([knees[0] - hips[0], knees[1] - hips[1], 0.0])
+    reach = float(np.linalg.norm(fwd))
+    if reach < 0.1:
+        return None
+    fwd /= reach
+    left = np.array([-fwd[1], fwd[0], 0.0])
+    cams = list(cameras)
+    hull = visual_hull(cams, [silhouettes[c.name] for c in cams], min_voxel_m=voxel_m)
+    X = hull.centres
+    if len(X) == 0:
+        return None
+    covered = np.ones(len(X), bool)
+    for cam in cams:
+        uv = np.round(cam.project(X)).astype(int)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+        hit = np.zeros(len(X), bool)
+        hit[inside] = explained[cam.name][uv[inside, 1], uv[inside, 0]]
+        covered &= hit
+    rel = X - hips
+    along, across = rel @ fwd, rel @ left
+    keep = (~covered & (X[:, 2] < hips[2]) & (along > -behind_hip_m) & (along < reach - behind_knee_m)
+            & (np.abs(across) < side_m))
+    if np.count_nonzero(keep) < 50:
+        return None
+    Y = X[keep]
+    lo = np.percentile(Y, quantile, axis=0)
+    hi = np.percentile(Y, 100.0 - quantile, axis=0)
+    lo[2] = 0.0
+    return PropBox.from_values(list(lo) + list(hi), where="seat_box")

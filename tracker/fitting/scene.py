@@ -37,7 +37,8 @@ import numpy as np
 from segmentation.background import BackgroundModel
 from segmentation.clutter import StaticClutter, segment_without_clutter
 from segmentation.pipeline import SegmentationParams
-from tracker.fitting.props import PropBox, PropPenalty, prop_masks
+from tracker.body.kinematics import forward, joint_centres
+from tracker.fitting.props import PropBox, PropPenalty, prop_masks, seat_box
 from tracker.fitting.tracking import Tracker
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import initialise_any
@@ -85,6 +86,9 @@ class SceneOptions:
     #: a prop's pixels are body where the body's projection grown by this covers them (metres;
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
+    #: without operator props, learn the seat of a subject fitted seated on the first frame
+    #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
+    auto_seat: bool = False
 
 
 class RecoveryBudget:
@@ -135,10 +139,12 @@ class SceneTracker:
                  segmentation: SegmentationParams | None = None, floor=None,
                  props: "list[PropBox] | None" = None) -> None:
         self.tracker = tracker
-        self.props = list(props or ())
-        self.prop_masks = prop_masks(tracker.cameras.values(), self.props) if self.props else {}
-        if self.props:
-            tracker.penalty = PropPenalty(self.props, weight=options.prop_weight, clearance=options.prop_clearance)
+        self.options = options
+        self.props: list[PropBox] = []
+        self.prop_masks: dict[str, np.ndarray] = {}
+        self.learned_seat: PropBox | None = None
+        self._seat_tried = bool(props) or not options.auto_seat
+        self.set_props(list(props or ()))
         self.floor = floor
         self.backgrounds = dict(backgrounds)
         self.options = options
@@ -162,6 +168,26 @@ class SceneTracker:
         self._explained: dict[str, np.ndarray] = {}
         self._prop_keep: dict[str, np.ndarray] = {}  # with prop_margin_m: the body's projection so grown
         self.last_segmentation: dict = {}
+
+    def set_props(self, props: "list[PropBox]") -> None:
+        """Use ``props`` from the next frame on (their masks and the fit's limit)."""
+        self.props = list(props)
+        self.prop_masks = prop_masks(self.tracker.cameras.values(), self.props) if self.props else {}
+        self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
+                                            clearance=self.options.prop_clearance) if self.props else None)
+
+    def _learn_seat(self, params: np.ndarray, raws: Mapping[str, np.ndarray]) -> None:
+        """``SceneOptions.auto_seat``: once, from the first fit, the seat under a seated subject."""
+        self._seat_tried = True
+        jc = joint_centres(self.tracker.model, forward(self.tracker.model, params))
+        names = [n for n in self.tracker.cameras if n in raws]
+        if len(names) < 2:
+            return
+        box = seat_box([self.tracker.cameras[n] for n in names], {n: raws[n] > 0 for n in names},
+                       self._explained, jc)
+        if box is not None:
+            self.learned_seat = box
+            self.set_props([box])
 
     def _render_views(self) -> ScoreViews:
         cams = list(self.tracker.cameras.values())
@@ -236,6 +262,8 @@ class SceneTracker:
             return rec
         params = np.asarray(rec["params"], dtype=float)
         self._explained = self.explained(params)
+        if not self._seat_tried:
+            self._learn_seat(params, raws)
         if self.props and self.options.prop_margin_m is not None:
             self._prop_keep = self.explained(params, self.options.prop_margin_m)
         if self.learners and self._trusted(rec):
