@@ -110,3 +110,61 @@ def test_session_prop_tables_validated(tmp_path, rng):
         with pytest.raises(SessionError, match=needle) as info:
             load_session(tmp_path)
         assert "session.toml" in str(info.value) and "prop" in str(info.value)
+
+
+def _seated_scene(seed: int):
+    """The cone model seated (``seated_params``) with a box under its thighs, 4 ring cameras:
+    cameras, silhouettes (body and box), the body's projection grown by 2 px, joint centres, box."""
+    import cv2
+
+    from tracker.body.kinematics import joint_centres
+    from tracker.imaging.render import render_label_images
+    from tracker.search.seated import seated_params
+
+    model = load_model("knossow40")
+    rng = np.random.default_rng(seed)
+    p = seated_params(model)
+    pose = forward(model, p)
+    jc = joint_centres(model, pose)
+    p[2] -= min(jc["left_ankle"][2], jc["right_ankle"][2]) - 0.08  # feet on the floor
+    p[:2] += rng.uniform(-0.3, 0.3, 2)
+    pose = forward(model, p)
+    jc = joint_centres(model, pose)
+    hips = 0.5 * (jc["left_hip"] + jc["right_hip"])
+    knees = 0.5 * (jc["left_knee"] + jc["right_knee"])
+    top = hips[2] - 0.12
+    box = PropBox.from_values([hips[0] - 0.2, hips[1] - 0.22, 0.0, knees[0] - 0.12, hips[1] + 0.22, top])
+    cams = ring_cameras(4, size=(320, 240))
+    labels = render_label_images(model, pose, cams)
+    boxes = prop_masks(cams, [box])
+    sils, explained = {}, {}
+    for cam, lab in zip(cams, labels):
+        body = (lab >= 0).astype(np.uint8)
+        sils[cam.name] = (body > 0) | boxes[cam.name]
+        explained[cam.name] = cv2.dilate(body, np.ones((5, 5), np.uint8)) > 0
+    return model, p, cams, sils, explained, jc, box
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_seat_box_learns_the_seat_under_a_seated_body(seed):
+    from tracker.fitting.props import seat_box
+
+    model, p, cams, sils, explained, jc, box = _seated_scene(seed)
+    learned = seat_box(cams, sils, explained, jc)
+    assert learned is not None
+    inter = np.prod(np.clip(np.minimum(learned.hi, box.hi) - np.maximum(learned.lo, box.lo), 0, None))
+    union = np.prod(learned.hi - learned.lo) + np.prod(box.hi - box.lo) - inter
+    assert inter / union > 0.5, (learned.lo, learned.hi, box.lo, box.hi)
+    # the learned box keeps the body out: the seated pose itself intrudes only a little (the
+    # pelvis may rest on it) while a pose with the thighs pushed into the box is penalised more
+    pen = PropPenalty([learned])
+    assert pen.residuals(model, p)[0].sum() < pen.residuals(model, p - np.eye(model.n_params)[2] * 0.1)[0].sum()
+
+
+def test_seat_box_is_none_for_a_standing_body():
+    from tracker.body.kinematics import joint_centres
+    from tracker.fitting.props import seat_box
+
+    model, p, cams, sils, explained, _, _ = _seated_scene(2)
+    standing = joint_centres(model, forward(model, model.zero()))
+    assert seat_box(cams, sils, explained, standing) is None
