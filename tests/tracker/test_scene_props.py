@@ -50,6 +50,10 @@ def test_masks_cover_the_projected_box():
         uv = np.round(cam.project(np.array([[0.0, 0.0, 0.2]]))[0]).astype(int)
         assert masks[cam.name][uv[1], uv[0]]
         assert 0 < masks[cam.name].mean() < 0.5
+    # a box around a camera has no bounded projection there: left out of that camera's mask
+    around = PropBox.from_values(list(cams[0].center - 0.5) + list(cams[0].center + 0.5))
+    masks = prop_masks(cams, [around])
+    assert not masks[cams[0].name].any()
 
 
 def test_penalty_jacobian_matches_finite_differences():

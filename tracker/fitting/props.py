@@ -108,14 +108,14 @@ def parse_prop(text: str) -> PropBox:
 
 def prop_masks(cameras: Iterable, props: Sequence[PropBox]) -> dict[str, np.ndarray]:
     """Per camera name, the (h, w) bool mask of the props' projections (each box the convex hull
-    of its projected corners; a box with a corner behind the camera covers the whole image)."""
+    of its projected corners; a box with a corner behind the camera is left out of that camera's
+    mask: its projection is unbounded, and the fit's limit still keeps the body out of it)."""
     out = {}
     for cam in cameras:
         mask = np.zeros((cam.height, cam.width), np.uint8)
         for box in props:
             corners = box.corners()
             if np.any(cam.depth(corners) <= 1e-3):
-                mask[:] = 1
                 continue
             uv = np.clip(cam.project(corners), -1e4, 1e4)
             hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
