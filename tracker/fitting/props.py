@@ -190,7 +190,8 @@ class PropPenalty:
 
 
 def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained: Mapping[str, np.ndarray],
-             joints: Mapping[str, np.ndarray], *, voxel_m: float = 0.02, behind_knee_m: float = 0.10,
+             joints: Mapping[str, np.ndarray], *, thigh_radius: float = 0.0, voxel_m: float = 0.02,
+             behind_knee_m: float = 0.10,
              behind_hip_m: float = 0.35, side_m: float = 0.35, quantile: float = 2.0) -> PropBox | None:
     """The seat under a seated subject, learned from one frame set: a seated prior, no operator.
 
@@ -199,8 +200,9 @@ def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained
     bool) covers, kept below the hip joints, along the thighs' forward direction from
     ``behind_hip_m`` behind the hips to ``behind_knee_m`` short of the knees (the shanks hang in
     front of a seat), within ``side_m`` of the hips sideways; the box is those voxels'
-    ``quantile``–(100 − ``quantile``) % extent, down to the floor.  ``joints``: the fit's joint
-    centres (name -> (3,) metres).  None when the fit is not seated (a thigh more than 35° off
+    ``quantile``–(100 − ``quantile``) % extent, down to the floor and up to at least the thighs'
+    underside (the lower hip joint minus ``thigh_radius``, metres: a seat supports the thighs; the
+    hull under them is hidden by the body).  ``joints``: the fit's joint centres (name -> (3,) m).  None when the fit is not seated (a thigh more than 35° off
     the horizontal) or fewer than 50 voxels are left."""
     from tracker.search.hull import visual_hull
 
@@ -238,4 +240,6 @@ def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained
     lo = np.percentile(Y, quantile, axis=0)
     hi = np.percentile(Y, 100.0 - quantile, axis=0)
     lo[2] = 0.0
+    hip_z = min(float(joints["left_hip"][2]), float(joints["right_hip"][2]))
+    hi[2] = max(hi[2], hip_z - float(thigh_radius))
     return PropBox.from_values(list(lo) + list(hi), where="seat_box")

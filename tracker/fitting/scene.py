@@ -183,8 +183,11 @@ class SceneTracker:
         names = [n for n in self.tracker.cameras if n in raws]
         if len(names) < 2:
             return
+        model = self.tracker.model
+        thighs = [i for i, name in enumerate(model.part_names) if name.endswith("thigh")]
+        radius = float(np.max(model.cones[thighs, :2])) if thighs else 0.0
         box = seat_box([self.tracker.cameras[n] for n in names], {n: raws[n] > 0 for n in names},
-                       self._explained, jc)
+                       self._explained, jc, thigh_radius=radius)
         if box is not None:
             self.learned_seat = box
             self.set_props([box])
