@@ -42,7 +42,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prop", action="append", default=[], metavar="x0,y0,z0,x1,y1,z1",
                         help="a world box (metres, the calibration's frame) that is never body, e.g. a chair: "
                              "clutter where the body does not cover it, and the fit keeps the body out of it "
-                             "(repeatable; adds to session.toml's [[prop]] boxes)")
+                             "(repeatable; adds to session.toml's [[prop]] boxes; --prop=-0.3,... when it starts with -)")
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--allow-missing-cameras", action="store_true",

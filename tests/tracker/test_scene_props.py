@@ -172,3 +172,24 @@ def test_seat_box_is_none_for_a_standing_body():
     model, p, cams, sils, explained, _, _ = _seated_scene(2)
     standing = joint_centres(model, forward(model, model.zero()))
     assert seat_box(cams, sils, explained, standing) is None
+
+
+def test_track_cli_takes_props_and_names_a_bad_one(tmp_path, capsys):
+    from service.cli import main
+    from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.synth import bundled_motion
+
+    root = make_synthetic_session(bundled_motion("scaled_131_03"), tmp_path / "hop", cameras=4, size=(160, 120),
+                                  frames=3, n_background=4, seed=3)
+    out, gt = tmp_path / "p.jsonl", str(root / "ground_truth.jsonl")
+    assert main(["track", str(root), "--out", str(out), "--initial-pose", gt, "--prop", "1,2,3"]) == 2
+    assert "--prop" in capsys.readouterr().err and not out.exists()
+    (root / "session.toml").write_text((root / "session.toml").read_text() + "\n[[prop]]\nbox = [0, 0, 0, 1, 1]\n")
+    assert main(["track", str(root), "--out", str(out), "--initial-pose", gt]) == 2
+    err = capsys.readouterr().err
+    assert "session.toml" in err and "prop" in err
+    # a valid box far from the subject: tracked as before, three records
+    (root / "session.toml").write_text((root / "session.toml").read_text().replace("box = [0, 0, 0, 1, 1]",
+                                                                                   "box = [5, 5, 0, 5.5, 5.5, 0.5]"))
+    assert main(["track", str(root), "--out", str(out), "--initial-pose", gt, "--prop=-6,-6,0,-5.5,-5.5,0.4"]) == 0
+    assert len(out.read_text().splitlines()) == 3

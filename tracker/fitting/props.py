@@ -27,6 +27,7 @@ import numpy as np
 
 from tracker.body.kinematics import forward, point_jacobian
 from tracker.body.model import BodyModel
+from tracker.errors import TrackerError
 
 __all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks"]
 
@@ -36,7 +37,7 @@ _NUMBER = r"\s*(-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 _PROP = re.compile(r"^" + ",".join([_NUMBER] * 6) + r"$")
 
 
-class PropError(ValueError):
+class PropError(TrackerError, ValueError):
     """A bad prop box; the message names it."""
 
 
