@@ -147,10 +147,8 @@ class LiveTrackerFitter(TrackerFitter):
     ----------
     tracker : Tracker
         Its own recovery is turned off (``recover = False``): searches run here, in a thread.
-    period_s : float
-        The cameras' frame period (adaptive effort), seconds.
-    adaptive : bool
-        Adapt the effort (else always full effort).
+    period_s, adaptive : float, bool
+        The cameras' frame period, seconds; adapt the effort to it (else always full effort).
     roi_margin_m, roi_margin_per_frame_m, roi_max_margin_m, roi_margin_px : float, float, float, int
         ROI margins: ``roi_margin_m`` + ``roi_margin_per_frame_m`` per frame since the last fit
         (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
@@ -167,18 +165,23 @@ class LiveTrackerFitter(TrackerFitter):
         ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
         in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
+    initialise_limbs_both, initialise_demand_s : bool, float
+        The initialisation's ``SearchOptions.limb_search_both`` (off: cheaper); while it searches,
+        sets are demanded at most every ``initialise_demand_s`` seconds (:attr:`demand_interval_s`).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
-                 rejoin_beside: bool = False) -> None:
+                 rejoin_beside: bool = False, initialise_limbs_both: bool = False,
+                 initialise_demand_s: float = 0.2) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
         # schedules it found as many ok sets but longer bad runs while searches were held (docs/performance.md)
-        tracker.options = replace(tracker.options, iou_rms_jump=None)
+        tracker.options = replace(tracker.options, iou_rms_jump=None, initialise_search=replace(
+            tracker.options.initialise_search, limb_search_both=bool(initialise_limbs_both)))
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)
@@ -195,6 +198,7 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
         self.rejoin_beside = bool(rejoin_beside)
+        self.initialise_demand_s = float(initialise_demand_s)
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -212,6 +216,12 @@ class LiveTrackerFitter(TrackerFitter):
     def searching(self) -> bool:
         """Whether a search runs in the background."""
         return self.search_runner.busy()
+
+    @property
+    def demand_interval_s(self) -> float:
+        """Least seconds between two demanded sets (``initialise_demand_s`` while the
+        initialisation searches, else 0: every set the cameras have)."""
+        return self.initialise_demand_s if self.tracker.params is None and self.searching else 0.0
 
     def _rejoin_accept_iou(self) -> float:
         """Least silhouette IoU of a rejoined pose (``rejoin_accept_iou``, at least the tracker's gate)."""

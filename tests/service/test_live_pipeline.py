@@ -69,6 +69,35 @@ def test_prediction_scales_with_the_frame_gap():
     assert tr.predict(1000)[0] == pytest.approx(0.02 + MAX_EXTRAPOLATION * 0.02)
 
 
+def test_sets_are_demanded_sparsely_only_while_the_initialisation_searches():
+    from tracker.body.model import load_model
+    from tracker.fitting.tracking import Tracker
+    from tracker.synthetic.scene import ring_cameras
+    from service.workers.live_fit import LiveTrackerFitter
+
+    class Runner:
+        running = False
+
+        def start(self, fn, name):
+            self.running = True
+
+        def busy(self):
+            return self.running
+
+    model = load_model("knossow40")
+    tr = Tracker(model, ring_cameras(2, size=(80, 60)))
+    runner = Runner()
+    fit = LiveTrackerFitter(tr, search_runner=runner, initialise_demand_s=0.25)
+    assert not fit.tracker.options.initialise_search.limb_search_both  # the cheaper live initialisation
+    assert fit.demand_interval_s == 0.0  # no search yet: the first set starts it
+    runner.running = True
+    assert fit.demand_interval_s == 0.25  # initialising: nothing to fit the sets to
+    tr.params = model.zero()
+    assert fit.demand_interval_s == 0.0  # a recovery search: tracking goes on, every set is wanted
+    runner.running, tr.params = False, None
+    assert fit.demand_interval_s == 0.0
+
+
 def test_pose_stats_line():
     t = [0.0]
     stats = PoseStats(lambda: t[0])
