@@ -165,23 +165,27 @@ class LiveTrackerFitter(TrackerFitter):
         ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
         in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
-    initialise_limbs_both, initialise_demand_s : bool, float
-        The initialisation's ``SearchOptions.limb_search_both`` (off: cheaper); while it searches,
-        sets are demanded at most every ``initialise_demand_s`` seconds (:attr:`demand_interval_s`).
+    limbs_both, recover_keep, initialise_demand_s : bool, int, float
+        The searches' ``SearchOptions.limb_search_both`` (off: cheaper) and the full recovery's
+        ``keep``; while the initialisation searches, sets are demanded at most every
+        ``initialise_demand_s`` seconds (:attr:`demand_interval_s`).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
-                 rejoin_beside: bool = False, initialise_limbs_both: bool = False,
+                 rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
                  initialise_demand_s: float = 0.2) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
         # schedules it found as many ok sets but longer bad runs while searches were held (docs/performance.md)
-        tracker.options = replace(tracker.options, iou_rms_jump=None, initialise_search=replace(
-            tracker.options.initialise_search, limb_search_both=bool(initialise_limbs_both)))
+        opts = tracker.options
+        tracker.options = replace(opts, iou_rms_jump=None,
+                                  initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
+                                  recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
+                                                         keep=int(recover_keep)))
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)
@@ -258,7 +262,9 @@ class LiveTrackerFitter(TrackerFitter):
                                  min_inside_fraction=tr.options.min_inside_fraction)
                     if res is None and full:
                         kind = "full"
-                        res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
+                        # the rejoin above was recover's cheap local stage: straight to the full search
+                        res = recover(tr.model, cams, sils, chs, seeds[0],
+                                      options=replace(tr.options.recover_search, local=False))
                 found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)

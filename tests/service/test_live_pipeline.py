@@ -88,7 +88,9 @@ def test_sets_are_demanded_sparsely_only_while_the_initialisation_searches():
     tr = Tracker(model, ring_cameras(2, size=(80, 60)))
     runner = Runner()
     fit = LiveTrackerFitter(tr, search_runner=runner, initialise_demand_s=0.25)
-    assert not fit.tracker.options.initialise_search.limb_search_both  # the cheaper live initialisation
+    opts = fit.tracker.options  # the cheaper live searches
+    assert not opts.initialise_search.limb_search_both and not opts.recover_search.limb_search_both
+    assert opts.recover_search.keep == 2
     assert fit.demand_interval_s == 0.0  # no search yet: the first set starts it
     runner.running = True
     assert fit.demand_interval_s == 0.25  # initialising: nothing to fit the sets to
