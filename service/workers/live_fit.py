@@ -165,10 +165,10 @@ class LiveTrackerFitter(TrackerFitter):
         ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
         in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
-    limbs_both, recover_keep, initialise_demand_s : bool, int, float
-        The searches' ``SearchOptions.limb_search_both`` (off: cheaper) and the full recovery's
-        ``keep``; while the initialisation searches, sets are demanded at most every
-        ``initialise_demand_s`` seconds (:attr:`demand_interval_s`).
+    limbs_both, recover_keep, initialise_demand_s, min_search_cameras : bool, int, float, float
+        The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
+        sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
+        a search runs only on a set with silhouettes from this fraction of the cameras.
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -176,7 +176,7 @@ class LiveTrackerFitter(TrackerFitter):
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
-                 initialise_demand_s: float = 0.2) -> None:
+                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -203,6 +203,7 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
         self.rejoin_beside = bool(rejoin_beside)
         self.initialise_demand_s = float(initialise_demand_s)
+        self.min_search_cameras = float(min_search_cameras)
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -232,19 +233,19 @@ class LiveTrackerFitter(TrackerFitter):
         gate = self.tracker.options.min_iou
         return gate if self.rejoin_accept_iou is None else max(gate, self.rejoin_accept_iou)
 
-    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> bool:
         """Search from ``silhouettes`` beside the stream (``search_runner``).
 
         ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
         ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
-        from the first of them."""
+        from the first of them.  False when the set has too few cameras (no search)."""
         from tracker.search.initialise import initialise
         from tracker.search.recovery import recover, rejoin
 
         tr = self.tracker
-        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        names = self._search_cameras(images, silhouettes)
         if not names:
-            return
+            return False
         cams = [tr.cameras[n] for n in names]
         sils = {n: silhouettes[n] for n in names}
         chs = {n: images[n] for n in names}
@@ -277,6 +278,15 @@ class LiveTrackerFitter(TrackerFitter):
         self.searches += 1
         tr.n_initialisations += 1
         self.search_runner.start(run, f"search-{what}")
+        return True
+
+    def _search_cameras(self, images: dict, silhouettes: dict) -> list[str]:
+        """The cameras of this set with a silhouette, or [] when they are fewer than
+        ``min_search_cameras`` × the tracker's cameras (a set released before most cameras'
+        chamfers came: a search on it finds a pose the full views refute)."""
+        names = [n for n in self.tracker.cameras if n in images and np.any(silhouettes[n])]
+        need = max(1, int(np.ceil(self.min_search_cameras * len(self.tracker.cameras))))
+        return names if len(names) >= need else []
 
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
@@ -318,7 +328,7 @@ class LiveTrackerFitter(TrackerFitter):
         from tracker.search.recovery import rejoin
 
         tr = self.tracker
-        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        names = self._search_cameras(images, silhouettes)
         if not names:
             return None
         try:
@@ -365,8 +375,10 @@ class LiveTrackerFitter(TrackerFitter):
             if not self.searching:
                 self._take_found(frame_id, images, silhouettes)
             if tr.params is None:
-                self._start_search(frame_id, None, images, silhouettes)
+                started = self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+                if not started:
+                    record["reason"] = "initialisation waits for a set with most cameras' silhouettes"
             else:  # tracking goes on beside a recovery search: it may come back by itself
                 level = EFFORT_LEVELS[self.effort.level]
                 tr.options = replace(self.base_options, n_samples=level.n_samples,
