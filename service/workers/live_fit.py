@@ -12,8 +12,10 @@
   every set still gets its record at once: during the initialisation ``ok: false`` with
   ``reason`` ``"searching: ..."``; during a recovery the tracker goes on fitting from its
   prediction (a bad fit is ``ok: false``, its reason saying a search runs).  When the search
-  ends, the tracker's prediction and the pose found are both fitted to the next set; the one
-  with the higher silhouette IoU is the tracker's pose from there; a failed search is retried.
+  ends, the pose found is brought forward through (at most ``catch_up_sets``) sets held while it
+  searched; that pose, the search's own and the tracker's prediction are fitted to the next set,
+  and the one with the highest silhouette IoU is the tracker's pose from there; a failed search
+  is retried.  A search runs only on a set with most cameras' silhouettes.
 - **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
   tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
   fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
@@ -152,11 +154,9 @@ class LiveTrackerFitter(TrackerFitter):
     roi_margin_m, roi_margin_per_frame_m, roi_max_margin_m, roi_margin_px : float, float, float, int
         ROI margins: ``roi_margin_m`` + ``roi_margin_per_frame_m`` per frame since the last fit
         (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
-    clock : callable () -> float
-        Seconds (fit times).
-    search_runner : object with ``start(fn, name)`` and ``busy()``, optional
-        Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
-        synchronously and holds their result for a given number of sets).
+    clock, search_runner : callable () -> float, object with ``start(fn, name)`` and ``busy()``
+        Seconds (fit times); where searches run (default :class:`ThreadSearches`;
+        ``service.live_replay`` runs them at once and holds their result for some sets).
     rejoin_headings, rejoin_accept_iou : int, float or None
         The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; least IoU of
         its pose (None: the tracker's own gate).
@@ -169,6 +169,8 @@ class LiveTrackerFitter(TrackerFitter):
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
         a search runs only on a set with silhouettes from this fraction of the cameras.
+    catch_up_sets : int
+        Sets held while a search runs, to bring its pose forward through (``_take_found``; 0: none).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -176,7 +178,7 @@ class LiveTrackerFitter(TrackerFitter):
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
-                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75) -> None:
+                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -204,6 +206,8 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoin_beside = bool(rejoin_beside)
         self.initialise_demand_s = float(initialise_demand_s)
         self.min_search_cameras = float(min_search_cameras)
+        self.catch_up_sets = int(catch_up_sets)
+        self._held: list[tuple[int, dict]] = []  # (frame id, chamfer images) of sets seen while searching
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -276,6 +280,7 @@ class LiveTrackerFitter(TrackerFitter):
             return kind if found is not None else None
 
         self.searches += 1
+        self._held = []
         tr.n_initialisations += 1
         self.search_runner.start(run, f"search-{what}")
         return True
@@ -291,35 +296,66 @@ class LiveTrackerFitter(TrackerFitter):
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
 
-        The search's pose is of the set it started on; the track went on meanwhile.  Both the
-        tracker's prediction and the search's pose are fitted to this set and the one whose fit
-        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
-        the search's pose, there is no other)."""
+        The search's pose is of the set it started on; the track went on meanwhile.  The pose is
+        first brought forward through the sets held while it searched (:meth:`_catch_up`).  The
+        tracker's prediction, the pose brought forward and the search's own pose are fitted to
+        this set and the one whose fit scores the highest silhouette IoU becomes the tracker's
+        pose (the prediction on a tie: the track came back by itself)."""
         from tracker.fitting.tracking import fit_frame
         from tracker.search.scoring import ScoreViews
 
         with self._lock:
             found, self._found = self._found, None
         if found is None or found[1] is None:
+            self._held = []
             return
         tr = self.tracker
+        start, start_frame = self._catch_up(np.asarray(found[1], dtype=float), int(found[0]))
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
-        start, start_frame = found[1], int(found[0])
-        if current is not None and names:
+        poses = [p for p in (current, start, found[1] if start_frame != int(found[0]) else None) if p is not None]
+        if len(poses) > 1 and names:
             cams = [tr.cameras[n] for n in names]
             chs = {n: images[n] for n in names}
             views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
             fitted = []
-            for p in (current, found[1]):
+            for p in poses:
                 res, _ = fit_frame(tr.model, cams, chs, p, sliding=tr.sliding, solver=tr.solver, options=tr.options)
                 fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
-            if fitted[0][0] >= fitted[1][0]:
+            best = max(range(len(fitted)), key=lambda i: (fitted[i][0], -i))
+            if current is not None and best == 0:
                 return  # the track is as good: it came back by itself
-            start, start_frame = fitted[1][1], int(frame_id)
+            start, start_frame = fitted[best][1], int(frame_id)
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
+
+    def _hold(self, frame_id: int, images: dict) -> None:
+        """Keep a set that arrived while a search runs (its chamfer images), at most
+        ``catch_up_sets``: when full, every other one is dropped (the newest kept), so the held
+        sets span the whole search at a coarser spacing."""
+        if self.catch_up_sets <= 0:
+            return
+        self._held.append((int(frame_id), images))
+        if len(self._held) > self.catch_up_sets:
+            self._held = self._held[::-1][::2][::-1]
+
+    def _catch_up(self, params: np.ndarray, frame_id: int) -> tuple[np.ndarray, int]:
+        """Fit ``params`` (the pose of set ``frame_id``) to each later held set in turn; returns the
+        pose and the frame id of the last set it was fitted to (the held sets are let go)."""
+        from tracker.fitting.tracking import fit_frame
+
+        tr = self.tracker
+        held, self._held = self._held, []
+        need = max(1, int(np.ceil(self.min_search_cameras * len(tr.cameras))))
+        for fid, chs in held:
+            names = [n for n in tr.cameras if n in chs]
+            if fid <= frame_id or len(names) < need:
+                continue
+            res, _ = fit_frame(tr.model, [tr.cameras[n] for n in names], {n: chs[n] for n in names}, params,
+                               sliding=tr.sliding, solver=tr.solver, options=tr.options)
+            params, frame_id = tr.model.clamp(np.asarray(res.params, dtype=float)), fid
+        return params, frame_id
 
     def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
         """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the
@@ -369,6 +405,8 @@ class LiveTrackerFitter(TrackerFitter):
         tr = self.tracker
         if tr.params is None and self.searching:  # initialising: nothing to fit from yet
             record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+            if self.catch_up_sets > 0:
+                self._hold(frame_id, {name: message_to_chamfer(msg) for name, msg in chamfer.items()})
         else:
             images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
             silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
@@ -385,7 +423,9 @@ class LiveTrackerFitter(TrackerFitter):
                                      max_iterations=level.max_iterations, reverse_samples=level.reverse_samples)
                 record = tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
                 record["effort"] = level.as_record()
-                if not self.searching:
+                if self.searching:
+                    self._hold(frame_id, images)
+                else:
                     self.effort.update(self.clock() - t0, bool(record.get("ok")))
                 if not record.get("ok"):
                     poor = str(record.get("reason", "")).startswith("poor fit")
