@@ -118,17 +118,19 @@ class EffortController:
 
 
 class ThreadSearches:
-    """Runs each search in a daemon thread (the live default): ``start(fn, name)``, ``busy()``."""
+    """Runs each search in a daemon thread (the live default): ``start(fn, name, then)``, ``busy()``."""
 
     def __init__(self) -> None:
         self._thread: threading.Thread | None = None
 
-    def start(self, fn: Callable[[], None], name: str) -> None:
-        """Run ``fn()`` beside the caller (its wall and CPU seconds logged at INFO)."""
+    def start(self, fn: Callable[[], None], name: str, then: Callable[[], None] | None = None) -> None:
+        """Run ``fn()`` then ``then()`` beside the caller (their wall and CPU seconds logged at INFO)."""
         def timed() -> None:
             w0, c0 = time.perf_counter(), time.thread_time()
             try:
                 result = fn()
+                if then is not None:
+                    then()
             finally:
                 log.info("%s: %.2f s wall, %.2f s CPU", name, time.perf_counter() - w0, time.thread_time() - c0)
             return result
@@ -170,7 +172,7 @@ class LiveTrackerFitter(TrackerFitter):
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
         a search runs only on a set with silhouettes from this fraction of the cameras.
     catch_up_sets : int
-        Sets held while a search runs, to bring its pose forward through (``_take_found``; 0: none).
+        Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -195,7 +197,8 @@ class LiveTrackerFitter(TrackerFitter):
         self.clock = clock
         self._lock = threading.Lock()
         self.search_runner = ThreadSearches() if search_runner is None else search_runner
-        self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
+        # (frame id of the pose, the pose brought forward, the search's own pose); poses None on failure
+        self._found: tuple[int, np.ndarray | None, np.ndarray | None] | None = None
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
@@ -275,14 +278,14 @@ class LiveTrackerFitter(TrackerFitter):
                 log.info("%s failed: %s", what, exc)
                 found = None
             with self._lock:
-                self._found = (frame_id, found)
+                self._found = (frame_id, found, found)
             self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
             return kind if found is not None else None
 
         self.searches += 1
         self._held = []
         tr.n_initialisations += 1
-        self.search_runner.start(run, f"search-{what}")
+        self.search_runner.start(run, f"search-{what}", self._catch_up)
         return True
 
     def _search_cameras(self, images: dict, silhouettes: dict) -> list[str]:
@@ -296,8 +299,8 @@ class LiveTrackerFitter(TrackerFitter):
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
 
-        The search's pose is of the set it started on; the track went on meanwhile.  The pose is
-        first brought forward through the sets held while it searched (:meth:`_catch_up`).  The
+        The search's pose is of the set it started on; the track went on meanwhile.  The pose was
+        brought forward through the sets held while it searched (:meth:`_catch_up`).  The
         tracker's prediction, the pose brought forward and the search's own pose are fitted to
         this set and the one whose fit scores the highest silhouette IoU becomes the tracker's
         pose (the prediction on a tie: the track came back by itself)."""
@@ -305,15 +308,14 @@ class LiveTrackerFitter(TrackerFitter):
         from tracker.search.scoring import ScoreViews
 
         with self._lock:
-            found, self._found = self._found, None
+            found, self._found, self._held = self._found, None, []
         if found is None or found[1] is None:
-            self._held = []
             return
         tr = self.tracker
-        start, start_frame = self._catch_up(np.asarray(found[1], dtype=float), int(found[0]))
+        start_frame, start, own = found
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
-        poses = [p for p in (current, start, found[1] if start_frame != int(found[0]) else None) if p is not None]
+        poses = [p for p in (current, start, None if own is start else own) if p is not None]
         if len(poses) > 1 and names:
             cams = [tr.cameras[n] for n in names]
             chs = {n: images[n] for n in names}
@@ -336,26 +338,39 @@ class LiveTrackerFitter(TrackerFitter):
         sets span the whole search at a coarser spacing."""
         if self.catch_up_sets <= 0:
             return
-        self._held.append((int(frame_id), images))
-        if len(self._held) > self.catch_up_sets:
-            self._held = self._held[::-1][::2][::-1]
+        with self._lock:
+            self._held.append((int(frame_id), images))
+            if len(self._held) > self.catch_up_sets:
+                self._held = self._held[::-1][::2][::-1]
 
-    def _catch_up(self, params: np.ndarray, frame_id: int) -> tuple[np.ndarray, int]:
-        """Fit ``params`` (the pose of set ``frame_id``) to each later held set in turn; returns the
-        pose and the frame id of the last set it was fitted to (the held sets are let go)."""
+    def _catch_up(self) -> None:
+        """Bring a found pose forward: fit it (full effort) to each held set after its own in turn.
+
+        Runs after the search, in its time (``search_runner``'s ``then``); the found entry becomes
+        ``(frame id of the last set fitted, pose, the search's own pose)`` and the held sets are let go."""
         from tracker.fitting.tracking import fit_frame
 
         tr = self.tracker
-        held, self._held = self._held, []
+        with self._lock:
+            found, held, self._held = self._found, self._held, []
+        if found is None or found[1] is None:
+            return
+        frame_id, params = int(found[0]), np.asarray(found[1], dtype=float)
         need = max(1, int(np.ceil(self.min_search_cameras * len(tr.cameras))))
         for fid, chs in held:
             names = [n for n in tr.cameras if n in chs]
             if fid <= frame_id or len(names) < need:
                 continue
-            res, _ = fit_frame(tr.model, [tr.cameras[n] for n in names], {n: chs[n] for n in names}, params,
-                               sliding=tr.sliding, solver=tr.solver, options=tr.options)
+            try:
+                res, _ = fit_frame(tr.model, [tr.cameras[n] for n in names], {n: chs[n] for n in names}, params,
+                                   sliding=tr.sliding, solver=tr.solver, options=self.base_options)
+            except ValueError as exc:  # a set it cannot be fitted to: keep what was brought so far
+                log.info("catch-up stopped at frame %d: %s", fid, exc)
+                break
             params, frame_id = tr.model.clamp(np.asarray(res.params, dtype=float)), fid
-        return params, frame_id
+        with self._lock:
+            if self._found is found:
+                self._found = (frame_id, params, found[2])
 
     def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
         """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the

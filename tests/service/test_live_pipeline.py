@@ -78,7 +78,7 @@ def test_sets_are_demanded_sparsely_only_while_the_initialisation_searches():
     class Runner:
         running = False
 
-        def start(self, fn, name):
+        def start(self, fn, name, then=None):
             self.running = True
 
         def busy(self):
@@ -112,7 +112,7 @@ def test_no_search_starts_on_a_set_most_cameras_are_missing_from():
         def __init__(self):
             self.started = []
 
-        def start(self, fn, name):
+        def start(self, fn, name, then=None):
             self.started.append(name)
 
         def busy(self):

@@ -22,6 +22,15 @@ def test_held_searches_hold_results_for_their_kind():
     runner.advance()
     assert not runner.busy()  # taken on the next set
     assert runner.held == [("full", 3), ("rejoin", 0)]
+    ended = []
+    runner.start(lambda: "full", "s", then=lambda: ended.append(runner.busy()))
+    for _ in range(3):
+        runner.advance()
+    assert ended == []  # the search's last step runs when its hold ends, not before
+    runner.advance()
+    assert ended == [False]
+    runner.advance()
+    assert ended == [False]  # once
     with pytest.raises(ValueError):
         HeldSearches({"rejoin": 1})
     with pytest.raises(ValueError):
