@@ -9,8 +9,9 @@ frame id the live cameras' segment workers hold, by their have notices; a camera
 ``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
 before fitting it, naming where the body can be in each camera when the fitter predicts it
 (``rois``); a fitter with ``demand_interval_s`` (seconds) is demanded sets at most that often
-(while it initialises, say).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture to publish: the
-camera worker's publish time, forwarded by the segment worker, to this worker's publish).  A
+(while it initialises, say).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture
+to publish: the camera worker's publish time, forwarded by the segment worker, to this worker's
+publish).  A
 fitter with ``warm_up()`` is warmed up before the first frame.
 """
 
@@ -130,8 +131,8 @@ class TrackWorker:
         if interval > 0 and self._demanded_at is not None and self.clock() - self._demanded_at < interval:
             return
         fid = self.planner.next_demand(self.clock(), hold=self.asm.is_pending)
-        if fid is not None:
-            self._demanded_at = self.clock()  # a fitter that predicts where the body is names each camera's region of interest
+        if fid is not None:  # a fitter that predicts where the body is names each camera's region of interest
+            self._demanded_at = self.clock()
             rois = self.fit.rois(fid) if hasattr(self.fit, "rois") else None
             self.demand_pub.put(DemandMessage(TRACK_CONSUMER, fid, rois).to_bytes())
 
