@@ -7,7 +7,8 @@ its searches held back for as many sets as they would take live (``--search-sets
 default=15,rejoin=3``, or ``--sets-per-cpu-s 60``: a search's CPU seconds × that, i.e. the frame
 rate times how much slower a search runs beside the stream than alone).  Prints ok sets, mean
 joint error over ok sets and over all sets with a pose, searches by kind, and the bad sets' clip
-frames.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
+frames.  ``--catch-up N`` sets how many sets a search's pose is brought forward through
+(``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
 runs on one tree.
 
     python bench/live_replay.py [--json] [--sets 180] [--gaps 1 2 3 2,1,3] [--search-sets default=15,rejoin=3]
@@ -61,6 +62,8 @@ def main() -> None:
     ap.add_argument("--sets-per-cpu-s", type=float, default=None)
     ap.add_argument("--no-rois", action="store_true")
     ap.add_argument("--old-recovery", action="store_true")
+    ap.add_argument("--catch-up", type=int, default=None, help="LiveTrackerFitter catch_up_sets (default: its own)")
+    ap.add_argument("--start", type=int, default=0, help="first frame id of the schedules")
     args = ap.parse_args()
     ref = machine_ref_ms()
     root = args.session or demo_session(DemoOptions(cache_dir=args.cache_dir), progress=lambda m: None)
@@ -70,9 +73,11 @@ def main() -> None:
         gap = [int(g) for g in gaps.split(",")]
         runner = HeldSearches(parse_sets(args.search_sets), sets_per_cpu_s=args.sets_per_cpu_s)
         extra = dict(rejoin_spacing=-1) if args.old_recovery else {}
+        if args.catch_up is not None:
+            extra["catch_up_sets"] = args.catch_up
         fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, **extra)
         c0 = time.process_time()
-        rep = replay_live(clip, every_nth(args.sets, gap), fitter=fitter, use_rois=not args.no_rois)
+        rep = replay_live(clip, every_nth(args.sets, gap, start=args.start), fitter=fitter, use_rois=not args.no_rois)
         cpu = time.process_time() - c0
         err = clip_joint_errors(clip, rep.records)
         ok = np.array([bool(r.get("ok")) for r in rep.records])
@@ -90,7 +95,7 @@ def main() -> None:
                   f"all {100 * (e_all or np.nan):.2f} cm, searches {run['searches']}, rejoined {run['rejoined']}, "
                   f"{run['cpu_ms_per_set']:.1f} ms CPU per set; bad clip frames {run['bad_clip_frames']}", flush=True)
     out = {"machine_ref_ms": ref, "search_sets": args.search_sets, "sets_per_cpu_s": args.sets_per_cpu_s,
-           "old_recovery": args.old_recovery, "rois": not args.no_rois, "runs": runs}
+           "old_recovery": args.old_recovery, "catch_up": args.catch_up, "start": args.start, "rois": not args.no_rois, "runs": runs}
     if args.json:
         print(json.dumps(out, indent=1))
     else:

@@ -261,6 +261,12 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
             for c in imaged]
     taps.append((Inbox(hub, keys.chamfer("*"), ChamferMessage.from_bytes, depth=2 * opts.cameras),
                  bridge.on_chamfer))
+    if live and opts.fit_plugin is None:
+        # numba's disk cache filled (or loaded) here, before session time 0 is set: on a fresh checkout the
+        # track worker's own warm-up would compile for longer than the start delay and miss the replay's start
+        from tracker.fitting.warmup import warm_up
+
+        progress(f"tracker kernels compiled or loaded in {warm_up():.1f} s")
     decoded_mb = decoded_clip_mb(opts)
     preload = live and 0 < decoded_mb <= opts.live_preload_mb
     # live: session time 0 is due once the workers are up and the cameras hold the clip (frames already

@@ -43,10 +43,12 @@ class HeldSearches:
         if sets_per_cpu_s is not None and not sets_per_cpu_s > 0:
             raise ValueError(f"sets_per_cpu_s: expected > 0, got {sets_per_cpu_s!r}")
         self.frames, self._left, self.sets_per_cpu_s = {k: int(v) for k, v in table.items()}, 0, sets_per_cpu_s
+        self._then: Callable[[], None] | None = None
         self.held: list[tuple[object, int]] = []  # (kind, sets) of every search
 
-    def start(self, fn: Callable[[], object], name: str) -> None:
-        """Run ``fn()`` now; its result is held for the sets its kind (or its CPU time) takes."""
+    def start(self, fn: Callable[[], object], name: str, then: Callable[[], None] | None = None) -> None:
+        """Run ``fn()`` now; its result is held for the sets its kind (or its CPU time) takes, and
+        ``then()`` runs when the hold ends (the search's last step, on the sets that came meanwhile)."""
         c0 = time.process_time()
         kind = fn()
         if self.sets_per_cpu_s is not None:
@@ -55,6 +57,7 @@ class HeldSearches:
             sets = self.frames.get(kind, self.frames["default"])
         self.held.append((kind, sets))
         self._left = sets + 1  # the set that started it is the first
+        self._then = then
 
     def busy(self) -> bool:
         """Whether the last search is (deemed) still running."""
@@ -63,6 +66,9 @@ class HeldSearches:
     def advance(self) -> None:
         """One set passed."""
         self._left = max(0, self._left - 1)
+        if not self._left and self._then is not None:
+            then, self._then = self._then, None
+            then()
 
 
 @dataclass

@@ -12,8 +12,10 @@
   every set still gets its record at once: during the initialisation ``ok: false`` with
   ``reason`` ``"searching: ..."``; during a recovery the tracker goes on fitting from its
   prediction (a bad fit is ``ok: false``, its reason saying a search runs).  When the search
-  ends, the tracker's prediction and the pose found are both fitted to the next set; the one
-  with the higher silhouette IoU is the tracker's pose from there; a failed search is retried.
+  ends, the pose found is brought forward through (at most ``catch_up_sets``) sets held while it
+  searched; that pose, the search's own and the tracker's prediction are fitted to the next set,
+  and the one with the highest silhouette IoU is the tracker's pose from there; a failed search
+  is retried.  A search runs only on a set with most cameras' silhouettes.
 - **Adaptive effort.**  When fitting a set takes longer than the cameras' frame period the
   tracker falls behind; the fitter then steps down :data:`EFFORT_LEVELS` (fewer contour samples,
   fewer LM iterations, fewer silhouette samples) and steps back up once fits are quick again.
@@ -116,17 +118,19 @@ class EffortController:
 
 
 class ThreadSearches:
-    """Runs each search in a daemon thread (the live default): ``start(fn, name)``, ``busy()``."""
+    """Runs each search in a daemon thread (the live default): ``start(fn, name, then)``, ``busy()``."""
 
     def __init__(self) -> None:
         self._thread: threading.Thread | None = None
 
-    def start(self, fn: Callable[[], None], name: str) -> None:
-        """Run ``fn()`` beside the caller (its wall and CPU seconds logged at INFO)."""
+    def start(self, fn: Callable[[], None], name: str, then: Callable[[], None] | None = None) -> None:
+        """Run ``fn()`` then ``then()`` beside the caller (their wall and CPU seconds logged at INFO)."""
         def timed() -> None:
             w0, c0 = time.perf_counter(), time.thread_time()
             try:
                 result = fn()
+                if then is not None:
+                    then()
             finally:
                 log.info("%s: %.2f s wall, %.2f s CPU", name, time.perf_counter() - w0, time.thread_time() - c0)
             return result
@@ -147,18 +151,14 @@ class LiveTrackerFitter(TrackerFitter):
     ----------
     tracker : Tracker
         Its own recovery is turned off (``recover = False``): searches run here, in a thread.
-    period_s : float
-        The cameras' frame period (adaptive effort), seconds.
-    adaptive : bool
-        Adapt the effort (else always full effort).
+    period_s, adaptive : float, bool
+        The cameras' frame period, seconds; adapt the effort to it (else always full effort).
     roi_margin_m, roi_margin_per_frame_m, roi_max_margin_m, roi_margin_px : float, float, float, int
         ROI margins: ``roi_margin_m`` + ``roi_margin_per_frame_m`` per frame since the last fit
         (at most ``roi_max_margin_m``), metres, and ``roi_margin_px`` pixels.
-    clock : callable () -> float
-        Seconds (fit times).
-    search_runner : object with ``start(fn, name)`` and ``busy()``, optional
-        Where searches run (default :class:`ThreadSearches`; ``service.live_replay`` runs them
-        synchronously and holds their result for a given number of sets).
+    clock, search_runner : callable () -> float, object with ``start(fn, name)`` and ``busy()``
+        Seconds (fit times); where searches run (default :class:`ThreadSearches`;
+        ``service.live_replay`` runs them at once and holds their result for some sets).
     rejoin_headings, rejoin_accept_iou : int, float or None
         The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; least IoU of
         its pose (None: the tracker's own gate).
@@ -167,18 +167,29 @@ class LiveTrackerFitter(TrackerFitter):
         ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
         in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
+    limbs_both, recover_keep, initialise_demand_s, min_search_cameras : bool, int, float, float
+        The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
+        sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
+        a search runs only on a set with silhouettes from this fraction of the cameras.
+    catch_up_sets : int
+        Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
                  roi_margin_per_frame_m: float = 0.04, roi_max_margin_m: float = 0.40, roi_margin_px: int = 8,
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
-                 rejoin_beside: bool = False) -> None:
+                 rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
+                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
         # schedules it found as many ok sets but longer bad runs while searches were held (docs/performance.md)
-        tracker.options = replace(tracker.options, iou_rms_jump=None)
+        opts = tracker.options
+        tracker.options = replace(opts, iou_rms_jump=None,
+                                  initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
+                                  recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
+                                                         keep=int(recover_keep)))
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)
@@ -186,7 +197,8 @@ class LiveTrackerFitter(TrackerFitter):
         self.clock = clock
         self._lock = threading.Lock()
         self.search_runner = ThreadSearches() if search_runner is None else search_runner
-        self._found: tuple[int, np.ndarray | None] | None = None  # (frame id, params or None on failure)
+        # (frame id of the pose, the pose brought forward, the search's own pose); poses None on failure
+        self._found: tuple[int, np.ndarray | None, np.ndarray | None] | None = None
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
@@ -195,6 +207,10 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
         self.rejoin_beside = bool(rejoin_beside)
+        self.initialise_demand_s = float(initialise_demand_s)
+        self.min_search_cameras = float(min_search_cameras)
+        self.catch_up_sets = int(catch_up_sets)
+        self._held: list[tuple[int, dict]] = []  # (frame id, chamfer images) of sets seen while searching
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -213,24 +229,30 @@ class LiveTrackerFitter(TrackerFitter):
         """Whether a search runs in the background."""
         return self.search_runner.busy()
 
+    @property
+    def demand_interval_s(self) -> float:
+        """Least seconds between two demanded sets (``initialise_demand_s`` while the
+        initialisation searches, else 0: every set the cameras have)."""
+        return self.initialise_demand_s if self.tracker.params is None and self.searching else 0.0
+
     def _rejoin_accept_iou(self) -> float:
         """Least silhouette IoU of a rejoined pose (``rejoin_accept_iou``, at least the tracker's gate)."""
         gate = self.tracker.options.min_iou
         return gate if self.rejoin_accept_iou is None else max(gate, self.rejoin_accept_iou)
 
-    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> None:
+    def _start_search(self, frame_id: int, seeds, images: dict, silhouettes: dict, *, full: bool = True) -> bool:
         """Search from ``silhouettes`` beside the stream (``search_runner``).
 
         ``seeds`` None: the initialisation.  Else the cheap ``tracker.search.recovery.rejoin`` from
         ``seeds`` (the poses to try, in order) and, when it fails and ``full``, the full ``recover``
-        from the first of them."""
+        from the first of them.  False when the set has too few cameras (no search)."""
         from tracker.search.initialise import initialise
         from tracker.search.recovery import recover, rejoin
 
         tr = self.tracker
-        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        names = self._search_cameras(images, silhouettes)
         if not names:
-            return
+            return False
         cams = [tr.cameras[n] for n in names]
         sils = {n: silhouettes[n] for n in names}
         chs = {n: images[n] for n in names}
@@ -248,52 +270,107 @@ class LiveTrackerFitter(TrackerFitter):
                                  min_inside_fraction=tr.options.min_inside_fraction)
                     if res is None and full:
                         kind = "full"
-                        res = recover(tr.model, cams, sils, chs, seeds[0], options=tr.options.recover_search)
+                        # the rejoin above was recover's cheap local stage: straight to the full search
+                        res = recover(tr.model, cams, sils, chs, seeds[0],
+                                      options=replace(tr.options.recover_search, local=False))
                 found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = None
             with self._lock:
-                self._found = (frame_id, found)
+                self._found = (frame_id, found, found)
             self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
             return kind if found is not None else None
 
         self.searches += 1
+        self._held = []
         tr.n_initialisations += 1
-        self.search_runner.start(run, f"search-{what}")
+        self.search_runner.start(run, f"search-{what}", self._catch_up)
+        return True
+
+    def _search_cameras(self, images: dict, silhouettes: dict) -> list[str]:
+        """The cameras of this set with a silhouette, or [] when they are fewer than
+        ``min_search_cameras`` × the tracker's cameras (a set released before most cameras'
+        chamfers came: a search on it finds a pose the full views refute)."""
+        names = [n for n in self.tracker.cameras if n in images and np.any(silhouettes[n])]
+        need = max(1, int(np.ceil(self.min_search_cameras * len(self.tracker.cameras))))
+        return names if len(names) >= need else []
 
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
 
-        The search's pose is of the set it started on; the track went on meanwhile.  Both the
-        tracker's prediction and the search's pose are fitted to this set and the one whose fit
-        scores the higher silhouette IoU becomes the tracker's pose (during the initialisation
-        the search's pose, there is no other)."""
+        The search's pose is of the set it started on; the track went on meanwhile.  The pose was
+        brought forward through the sets held while it searched (:meth:`_catch_up`).  The
+        tracker's prediction, the pose brought forward and the search's own pose are fitted to
+        this set and the one whose fit scores the highest silhouette IoU becomes the tracker's
+        pose (the prediction on a tie: the track came back by itself)."""
         from tracker.fitting.tracking import fit_frame
         from tracker.search.scoring import ScoreViews
 
         with self._lock:
-            found, self._found = self._found, None
+            found, self._found, self._held = self._found, None, []
         if found is None or found[1] is None:
             return
         tr = self.tracker
+        start_frame, start, own = found
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
-        start, start_frame = found[1], int(found[0])
-        if current is not None and names:
+        poses = [p for p in (current, start, None if own is start else own) if p is not None]
+        if len(poses) > 1 and names:
             cams = [tr.cameras[n] for n in names]
             chs = {n: images[n] for n in names}
             views = ScoreViews(tr.model, cams, [silhouettes[n] for n in names], scale=0.5)
             fitted = []
-            for p in (current, found[1]):
+            for p in poses:
                 res, _ = fit_frame(tr.model, cams, chs, p, sliding=tr.sliding, solver=tr.solver, options=tr.options)
                 fitted.append((float(views.score(np.asarray(res.params))), np.asarray(res.params)))
-            if fitted[0][0] >= fitted[1][0]:
+            best = max(range(len(fitted)), key=lambda i: (fitted[i][0], -i))
+            if current is not None and best == 0:
                 return  # the track is as good: it came back by itself
-            start, start_frame = fitted[1][1], int(frame_id)
+            start, start_frame = fitted[best][1], int(frame_id)
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
+
+    def _hold(self, frame_id: int, images: dict) -> None:
+        """Keep a set that arrived while a search runs (its chamfer images), at most
+        ``catch_up_sets``: when full, every other one is dropped (the newest kept), so the held
+        sets span the whole search at a coarser spacing."""
+        if self.catch_up_sets <= 0:
+            return
+        with self._lock:
+            self._held.append((int(frame_id), images))
+            if len(self._held) > self.catch_up_sets:
+                self._held = self._held[::-1][::2][::-1]
+
+    def _catch_up(self) -> None:
+        """Bring a found pose forward: fit it (full effort) to each held set after its own in turn.
+
+        Runs after the search, in its time (``search_runner``'s ``then``); the found entry becomes
+        ``(frame id of the last set fitted, pose, the search's own pose)`` and the held sets are let go."""
+        from tracker.fitting.tracking import fit_frame
+
+        tr = self.tracker
+        with self._lock:
+            found, held, self._held = self._found, self._held, []
+        if found is None or found[1] is None:
+            return
+        frame_id, params = int(found[0]), np.asarray(found[1], dtype=float)
+        need = max(1, int(np.ceil(self.min_search_cameras * len(tr.cameras))))
+        for fid, chs in held:
+            names = [n for n in tr.cameras if n in chs]
+            if fid <= frame_id or len(names) < need:
+                continue
+            try:
+                res, _ = fit_frame(tr.model, [tr.cameras[n] for n in names], {n: chs[n] for n in names}, params,
+                                   sliding=tr.sliding, solver=tr.solver, options=self.base_options)
+            except ValueError as exc:  # a set it cannot be fitted to: keep what was brought so far
+                log.info("catch-up stopped at frame %d: %s", fid, exc)
+                break
+            params, frame_id = tr.model.clamp(np.asarray(res.params, dtype=float)), fid
+        with self._lock:
+            if self._found is found:
+                self._found = (frame_id, params, found[2])
 
     def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
         """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the
@@ -302,7 +379,7 @@ class LiveTrackerFitter(TrackerFitter):
         from tracker.search.recovery import rejoin
 
         tr = self.tracker
-        names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
+        names = self._search_cameras(images, silhouettes)
         if not names:
             return None
         try:
@@ -343,21 +420,27 @@ class LiveTrackerFitter(TrackerFitter):
         tr = self.tracker
         if tr.params is None and self.searching:  # initialising: nothing to fit from yet
             record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+            if self.catch_up_sets > 0:
+                self._hold(frame_id, {name: message_to_chamfer(msg) for name, msg in chamfer.items()})
         else:
             images = {name: message_to_chamfer(msg) for name, msg in chamfer.items()}
             silhouettes = {name: silhouette_mask(ci) for name, ci in images.items()}
             if not self.searching:
                 self._take_found(frame_id, images, silhouettes)
             if tr.params is None:
-                self._start_search(frame_id, None, images, silhouettes)
+                started = self._start_search(frame_id, None, images, silhouettes)
                 record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
+                if not started:
+                    record["reason"] = "initialisation waits for a set with most cameras' silhouettes"
             else:  # tracking goes on beside a recovery search: it may come back by itself
                 level = EFFORT_LEVELS[self.effort.level]
                 tr.options = replace(self.base_options, n_samples=level.n_samples,
                                      max_iterations=level.max_iterations, reverse_samples=level.reverse_samples)
                 record = tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
                 record["effort"] = level.as_record()
-                if not self.searching:
+                if self.searching:
+                    self._hold(frame_id, images)
+                else:
                     self.effort.update(self.clock() - t0, bool(record.get("ok")))
                 if not record.get("ok"):
                     poor = str(record.get("reason", "")).startswith("poor fit")

@@ -8,8 +8,10 @@ Live mode demands the frames it fits (:class:`~service.flow.demand.DemandPlanner
 frame id the live cameras' segment workers hold, by their have notices; a camera silent for
 ``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
 before fitting it, naming where the body can be in each camera when the fitter predicts it
-(``rois``).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture to publish: the
-camera worker's publish time, forwarded by the segment worker, to this worker's publish).  A
+(``rois``); a fitter with ``demand_interval_s`` (seconds) is demanded sets at most that often
+(while it initialises, say).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture
+to publish: the camera worker's publish time, forwarded by the segment worker, to this worker's
+publish).  A
 fitter with ``warm_up()`` is warmed up before the first frame.
 """
 
@@ -108,6 +110,7 @@ class TrackWorker:
                                                                   mode="lossless")
         self.status = StatusReporter(session, keys, component, clock=clock)
         self.sent: dict[int, int] = {}  # frame id -> earliest capture wall time (ns) of its pending set
+        self._demanded_at: float | None = None
 
     def gauges(self) -> dict:
         """Assembly and queue gauges for the status messages and the returned counters."""
@@ -122,8 +125,14 @@ class TrackWorker:
         return out
 
     def _demand(self) -> None:
-        fid = self.planner.next_demand(self.clock(), hold=self.asm.is_pending) if self.planner is not None else None
+        if self.planner is None:
+            return
+        interval = float(getattr(self.fit, "demand_interval_s", 0.0))
+        if interval > 0 and self._demanded_at is not None and self.clock() - self._demanded_at < interval:
+            return
+        fid = self.planner.next_demand(self.clock(), hold=self.asm.is_pending)
         if fid is not None:  # a fitter that predicts where the body is names each camera's region of interest
+            self._demanded_at = self.clock()
             rois = self.fit.rois(fid) if hasattr(self.fit, "rois") else None
             self.demand_pub.put(DemandMessage(TRACK_CONSUMER, fid, rois).to_bytes())
 

@@ -69,6 +69,68 @@ def test_prediction_scales_with_the_frame_gap():
     assert tr.predict(1000)[0] == pytest.approx(0.02 + MAX_EXTRAPOLATION * 0.02)
 
 
+def test_sets_are_demanded_sparsely_only_while_the_initialisation_searches():
+    from tracker.body.model import load_model
+    from tracker.fitting.tracking import Tracker
+    from tracker.synthetic.scene import ring_cameras
+    from service.workers.live_fit import LiveTrackerFitter
+
+    class Runner:
+        running = False
+
+        def start(self, fn, name, then=None):
+            self.running = True
+
+        def busy(self):
+            return self.running
+
+    model = load_model("knossow40")
+    tr = Tracker(model, ring_cameras(2, size=(80, 60)))
+    runner = Runner()
+    fit = LiveTrackerFitter(tr, search_runner=runner, initialise_demand_s=0.25)
+    opts = fit.tracker.options  # the cheaper live searches
+    assert not opts.initialise_search.limb_search_both and not opts.recover_search.limb_search_both
+    assert opts.recover_search.keep == 2
+    assert fit.demand_interval_s == 0.0  # no search yet: the first set starts it
+    runner.running = True
+    assert fit.demand_interval_s == 0.25  # initialising: nothing to fit the sets to
+    tr.params = model.zero()
+    assert fit.demand_interval_s == 0.0  # a recovery search: tracking goes on, every set is wanted
+    runner.running, tr.params = False, None
+    assert fit.demand_interval_s == 0.0
+
+
+def test_no_search_starts_on_a_set_most_cameras_are_missing_from():
+    """A set released before most cameras' chamfers came (start-up) would give the initialisation
+    one view: it waits for a set with silhouettes from 3 of the 4 cameras."""
+    from tracker.body.model import load_model
+    from tracker.fitting.tracking import Tracker
+    from tracker.synthetic.scene import ring_cameras
+    from service.workers.live_fit import LiveTrackerFitter
+
+    class Runner:
+        def __init__(self):
+            self.started = []
+
+        def start(self, fn, name, then=None):
+            self.started.append(name)
+
+        def busy(self):
+            return False
+
+    tr = Tracker(load_model("knossow40"), ring_cameras(4, size=(80, 60)))
+    runner = Runner()
+    fit = LiveTrackerFitter(tr, search_runner=runner)
+    body = np.zeros((60, 80), np.uint8)
+    body[20:50, 30:40] = 255
+    names = list(tr.cameras)
+    for present, starts in ((names[:1], False), (names[:2], False), (names[:3], True), (names, True)):
+        runner.started.clear()
+        sils = {n: body for n in present} | {n: np.zeros_like(body) for n in names if n not in present}
+        assert fit._start_search(0, None, {n: None for n in names}, sils) is starts
+        assert runner.started == (["search-initialisation"] if starts else [])
+
+
 def test_pose_stats_line():
     t = [0.0]
     stats = PoseStats(lambda: t[0])
