@@ -219,11 +219,15 @@ def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, di
 
 def calibrate_clip(root: Path, session, backgrounds, records: list, *, frames: int, samples: int) -> tuple:
     """The subject calibrated from the height-only track's first ``frames`` frames: up to ``samples``
-    ok fits spread over them, with their segmented silhouettes (the same segmentation as the
+    ok fits spread over them (none ok: those with a silhouette IoU of at least
+    ``CALIBRATION_MIN_IOU``), with their segmented silhouettes (the same segmentation as the
     tracker's), handed to ``tracker.fitting.subject_size.estimate_segment_lengths`` with every
     width and radius group.  Nothing of the truth is used.  Returns (BodyModel or None, info dict)."""
     c0 = time.process_time()
-    good = [r for r in records if r["frame"] < frames and r.get("ok") and r.get("params") is not None]
+    first = [r for r in records if r["frame"] < frames and r.get("params") is not None]
+    good = [r for r in first if r.get("ok")]
+    if not good:  # a body far from the model fails the gate everywhere: its best-explained fits
+        good = [r for r in first if (r.get("iou") or 0.0) >= CALIBRATION_MIN_IOU]
     if not good:
         return None, {"frames_used": 0, "cpu_s": time.process_time() - c0}
     pick = [good[int(i)] for i in np.unique(np.linspace(0, len(good) - 1, samples).round().astype(int))]
@@ -247,6 +251,9 @@ def calibrate_clip(root: Path, session, backgrounds, records: list, *, frames: i
 
 #: the body model tracked (``--model``: a bundled name or a model file)
 MODEL = ["knossow40"]
+
+#: the silhouette IoU a not-ok fit needs to be calibrated on when no fit of the first frames is ok
+CALIBRATION_MIN_IOU = 0.7
 
 #: ``estimate_segment_lengths`` settings of the benchmark's calibration (a coarser grid than the
 #: command's: 36 clips)
