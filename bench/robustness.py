@@ -37,7 +37,13 @@ machine); quote them as ratios to ``machine_ref_ms``.
 
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
-                               [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--out result.json]
+                               [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--calibrate 30]
+                               [--out result.json]
+
+``--calibrate N``: per clip, the subject is also calibrated from the height-only track's first N
+frames (``calibrate_clip``: its ok fits and segmented silhouettes, never the truth) and the clip
+is tracked again with that body; the summary gives both (``mpjpe_mm_mean_height_only`` and the
+``*_calibrated`` figures, per-joint means ``joint_mm_height_only`` / ``joint_mm_calibrated``).
 """
 
 from __future__ import annotations
@@ -68,6 +74,8 @@ from machine_ref import machine_ref_ms  # noqa: E402
 from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import SegmentationParams, segment_frame  # noqa: E402
 from tracker.synthetic.bvh import load_bvh  # noqa: E402
+from tracker.body.model import load_model  # noqa: E402
+from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
 from service.offline import floor_test, track_session  # noqa: E402
 from tracker.fitting.tracking import TrackerOptions  # noqa: E402
@@ -152,13 +160,14 @@ def _reason_keys(reason: str) -> list[str]:
     return keys or ["other"]
 
 
-def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3) -> float:
+def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3,
+                model: str = "knossow40") -> float:
     """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
     the true joints (``tracker.synthetic.retarget``) on every ``every``-th frame: what a perfect tracker with
     that model could reach on this subject."""
     skel = subject_skeleton(motion, bench_subject(subject_index))
     n = (skel.n_frames - 1) // every + 1
-    rt = retarget_bvh(skel, model="knossow40", fps=fps / every, frames=n, height_m=height_m)
+    rt = retarget_bvh(skel, model=model, fps=fps / every, frames=n, height_m=height_m)
     return float(1e3 * rt.residual_m.mean())
 
 
@@ -168,30 +177,28 @@ TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
                        "options": TrackerOptions(lost_iou_margin=LOST_IOU_MARGIN)}
 
 
-def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
-             ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours") -> dict:
-    """Render, track and score one clip; returns its per-clip record.
+def _track(session, backgrounds, *, method: str, budget_s: float, model=None) -> tuple[list, list, list, float]:
+    """Track ``session`` (``service.offline.track_session`` with ``TRACK_OPTIONS``; ``model``: a
+    sized BodyModel, default the session's height-sized knossow40) until ``budget_s`` CPU seconds
+    (0: no limit); returns (records, wall ms per frame, CPU ms per frame, CPU seconds)."""
+    records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
+    extra = {"model": MODEL[0] if model is None else model}
+    it = track_session(session, backgrounds=backgrounds, method=method, **TRACK_OPTIONS, **extra)
+    while not (budget_s and cpu_s > budget_s):
+        t0, c0 = time.perf_counter(), time.process_time()
+        rec = next(it, None)
+        if rec is None:
+            break
+        pipe_cpu_ms.append(1e3 * (time.process_time() - c0))
+        cpu_s += pipe_cpu_ms[-1] / 1e3
+        pipe_ms.append(1e3 * (time.perf_counter() - t0))
+        records.append(rec)
+    it.close()
+    return records, pipe_ms, pipe_cpu_ms, cpu_s
 
-    ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
-    much CPU time; the frames left are scored as not ok without a pose (``unprocessed``)."""
-    t_clip = time.perf_counter()
-    motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
-    with tempfile.TemporaryDirectory(prefix="robustness_") as tmp:
-        root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
-        truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
-        session = load_session(root)
-        records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
-        it = track_session(session, backgrounds=backgrounds, method=method, **TRACK_OPTIONS)
-        while not (budget_s and cpu_s > budget_s):
-            t0, c0 = time.perf_counter(), time.process_time()
-            rec = next(it, None)
-            if rec is None:
-                break
-            pipe_cpu_ms.append(1e3 * (time.process_time() - c0))
-            cpu_s += pipe_cpu_ms[-1] / 1e3
-            pipe_ms.append(1e3 * (time.perf_counter() - t0))
-            records.append(rec)
-        it.close()
+
+def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, dict]:
+    """(``score_clip`` figures, per-joint mean error in mm, per-frame series) of ``records``."""
     pred = np.full(truth.shape, np.nan)
     ok = np.zeros(len(truth), bool)
     for rec in records:
@@ -207,23 +214,100 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     posed = np.isfinite(per_joint).all(axis=1)
     joint_mm = {j: round(1e3 * float(per_joint[posed, i].mean()), 1) if posed.any() else None
                 for i, j in enumerate(JOINT_NAMES)}
+    return score, joint_mm, series
+
+
+def calibrate_clip(root: Path, session, backgrounds, records: list, *, frames: int, samples: int) -> tuple:
+    """The subject calibrated from the height-only track's first ``frames`` frames: up to ``samples``
+    ok fits spread over them (none ok: those with a silhouette IoU of at least
+    ``CALIBRATION_MIN_IOU``), with their segmented silhouettes (the same segmentation as the
+    tracker's), handed to ``tracker.fitting.subject_size.estimate_segment_lengths`` with every
+    width and radius group.  Nothing of the truth is used.  Returns (BodyModel or None, info dict)."""
+    c0 = time.process_time()
+    first = [r for r in records if r["frame"] < frames and r.get("params") is not None]
+    good = [r for r in first if r.get("ok")]
+    if not good:  # a body far from the model fails the gate everywhere: its best-explained fits
+        good = [r for r in first if (r.get("iou") or 0.0) >= CALIBRATION_MIN_IOU]
+    if not good:
+        return None, {"frames_used": 0, "cpu_s": time.process_time() - c0}
+    pick = [good[int(i)] for i in np.unique(np.linspace(0, len(good) - 1, samples).round().astype(int))]
+    names = list(session.camera_names)
+    cams = [session.camera_model(n) for n in names]
+    floor = floor_test(cams, backgrounds, TRACK_OPTIONS.get("segmentation"))
+    sils = []
+    for rec in pick:
+        images = {n: cv2.imread(str(root / n / f"{rec['frame']:06d}.jpg"), cv2.IMREAD_COLOR) for n in names}
+        sils.append({n: segment_frame(backgrounds[n], img, params=TRACK_OPTIONS.get("segmentation"),
+                                      floor=None if floor is None else floor.for_camera(n, images)).silhouette > 0
+                     for n, img in images.items()})
+    model = load_model(MODEL[0], height_m=session.height_m)
+    fit = estimate_segment_lengths(model, cams, [np.asarray(r["params"], float) for r in pick], sils,
+                                   widths=WIDTH_ORDER, radii=RADIUS_ORDER, **CALIBRATION)
+    info = {"frames_used": len(pick), "iou_before": fit.iou_before, "iou_after": fit.iou_after,
+            "segment_lengths_m": fit.segment_lengths, "widths_m": fit.widths, "radius_scale": fit.radius_scale,
+            "cpu_s": time.process_time() - c0}
+    return fit.model, info
+
+
+#: the body model tracked (``--model``: a bundled name or a model file)
+MODEL = ["knossow40"]
+
+#: the silhouette IoU a not-ok fit needs to be calibrated on when no fit of the first frames is ok
+CALIBRATION_MIN_IOU = 0.7
+
+#: ``estimate_segment_lengths`` settings of the benchmark's calibration (a coarser grid than the
+#: command's: 36 clips)
+CALIBRATION = {"rounds": 2, "step": 0.05, "polish_rounds": 3}
+
+
+def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
+             ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours",
+             calibrate_frames: int = 0, calibrate_samples: int = 6) -> dict:
+    """Render, track and score one clip; returns its per-clip record.
+
+    ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
+    much CPU time; the frames left are scored as not ok without a pose (``unprocessed``).
+    ``calibrate_frames`` > 0: also calibrate the subject from the first that many frames
+    (``calibrate_clip``) and track the whole clip again with the calibrated body (``"calibrated"``)."""
+    t_clip = time.perf_counter()
+    motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
+    calibrated = None
+    with tempfile.TemporaryDirectory(prefix="robustness_") as tmp:
+        root = Path(tmp) / f"s{subject_index}_{name}_{n_cameras}"
+        truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
+        session = load_session(root)
+        records, pipe_ms, pipe_cpu_ms, cpu_s = _track(session, backgrounds, method=method, budget_s=budget_s)
+        if calibrate_frames > 0:
+            body, info = calibrate_clip(root, session, backgrounds, records, frames=calibrate_frames,
+                                        samples=calibrate_samples)
+            if body is not None:
+                rec_c, _, _, cpu_c = _track(session, backgrounds, method=method, budget_s=budget_s, model=body)
+            else:  # no ok fit to calibrate on: the height-only track stands
+                rec_c, cpu_c = records, cpu_s
+            score_c, joint_c, series_c = _score(rec_c, truth, fps)
+            calibrated = {**score_c, "joint_mm": joint_c, "unprocessed": len(truth) - len(rec_c), "cpu_s": cpu_c,
+                          "calibration": info, "series": series_c}
+    score, joint_mm, series = _score(records, truth, fps)
     by_frame = {rec["frame"]: rec for rec in records}
     for key in ("iou", "rms_px", "inside_fraction", "coverage", "reason"):  # the quality figures, for gate studies
         series[key] = [by_frame.get(k, {}).get(key) for k in range(len(truth))]
-    floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps) if ik_floor else None
+    floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps, model=MODEL[0]) if ik_floor else None
     lat = [r["latency_ms"] for r in records]
     reasons: dict[str, int] = {}
     for r in records:
         if not r.get("ok"):
             for key in _reason_keys(r.get("reason", "")):
                 reasons[key] = reasons.get(key, 0) + 1
-    return {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
-            "height_m": round(height, 3),
-            **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
-            "not_ok_reasons": reasons, "joint_mm": joint_mm, "ms_per_frame_median": float(np.median(lat)),
-            "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
-            "wall_s": time.perf_counter() - t_clip,
-            "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
+    out = {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
+           "height_m": round(height, 3),
+           **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
+           "not_ok_reasons": reasons, "joint_mm": joint_mm, "ms_per_frame_median": float(np.median(lat)),
+           "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
+           "wall_s": time.perf_counter() - t_clip,
+           "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
+    if calibrated is not None:
+        out["calibrated"] = calibrated
+    return out
 
 
 def summarise(per_clip: list[dict]) -> dict:
@@ -233,12 +317,25 @@ def summarise(per_clip: list[dict]) -> dict:
     lat = [v for r in per_clip for v in r["latencies_ms"]]
     pipe = [v for r in per_clip for v in r["pipeline_ms"]]
     pipe_cpu = [v for r in per_clip for v in r.get("pipeline_cpu_ms", [])]
+    cal = [r["calibrated"] for r in per_clip if "calibrated" in r]
+    if cal:  # the same clips tracked with the calibrated subject (``--calibrate``)
+        cal_summary = summarise_clips(cal)
+        summary = {**summary, "mpjpe_mm_mean_height_only": summary["mpjpe_mm_mean"],
+                   **{f"{k}_calibrated": v for k, v in cal_summary.items()},
+                   "calibration_cpu_s_median": float(np.median([c["calibration"]["cpu_s"] for c in cal])),
+                   "joint_mm_height_only": _joint_means(per_clip), "joint_mm_calibrated": _joint_means(cal)}
     return {"subjects": len({r["subject"] for r in per_clip}), "clips": len(per_clip), **summary,
             "ik_floor_mm_mean": float(np.mean(floors)) if floors else None,
             "unprocessed_percent": 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"],
             "ms_per_frame_median": float(np.median(lat)) if lat else None,
             "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None,
             "pipeline_cpu_ms_per_frame_median": float(np.median(pipe_cpu)) if pipe_cpu else None}
+
+
+def _joint_means(clips: list[dict]) -> dict:
+    """Per joint, the mean over clips of the clips' mean error (mm)."""
+    return {j: round(float(np.mean([c["joint_mm"][j] for c in clips if c["joint_mm"][j] is not None] or [np.nan])), 1)
+            for j in JOINT_NAMES}
 
 
 def merge(paths) -> dict:
@@ -287,12 +384,23 @@ def main(argv=None) -> int:
                     help="segment each camera alone (no segmentation.floor test), as the live workers do")
     ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
+    ap.add_argument("--calibrate", type=int, default=0, metavar="FRAMES",
+                    help="also calibrate the subject (lengths, widths, radii) from the height-only track's first "
+                         "FRAMES frames and track each clip again with it: figures with the suffix _calibrated "
+                         "beside the height-only ones (0: off)")
+    ap.add_argument("--model", default="knossow40",
+                    help="body model: a bundled name or a model TOML file (sized by each clip's height; "
+                         "--calibrate needs a bundled one)")
+    ap.add_argument("--calibrate-samples", type=int, default=6, help="frame sets the calibration fits (default 6)")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
                     help="combine the --out files of several runs (nothing is run)")
     args = ap.parse_args(argv)
     if args.merge:
         return _emit(merge(args.merge), args)
+    MODEL[0] = args.model
+    if args.calibrate and Path(args.model).suffix:
+        ap.error("--calibrate needs a bundled --model name")
     if args.no_front_back:
         TRACK_OPTIONS["front_back"] = None
     if args.no_floor_test:
@@ -331,7 +439,8 @@ def main(argv=None) -> int:
         for j, name in enumerate(clips):
             for n in (cams if args.all_cameras else [cams[(s + j) % len(cams)]]):
                 rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
-                               ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s, method=args.method)
+                               ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s, method=args.method,
+                               calibrate_frames=args.calibrate, calibrate_samples=args.calibrate_samples)
                 per_clip.append(rec)
                 if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
                     args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
@@ -342,7 +451,11 @@ def main(argv=None) -> int:
                       f"{rec['mirrored_after']:3d})  false ok {rec['false_ok']:3d}  false alarm "
                       f"{rec['false_alarm']:3d}  IK floor {rec['ik_floor_mm'] or float('nan'):5.1f} mm  "
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
-                      f"{rec['unprocessed']}", flush=True, file=sys.stderr if args.json else sys.stdout)
+                      f"{rec['unprocessed']}" + (f"  calibrated: MPJPE {rec['calibrated']['mpjpe_mm'] or float('nan'):7.1f} mm "
+                                                 f"ok {rec['calibrated']['ok']:3d}  calibration "
+                                                 f"{rec['calibrated']['calibration']['cpu_s']:.0f} s CPU"
+                                                 if "calibrated" in rec else ""),
+                      flush=True, file=sys.stderr if args.json else sys.stdout)
     result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), **header, "wall_s": time.perf_counter() - t_start,
               "per_clip": per_clip}
     return _emit(result, args)

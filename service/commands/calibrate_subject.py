@@ -3,7 +3,8 @@
 The frames are tracked as ``contourcap track`` does (clutter learned, seated or standing start);
 ``--samples`` frame sets spread over the range's second half (after the clutter has been learned),
 whose fits the scene tracker trusts, are handed with their body silhouettes to
-``tracker.fitting.subject_size.estimate_segment_lengths``; the lengths are written as a subject
+``tracker.fitting.subject_size.estimate_segment_lengths`` (segment lengths, and unless
+``--lengths-only`` the hip and shoulder widths and the limb and trunk radii); the result is written as a subject
 file (``tracker.body.subject``), which ``contourcap track --subject`` and session.toml's
 ``[subject] file`` use.  Exit status 0 when written, 1 when no frame could be used, 2 on bad input.
 """
@@ -23,7 +24,7 @@ from service.offline import background_models, session_model
 from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
 from tracker.fitting.scene import SceneOptions, SceneTracker
-from tracker.fitting.subject_size import estimate_segment_lengths
+from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
 from tracker.fitting.tracking import Tracker
 
 
@@ -33,6 +34,8 @@ def add_subject_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="subject file to write (TOML)")
     p.add_argument("--model", default="knossow40", choices=available_models(), help="body model")
     p.add_argument("--samples", type=int, default=6, help="frame sets the lengths are fitted to (default 6)")
+    p.add_argument("--lengths-only", action="store_true",
+                   help="fit the segment lengths only (not the hip/shoulder widths and the radii)")
     p.add_argument("--quiet", action="store_true", help="no progress")
 
 
@@ -66,10 +69,11 @@ def run_subject(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 1
         fitted_model = st.tracker.model
-        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils)
+        more = {} if args.lengths_only else {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER}
+        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils, **more)
         subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,
                           f"contourcap calibrate subject, frames {args.frames}, {len(poses)} frame sets, "
-                          f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}")
+                          f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}", fit.widths, fit.radius_scale)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         write_subject(args.out, subject)
     except (SessionError, ModelError, ValueError, OSError) as exc:
@@ -77,5 +81,7 @@ def run_subject(args: argparse.Namespace) -> int:
         return 2
     print(json.dumps({"out": str(args.out), "frames_used": len(poses), "iou_before": round(fit.iou_before, 4),
                       "iou_after": round(fit.iou_after, 4),
-                      "segment_lengths_m": {k: round(v, 4) for k, v in fit.segment_lengths.items()}}))
+                      "segment_lengths_m": {k: round(v, 4) for k, v in fit.segment_lengths.items()},
+                      "widths_m": {k: round(v, 4) for k, v in fit.widths.items()},
+                      "radius_scale": {k: round(v, 4) for k, v in fit.radius_scale.items()}}))
     return 0

@@ -1,7 +1,9 @@
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import MODELS_DIR, ModelError, available_models, load_model
 
 
@@ -67,3 +69,49 @@ def test_package_face_resolves_every_name():
         assert getattr(tracker, name) is not None, name
     with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
         tracker.nonsense  # noqa: B018
+
+
+def _rest(model):
+    pose = forward(model, model.zero())
+    return dict(zip(model.joint_names, joint_centre_array(model, pose))), pose.translation
+
+
+@pytest.mark.parametrize("name", ["knossow40", "knossow54"])
+def test_widths_set_the_part_origins_and_nothing_else(name):
+    base = load_model(name, height_m=1.7)
+    wide = load_model(name, height_m=1.7, widths={"hip_width": 0.21, "shoulder_width": 0.41})
+    (jb, tb), (jw, tw) = _rest(base), _rest(wide)
+    for side, sign in (("left", 1), ("right", -1)):
+        thigh, arm = base.part_index(f"{side}_thigh"), base.part_index(f"{side}_upper_arm")
+        assert tw[thigh][1] == pytest.approx(sign * 0.105)
+        assert tw[arm][1] == pytest.approx(sign * 0.205)
+        assert jw[f"{side}_shoulder"] == pytest.approx(tw[arm])
+        # only the lateral place moves: height and forward offset kept, limbs unchanged below
+        for i in (thigh, arm):
+            assert tw[i][[0, 2]] == pytest.approx(tb[i][[0, 2]])
+        assert jw[f"{side}_knee"] - tw[thigh] == pytest.approx(jb[f"{side}_knee"] - tb[thigh])
+        assert jw[f"{side}_hip"] == pytest.approx(tw[thigh])
+    for j in ("pelvis", "spine", "neck", "head"):
+        assert jw[j] == pytest.approx(jb[j])
+    assert (wide.cones == base.cones).all()
+
+
+def test_radius_scale_groups():
+    base = load_model("knossow40")
+    m = load_model("knossow40", radius_scale={"thigh": 1.2, "trunk_width": 0.9, "trunk_depth": 1.1})
+    th, pel, sh = (base.part_index(p) for p in ("left_thigh", "pelvis", "left_shank"))
+    assert m.cones[th, :2] == pytest.approx(1.2 * base.cones[th, :2])
+    assert m.cones[pel, :2] == pytest.approx([1.1 * base.cones[pel, 0], 0.9 * base.cones[pel, 1]])
+    assert m.cones[sh] == pytest.approx(base.cones[sh])
+    assert m.cones[th, 2:] == pytest.approx(base.cones[th, 2:])  # taper and extent kept
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"widths": {"ear_width": 0.1}}, "unknown width"),
+    ({"widths": {"hip_width": 2.0}}, "implausible"),
+    ({"radius_scale": {"tail": 1.1}}, "unknown radius group"),
+    ({"radius_scale": {"thigh": 9.0}}, "implausible"),
+])  # fmt: skip
+def test_bad_widths_and_radii_named(kwargs, match):
+    with pytest.raises(ModelError, match=match):
+        load_model("knossow40", **kwargs)

@@ -16,7 +16,13 @@ topological order.  Each part has
   ``X(θ, z) = (a cos θ (1 + k z), b sin θ (1 + k z), z)`` for ``z in [z1, z2]``,
   with ``a, b, z1, z2`` in fractions of height and ``k`` in 1/height;
 - ``segment`` (optional): a name a subject's explicit segment length may set
-  (the part's cone and its children's offsets are stretched along its axis).
+  (the part's cone and its children's offsets are stretched along its axis);
+- ``width`` (optional): a name of a left-right width a subject may set (``hip_width``,
+  ``shoulder_width``): the distance between the origins of the two parts carrying the name at
+  the reference pose; a given width scales the lateral component (world y at the reference pose)
+  of the part's ``offset`` so that its origin lies ± width / 2 from the midline;
+- ``radius`` (optional): a name of a radius group a subject may scale (both cone axes), or
+  ``radius_a`` / ``radius_b`` for one axis each (e.g. ``trunk_depth`` / ``trunk_width``).
 
 ``part2world = parent2world · Trans(offset) · Rot(rotation) · Rot(dofs)``, so
 Φ = 0 is the reference pose (a T-pose facing +X, standing on z = 0 at the
@@ -92,9 +98,7 @@ class BodyModel:
 
     Attributes
     ----------
-    name : str
-    height_m : float
-    part_names : tuple of str, length n_parts
+    name, height_m, part_names : str, float (metres), tuple of str (length n_parts)
     parent : ndarray of int, shape (n_parts,)
         Parent index, -1 for the root (index 0).
     offset : ndarray, shape (n_parts, 3)
@@ -113,10 +117,11 @@ class BodyModel:
         Limits, radians for rotations (±inf for the root).
     affects : ndarray of bool, shape (n_parts, n_params)
         ``affects[p, k]``: parameter k moves part p (k acts on p or an ancestor).
-    joint_names : tuple of str
-    joint_part : ndarray of int, shape (n_joints,)
+    joint_names, joint_part : tuple of str, ndarray of int, shape (n_joints,)
     joint_point : ndarray, shape (n_joints, 3)
         Joint centre in its part's frame, metres.
+    segments, width_parts, radius_groups : mapping str -> int, mapping str -> tuple of int, tuple of str
+        Names ``load_model``'s ``segment_lengths``, ``widths`` and ``radius_scale`` may set (-> parts).
     """
 
     name: str
@@ -137,6 +142,8 @@ class BodyModel:
     joint_part: np.ndarray
     joint_point: np.ndarray
     segments: Mapping[str, int]
+    width_parts: Mapping[str, tuple] = ()
+    radius_groups: tuple = ()
 
     @property
     def n_parts(self) -> int:
@@ -221,21 +228,24 @@ class BodyModel:
         p[self.param_kind == ROOT_ROTATION] = [rng.normal(0, 0.15), rng.normal(0, 0.15), rng.uniform(-np.pi, np.pi)]
         return p
 
-    def with_height(self, height_m: float, *, segment_lengths: Mapping[str, float] | None = None) -> "BodyModel":
+    def with_height(self, height_m: float, *, segment_lengths: Mapping[str, float] | None = None,
+                    widths: Mapping[str, float] | None = None,
+                    radius_scale: Mapping[str, float] | None = None) -> "BodyModel":
         """The same model sized for another subject.
 
         Parameters
         ----------
         height_m : float
             Subject height, metres.
-        segment_lengths : mapping str -> float, optional
-            Explicit segment lengths, metres (``load_model``).
+        segment_lengths, widths, radius_scale : mapping str -> float, optional
+            Explicit segment lengths and widths (metres) and radius factors (``load_model``).
 
         Returns
         -------
         BodyModel
         """
-        return load_model(self.name, height_m=height_m, segment_lengths=segment_lengths)
+        return load_model(self.name, height_m=height_m, segment_lengths=segment_lengths, widths=widths,
+                          radius_scale=radius_scale)
 
 
 def available_models() -> list[str]:
@@ -248,6 +258,8 @@ def load_model(
     *,
     height_m: float | None = None,
     segment_lengths: Mapping[str, float] | None = None,
+    widths: Mapping[str, float] | None = None,
+    radius_scale: Mapping[str, float] | None = None,
 ) -> BodyModel:
     """Load a body model by name (``knossow40``, ``knossow54``) or file path and size it.
 
@@ -260,6 +272,12 @@ def load_model(
     segment_lengths : mapping str -> float, optional
         Explicit lengths in metres for named segments (the model file's ``segment`` keys, e.g.
         ``upper_arm``, ``thigh``), overriding the anthropometric ratios along that segment's axis.
+    widths : mapping str -> float, optional
+        Explicit left-right widths in metres (the model file's ``width`` keys: ``hip_width`` between
+        the hip joint centres, ``shoulder_width`` between the shoulder joint centres).
+    radius_scale : mapping str -> float, optional
+        Factors on the cone radii of the named radius groups (``radius``, ``radius_a``, ``radius_b``
+        keys: ``thigh``, ``shank``, ``upper_arm``, ``forearm``, ``trunk_width``, ``trunk_depth``).
 
     Returns
     -------
@@ -279,10 +297,10 @@ def load_model(
     height = DEFAULT_HEIGHT_M if height_m is None else float(height_m)
     if not (0.5 <= height <= 2.6):
         raise ModelError(f"height_m must be between 0.5 and 2.6 m, got {height_m}")
-    return _build(path, data, height, dict(segment_lengths or {}))
+    return _build(path, data, height, dict(segment_lengths or {}), dict(widths or {}), dict(radius_scale or {}))
 
 
-def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel:
+def _build(path: Path, data: dict, H: float, segment_lengths: dict, widths: dict, radius_scale: dict) -> BodyModel:
     meta = data.get("model", {})
     name = str(meta.get("name", path.stem))
     parts = data.get("part")
@@ -292,6 +310,8 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
     parent, offset, rest, cones, axial_scale = [], [], [], [], []
     p_names, p_kind, p_part, p_axis, lower, upper = [], [], [], [], [], []
     segments: dict[str, int] = {}
+    width_parts: dict[str, list[int]] = {}
+    radius_groups: set[str] = set()
     for i, part in enumerate(parts):
         if not isinstance(part, dict):
             raise ModelError(f"{path}: [[part]] #{i} must be a table, got {part!r}")
@@ -334,12 +354,28 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
                 if not (0.2 * nominal <= given <= 3.0 * nominal):
                     raise ModelError(f"{where}: segment length {seg}={given} m is implausible (nominal {nominal:.3f} m)")
                 s_ax = given / nominal
+        wname = part.get("width")
+        if wname is not None:
+            if i == 0:
+                raise ModelError(f"{where}: the root part cannot carry a width")
+            width_parts.setdefault(str(wname), []).append(i)
+        r_fac = []
+        for key in ("radius_a", "radius_b"):
+            group = part.get(key, part.get("radius"))
+            if group is None:
+                r_fac.append(1.0)
+                continue
+            radius_groups.add(str(group))
+            fac = float(radius_scale.get(str(group), 1.0))
+            if not 0.4 <= fac <= 2.5:
+                raise ModelError(f"{where}: radius factor {group}={fac} is implausible (0.4-2.5)")
+            r_fac.append(fac)
         names.append(pname)
         parent.append(pidx)
         offset.append(off * H)
         rest.append(rot)
         axial_scale.append(s_ax)
-        cones.append([a * H, b * H, k / (H * s_ax), z1 * H * s_ax, z2 * H * s_ax])
+        cones.append([a * H * r_fac[0], b * H * r_fac[1], k / (H * s_ax), z1 * H * s_ax, z2 * H * s_ax])
         if joint == "free":
             for ax, n in zip("xyz", ("tx", "ty", "tz")):
                 p_names.append(f"{pname}.{n}"), p_kind.append(ROOT_TRANSLATION), p_part.append(i)
@@ -375,6 +411,11 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
     unknown = set(segment_lengths) - set(segments)
     if unknown:
         raise ModelError(f"{path}: unknown segment(s) {sorted(unknown)}; known: {sorted(segments)}")
+    for kind, given, known in (("width", widths, width_parts), ("radius group", radius_scale, radius_groups)):
+        if set(given) - set(known):
+            raise ModelError(f"{path}: unknown {kind}(s) {sorted(set(given) - set(known))}; known: {sorted(known)}")
+    if widths:
+        _apply_widths(path, offset_arr, rest, parent, width_parts, widths)
     n_parts = len(names)
     param_part = np.array(p_part)
     # ancestry: affects[p, k] if param k's part is p or an ancestor of p
@@ -410,4 +451,31 @@ def _build(path: Path, data: dict, H: float, segment_lengths: dict) -> BodyModel
         param_part=ro(param_part, int), param_axis=ro(p_axis), lower=ro(lower), upper=ro(upper),
         affects=ro(affects, bool), joint_names=tuple(j_names), joint_part=ro(j_part, int),
         joint_point=ro(j_point), segments=dict(segments),
+        width_parts={k: tuple(v) for k, v in width_parts.items()}, radius_groups=tuple(sorted(radius_groups)),
     )  # fmt: skip
+
+
+def _apply_widths(path: Path, offset: np.ndarray, rest: list, parent: list, width_parts: dict, widths: dict) -> None:
+    """Scale, in place, the lateral component (world y at the reference pose) of the offsets of the
+    parts carrying each given width (``load_model``'s ``widths``) so that their origins lie
+    ± width / 2 from the midline."""
+    n = len(parent)
+    R = np.zeros((n, 3, 3))
+    P = np.zeros((n, 3))
+    for i, pi in enumerate(parent):
+        R[i] = rest[i] if pi < 0 else R[pi] @ rest[i]
+        P[i] = offset[i] if pi < 0 else P[pi] + R[pi] @ offset[i]
+    for wname, idx in width_parts.items():
+        if wname not in widths:
+            continue
+        given = float(widths[wname])
+        for i in idx:
+            base = abs(P[parent[i], 1])
+            reach = abs(P[i, 1]) - base
+            if reach <= 1e-6:
+                raise ModelError(f"{path}: width {wname!r}: part #{i} does not lie further out than its parent")
+            s = (0.5 * given - base) / reach
+            if not 0.3 <= s <= 3.0:
+                raise ModelError(f"{path}: width {wname}={given} m is implausible for this model")
+            lateral = R[parent[i]][1]  # world y in the parent's frame
+            offset[i] += (s - 1.0) * (offset[i] @ lateral) * lateral

@@ -8,6 +8,10 @@ A subject file (DESIGN.md, ``subject.toml``) is TOML::
     fitted = "..."                 # how it was fitted (free text)
     [subject.segment_lengths]      # metres, the model's ``segment`` names
     thigh = 0.46
+    [subject.widths]               # optional, metres, the model's ``width`` names
+    hip_width = 0.16
+    [subject.radius_scale]         # optional, factors on the model's radius groups
+    thigh = 1.1
 """
 
 from __future__ import annotations
@@ -24,16 +28,20 @@ __all__ = ["Subject", "read_subject", "write_subject"]
 
 @dataclass(frozen=True)
 class Subject:
-    """A subject's body: model name, height (metres), segment lengths (metres) and provenance."""
+    """A subject's body: model name, height (metres), segment lengths and widths (metres), radius
+    factors and provenance (``load_model``'s keywords)."""
 
     model: str = "knossow40"
     height_m: float = 1.75
     segment_lengths: Mapping[str, float] = field(default_factory=dict)
     fitted: str = ""
+    widths: Mapping[str, float] = field(default_factory=dict)
+    radius_scale: Mapping[str, float] = field(default_factory=dict)
 
     def body(self) -> BodyModel:
         """The sized body model (``load_model``)."""
-        return load_model(self.model, height_m=self.height_m, segment_lengths=dict(self.segment_lengths))
+        return load_model(self.model, height_m=self.height_m, segment_lengths=dict(self.segment_lengths),
+                          widths=dict(self.widths), radius_scale=dict(self.radius_scale))
 
 
 def read_subject(path) -> Subject:
@@ -45,16 +53,21 @@ def read_subject(path) -> Subject:
         raise ModelError(f"{path}: no [subject] table")
     name = sub.get("model", "knossow40")
     height = sub.get("height_m", 1.75)
-    lengths = sub.get("segment_lengths", {})
     if not isinstance(name, str) or not name:
         raise ModelError(f"{path}: [subject] model must be a model name")
     if isinstance(height, bool) or not isinstance(height, (int, float)) or not 0.5 <= height <= 2.6:
         raise ModelError(f"{path}: [subject] height_m must be metres in [0.5, 2.6], got {height!r}")
-    if not isinstance(lengths, dict) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 for v in lengths.values()):
-        raise ModelError(f"{path}: [subject.segment_lengths] must map segment names to positive metres")
-    subject = Subject(name, float(height), {str(k): float(v) for k, v in lengths.items()},
-                      str(sub.get("fitted", "")))
+    tables = {}
+    for key, what in (("segment_lengths", "segment names to positive metres"),
+                      ("widths", "width names to positive metres"),
+                      ("radius_scale", "radius groups to positive factors")):
+        table = sub.get(key, {})
+        if not isinstance(table, dict) or len(table) > 64 or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < 10 for v in table.values()):
+            raise ModelError(f"{path}: [subject.{key}] must map {what}")
+        tables[key] = {str(k): float(v) for k, v in table.items()}
+    subject = Subject(name, float(height), tables["segment_lengths"], str(sub.get("fitted", "")),
+                      tables["widths"], tables["radius_scale"])
     try:
         subject.body()
     except ModelError as exc:
@@ -67,4 +80,8 @@ def write_subject(path, subject: Subject) -> None:
     data = {"subject": {"model": subject.model, "height_m": round(float(subject.height_m), 4),
                         "fitted": subject.fitted,
                         "segment_lengths": {k: round(float(v), 4) for k, v in subject.segment_lengths.items()}}}
+    for key in ("widths", "radius_scale"):
+        table = getattr(subject, key)
+        if table:
+            data["subject"][key] = {k: round(float(v), 4) for k, v in table.items()}
     Path(path).write_text(dumps(data), encoding="utf-8")
