@@ -23,6 +23,7 @@ from capture.session import SessionError, load_session
 from service.offline import background_models, session_model
 from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
+from tracker.fitting.props import PropBox
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
 from tracker.fitting.tracking import Tracker
@@ -51,7 +52,8 @@ def run_subject(args: argparse.Namespace) -> int:
         names = list(session.camera_names)
         backgrounds, _ = background_models(session, names, frames=frames)
         tracker = Tracker(model, [session.camera_model(n) for n in names])
-        st = SceneTracker(tracker, backgrounds)
+        props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+        st = SceneTracker(tracker, backgrounds, props=props)
         half = frames.start + len(frames) // 2
         want = set(np.linspace(half, frames.stop - 1, args.samples).round().astype(int).tolist())
         poses, sils = [], []

@@ -70,3 +70,28 @@ def test_calibrate_subject_bad_input_is_one_clear_error(session, tmp_path, capsy
     assert main(["calibrate", "subject", str(tmp_path / "nope"), "--out", str(out)]) == 2
     assert "nope" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_calibrate_subject_uses_the_session_props(session, tmp_path, monkeypatch, capsys):
+    """The session's ``[[prop]]`` boxes reach the scene tracker that ``calibrate subject`` runs (a chair
+    left in the silhouettes would be fitted as body and inflate the radii)."""
+    import service.commands.calibrate_subject as cs
+
+    root = tmp_path / "s"
+    shutil.copytree(session, root)
+    with open(root / "session.toml", "a") as f:
+        f.write("\n[[prop]]\nbox = [0.5, 0.5, 0.0, 0.9, 0.9, 0.45]\n")
+    seen = {}
+
+    class Stop(ValueError):
+        pass
+
+    def fake_scene(tracker, backgrounds, **kw):
+        seen.update(kw)
+        raise Stop("stopped after the scene tracker was made")
+
+    monkeypatch.setattr(cs, "SceneTracker", fake_scene)
+    assert main(["calibrate", "subject", str(root), "--frames", "0:3", "--out", str(tmp_path / "sub.toml")]) == 2
+    assert "stopped after" in capsys.readouterr().err
+    assert len(seen["props"]) == 1
+    np.testing.assert_allclose(np.r_[seen["props"][0].lo, seen["props"][0].hi], [0.5, 0.5, 0.0, 0.9, 0.9, 0.45])
