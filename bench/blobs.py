@@ -97,9 +97,11 @@ def main(argv=None) -> int:
     ap.add_argument("--ik", choices=("ccd", "dls"), default="dls")
     ap.add_argument("--only", choices=sorted(SESSIONS), default=None, help="one of the two sessions")
     ap.add_argument("--cache", type=Path, default=None, help="keep (or reuse) the rendered sessions here")
+    ap.add_argument("--no-static-scene", action="store_true",
+                    help="BlobOptions(static_scene=False): no static-scene voxel memory (for A/B)")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)
-    options = replace(BlobOptions(), ik=args.ik)
+    options = replace(BlobOptions(), ik=args.ik, static_scene=not args.no_static_scene)
     ref = machine_ref_ms()
     result = {"method": "blobs", "ik": args.ik, "init": "ground_truth_frame0", "machine_ref_ms": ref, "sessions": {}}
     with tempfile.TemporaryDirectory() as tmp:

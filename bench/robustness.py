@@ -392,6 +392,8 @@ def main(argv=None) -> int:
                     help="body model: a bundled name or a model TOML file (sized by each clip's height; "
                          "--calibrate needs a bundled one)")
     ap.add_argument("--calibrate-samples", type=int, default=6, help="frame sets the calibration fits (default 6)")
+    ap.add_argument("--blob-option", action="append", default=[], metavar="NAME=VALUE",
+                    help="a tracker.blobs.BlobOptions field for --method blobs (e.g. colour_weight=2); repeatable")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="RESULT_JSON",
                     help="combine the --out files of several runs (nothing is run)")
@@ -407,6 +409,9 @@ def main(argv=None) -> int:
         TRACK_OPTIONS["segmentation"] = SegmentationParams(floor_test=False)
     if args.tracker_option:
         TRACK_OPTIONS["options"] = _tracker_options(args.tracker_option, ap, TRACK_OPTIONS["options"])
+    if args.blob_option:
+        from tracker.blobs import BlobOptions
+        TRACK_OPTIONS["blob_options"] = _tracker_options(args.blob_option, ap, BlobOptions(), flag="--blob-option")
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
@@ -461,14 +466,15 @@ def main(argv=None) -> int:
     return _emit(result, args)
 
 
-def _tracker_options(pairs, ap, base: TrackerOptions) -> TrackerOptions:
-    """``TrackerOptions`` with ``NAME=VALUE`` fields replaced (numbers, true/false, none)."""
-    fields = {f.name: f for f in dataclasses.fields(TrackerOptions)}
+def _tracker_options(pairs, ap, base, flag: str = "--tracker-option"):
+    """``base`` (a ``TrackerOptions`` or ``BlobOptions``) with ``NAME=VALUE`` fields replaced (numbers,
+    true/false, none)."""
+    fields = {f.name: f for f in dataclasses.fields(base)}
     changes = {}
     for pair in pairs:
         name, _, text = pair.partition("=")
         if name not in fields or not text:
-            ap.error(f"--tracker-option {pair!r}: expected NAME=VALUE with NAME a TrackerOptions field")
+            ap.error(f"{flag} {pair!r}: expected NAME=VALUE with NAME a {type(base).__name__} field")
         low = text.lower()
         changes[name] = (None if low == "none" else low == "true" if low in ("true", "false")
                          else int(text) if text.lstrip("-").isdigit() else float(text))

@@ -10,6 +10,7 @@ A second tracking method beside the contour tracker (``tracker.fitting.tracking`
 - ``em``: expectation–maximisation of position/colour blobs on the voxels (eqs. 2–4);
 - ``blobset``: blobs attached to the body model's parts, learned at initialisation;
 - ``ik``: the root by least squares, the limbs by cyclic coordinate descent, the floor contact;
+- ``static_voxels``: hull cubes that stay away from the body (furniture), left out of the fit;
 - ``tracking``: the per-frame loop.
 """
 

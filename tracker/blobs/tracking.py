@@ -41,6 +41,7 @@ from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zo
 from tracker.blobs.em import expectation, maximisation
 from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.start import StartPending
+from tracker.blobs.static_voxels import StaticVoxels
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
@@ -54,33 +55,32 @@ _ROOT_BLOBS = ("pelvis", "abdomen", "torso.0")
 class BlobOptions:
     """Options of :class:`BlobTracker`.
 
-    hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the
-    predicted body surface; em_iterations : expectation–maximisation–IK rounds per frame;
-    colour_weight : factor on the colour term of eq. 2; log_det : add the Gaussians' log-determinants
-    to eq. 2 (``tracker.blobs.em.expectation``); soft : share each voxel among its ``soft`` nearest
-    blobs instead of the paper's hard assignment (0); gate : largest position term of an assigned
-    voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position covariance in
-    the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
-    reaches its voxels); min_fill : filling below which a blob is inactive;
-    colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior
-    each frame (skin blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps,
-    ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
-    ``damped_least_squares``; dls_root : the root moves in it too (the legs' goals lower the trunk into
-    a crouch); root_blobs : the rigid root fit's blobs; offset_weight, max_offset_m : ``learn_blobs``'
-    learnt attachment offsets (0: none); orientation_weight, max_turn_deg : the root's orientation constraint
-    (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint);
-    velocity_gain : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses
-    1, but blob fits are noisier than contour fits and the extrapolation amplifies their noise);
-    min_voxels, min_active_fraction, max_goal_rms_m : below/above these a frame is ``ok: false``;
-    min_part_support : a frame is ``ok: false`` when some part (clavicles aside) has less than this
-    fraction of its interior points (its cone shrunk to half its radii) in the hull, within half a
-    finest voxel (:func:`hull_support`): a limb the fit put where the cameras see background (or
-    where nothing was reconstructed) is not explained by the images, however well the blobs fit
-    (0: no such test); max_unexplained : a frame is ``ok: false`` when more than this fraction of the
-    hull's volume lies outside the fitted body (every part grown by a finest voxel,
-    :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
-    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
-    floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras).
+    hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the predicted body
+    surface; em_iterations : expectation–maximisation–IK rounds per frame; colour_weight : factor on the colour term
+    of eq. 2; log_det : add the Gaussians' log-determinants to eq. 2 (``tracker.blobs.em.expectation``); soft :
+    share each voxel among its ``soft`` nearest blobs instead of the paper's hard assignment (0); gate : largest
+    position term of an assigned voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position
+    covariance in the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
+    reaches its voxels); min_fill : filling below which a blob is inactive; colour_prior_weight, skin_prior_weight :
+    how much a blob's colour is pulled back to its prior each frame (skin blobs: face and hands); ik : ``"ccd"`` or
+    ``"dls"``; ccd_sweeps, ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
+    ``damped_least_squares``; dls_root : the root moves in it too (the legs' goals lower the trunk into a crouch);
+    root_blobs : the rigid root fit's blobs; offset_weight, max_offset_m : ``learn_blobs``' learnt attachment
+    offsets (0: none); orientation_weight, max_turn_deg : the root's orientation constraint (``fit_root``);
+    floor_snap_m : ``floor_contact`` (None: no floor constraint); velocity_gain : predict ``p_t + g (p_t −
+    p_{t−1})`` (0: the last pose; the contour tracker uses 1, but blob fits are noisier than contour fits and the
+    extrapolation amplifies their noise); min_voxels, min_active_fraction, max_goal_rms_m : below/above these a
+    frame is ``ok: false``; min_part_support : a frame is ``ok: false`` when some part (clavicles aside) has less
+    than this fraction of its interior points (its cone shrunk to half its radii) in the hull, within half a finest
+    voxel (:func:`hull_support`): a limb the fit put where the cameras see background (or where nothing was
+    reconstructed) is not explained by the images, however well the blobs fit (0: no such test); max_unexplained : a
+    frame is ``ok: false`` when more than this fraction of the hull's volume lies outside the fitted body (every
+    part grown by a finest voxel, :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a
+    limb reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
+    floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras);
+    static_scene : voxels of lattice cubes that stay occupied away from the fitted body are left out of the EM and
+    of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
+    ``static_clearance_m``; e.g. a chair not in the background).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -114,6 +114,10 @@ class BlobOptions:
     root_blobs: tuple = _ROOT_BLOBS
     dls_root: bool = True
     max_offset_m: float = 0.05
+    static_scene: bool = True
+    static_rate: float = 0.05
+    static_threshold: float = 0.7
+    static_clearance_m: float = 0.1
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
@@ -258,6 +262,9 @@ class BlobTracker:
                                                            for p in model.param_part])
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
         self._support_parts, self._support_part, self._support_local = _interior_samples(model)
+        self._static = (StaticVoxels(options.hull.min_voxel_m, rate=options.static_rate,
+                                     threshold=options.static_threshold, clearance_m=options.static_clearance_m)
+                        if options.static_scene else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
 
@@ -297,13 +304,20 @@ class BlobTracker:
                               tolerance_m=0.5 * hull.min_voxel_m)
         return inside.reshape(len(self._support_parts), -1).mean(1)
 
-    def explains(self, hull: ColourHull, pose) -> dict:
+    def static(self, hull: ColourHull) -> np.ndarray:
+        """Which of the hull's voxels are static scene (``BlobOptions.static_scene``); (n,) bool."""
+        if self._static is None:
+            return np.zeros(hull.n_voxels, bool)
+        return self._static.static(hull.centres)
+
+    def explains(self, hull: ColourHull, pose, scene: np.ndarray | None = None) -> dict:
         """How a pose (``Pose`` or params) and a hull explain each other: ``unexplained`` (fraction of
-        the hull's volume outside every part grown by a finest voxel), ``support_min`` (the smallest
-        :meth:`part_support`) and ``support_min_part`` (its part's name)."""
+        the hull's volume, but the ``scene`` voxels (n,) bool, outside every part grown by a finest
+        voxel), ``support_min`` (the smallest :meth:`part_support`) and ``support_min_part`` (its
+        part's name)."""
         if not hasattr(pose, "to_world"):
             pose = forward(self.model, np.asarray(pose, dtype=float))
-        vol = hull.volumes
+        vol = hull.volumes if scene is None else np.where(scene, 0.0, hull.volumes)
         outside = ~body_contains(self.model, pose, hull.centres, margin_m=hull.min_voxel_m)
         support = self.part_support(hull, pose)
         worst = int(np.argmin(support))
@@ -320,12 +334,17 @@ class BlobTracker:
         o, m, blobs = self.options, self.model, self.blobs
         params = start
         goals = weights = None
+        scene = self.static(hull)
+        if np.count_nonzero(~scene) < o.min_voxels:  # nothing left for the body: trust no scene memory
+            scene = np.zeros_like(scene)
+        body = ~scene
+        centres, colours, sizes = hull.centres[body], hull.colours[body], hull.sizes[body]
         for _ in range(int(o.em_iterations)):
             pose = forward(m, params)
             blobs.regenerate(m, pose)
-            asg = expectation(hull.centres, hull.colours, blobs.mean, blobs.cov + self._motion, blobs.colour, blobs.colour_cov,
+            asg = expectation(centres, colours, blobs.mean, blobs.cov + self._motion, blobs.colour, blobs.colour_cov,
                               colour_weight=o.colour_weight, gate=o.gate, log_det=o.log_det, soft=o.soft)
-            stats = maximisation(asg, hull.centres, hull.sizes, self.layout.n_blobs)
+            stats = maximisation(asg, centres, sizes, self.layout.n_blobs)
             blobs.absorb(stats, colour_prior_weight=self._prior_weight, min_fill=o.min_fill)
             weights = np.where(blobs.active, np.minimum(blobs.fill, 1.0), 0.0)
             goals = np.where(blobs.active[:, None], np.nan_to_num(stats.mean), blobs.mean)
@@ -336,7 +355,10 @@ class BlobTracker:
         at = blobs.attachment(m, pose)
         act = weights > 0
         rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
-        return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms, **self.explains(hull, pose)}
+        if self._static is not None:
+            self._static.update(hull.centres, ~body_contains(m, pose, hull.centres, margin_m=o.static_clearance_m))
+        return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms, "static_fraction": float(scene.mean()),
+                        **self.explains(hull, pose, scene)}
 
     def judge(self, quality: dict) -> list:
         """Why a fit with these quality figures (``fit``'s) is not ok; empty when it is (``BlobOptions``)."""
