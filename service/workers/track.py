@@ -9,9 +9,10 @@ frame id the live cameras' segment workers hold, by their have notices; a camera
 ``absent_after_s`` is left out) and, once a demanded set is complete, demands the next one
 before fitting it, naming where the body can be in each camera when the fitter predicts it
 (``rois``); a fitter with ``demand_interval_s`` (seconds) is demanded sets at most that often
-(while it initialises, say).  Each record gets ``fit_ms`` (the fit) and ``latency_ms`` (capture
-to publish: the camera worker's publish time, forwarded by the segment worker, to this worker's
-publish).  A
+(while it initialises, say).  Each record gets ``fit_ms`` (the fit, wall clock), ``fit_cpu_ms``
+(the CPU time of this worker's thread during the fit: below ``fit_ms`` by the time the fit waited
+for a core other processes held) and ``latency_ms`` (capture to publish: the camera worker's
+publish time, forwarded by the segment worker, to this worker's publish).  A
 fitter with ``warm_up()`` is warmed up before the first frame.
 """
 
@@ -160,7 +161,7 @@ class TrackWorker:
     def _finish(self, fs) -> None:
         """Fit one released set and publish its pose (and its credit, lossless)."""
         first = next(iter(fs.items.values()))
-        t_fit = self.clock()
+        t_fit, cpu_fit = self.clock(), time.thread_time()
         try:
             record = dict(self.fit(fs.frame_id, first.timestamp_ns, fs.items))
         except Exception as exc:  # the fitter is a plug-in; a crash costs one frame, not the service
@@ -171,6 +172,7 @@ class TrackWorker:
         if fs.missing:  # which cameras the set went on without (absent, or late beyond the set timeout)
             record.setdefault("missing_cameras", list(fs.missing))
         record.setdefault("fit_ms", 1e3 * (self.clock() - t_fit))
+        record.setdefault("fit_cpu_ms", 1e3 * (time.thread_time() - cpu_fit))
         t0 = self.sent.pop(fs.frame_id, None)
         if t0 is not None:
             record["latency_ms"] = (self.wall_ns() - t0) / 1e6

@@ -49,6 +49,8 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
     assert [p.to_dict()["params"] for p in poses] == [o["params"] for o in offline]
     assert [p.frame for p in poses] == [o["frame"] for o in offline]
     assert all(p.get("latency_ms") > 0 for p in poses)
+    # the fit's thread CPU time: never more than its wall time (1 ms for the clocks' resolution)
+    assert all(0 <= p.get("fit_cpu_ms") <= p.get("fit_ms") + 1.0 for p in poses)
     got = []
     assert wait_for(lambda: got.extend(pose_inbox.drain()) or len(got) >= len(offline), 5.0)
     assert [r.message.frame for r in got] == [o["frame"] for o in offline]
