@@ -14,12 +14,19 @@ before fitting it, naming where the body can be in each camera when the fitter p
 for a core other processes held) and ``latency_ms`` (capture to publish: the camera worker's
 publish time, forwarded by the segment worker, to this worker's publish).  A
 fitter with ``warm_up()`` is warmed up before the first frame.
+
+The thread that fits runs ``priority_boost`` nice levels above the process (Linux niceness is per
+thread; threads it starts inherit it): the camera and segment workers feeding it share the cores,
+and without it the fit waits for a core while they run ahead.  Raising priority needs
+``CAP_SYS_NICE`` or an ``RLIMIT_NICE`` allowance; when refused the worker logs it, counts
+``priority_refused`` and runs as it is.
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import os
 import threading
 import time
 from typing import Callable
@@ -38,6 +45,8 @@ __all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
 log = logging.getLogger("contourcap.worker")
 
 LOSSLESS_SET_TIMEOUT_S = 60.0
+DEFAULT_PRIORITY_BOOST = 5
+"""Nice levels the fitting thread is raised by (see the module docstring)."""
 # the largest chamfer message taken (a 1920x1200 camera's two uint16 images are ~9 MB): with the inbox
 # depths below, a live track worker holds at most 2 x cameras x 16 MiB of received chamfers
 CHAMFER_MAX_BYTES = 16 * 1024 * 1024
@@ -80,7 +89,9 @@ class TrackWorker:
                  clock: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
                  component: str = "track", max_frames: int | None = None, idle_exit_s: float | None = None,
                  on_pose: Callable[[PoseRecord], None] | None = None, absent_after_s: float = 0.5,
-                 demand_timeout_s: float | None = None, inputs: str = "chamfer") -> None:
+                 demand_timeout_s: float | None = None, inputs: str = "chamfer",
+                 priority_boost: int = DEFAULT_PRIORITY_BOOST) -> None:
+        self.priority_boost = int(priority_boost)
         self.keys, self.fit, self.stop, self.clock, self.wall_ns = keys, fit, stop, clock, wall_ns
         self.max_frames, self.idle_exit_s, self.on_pose = max_frames, idle_exit_s, on_pose
         lossless = mode == "lossless"
@@ -197,9 +208,21 @@ class TrackWorker:
                 and self.clock() - last_input > self.idle_exit_s
                 and not len(self.asm) and not len(self.inbox) and not (self.haves is not None and len(self.haves)))
 
+    def _raise_priority(self) -> None:
+        """Raise the calling thread's priority by ``priority_boost`` nice levels (see the module docstring)."""
+        if self.priority_boost <= 0 or not hasattr(os, "setpriority"):
+            return
+        tid = threading.get_native_id()  # Linux: PRIO_PROCESS of a thread id is that thread's niceness
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) - self.priority_boost)
+        except OSError as exc:
+            log.info("fitting thread's priority not raised (%s): it shares the cores as it is", exc)
+            self.status.count("priority_refused")
+
     def run(self) -> dict:
         """Fit until ``max_frames`` poses, ``idle_exit_s`` without input, or ``stop``; returns the counters."""
         done, last_input = 0, None  # idle time counts from the first input
+        self._raise_priority()
         try:
             if hasattr(self.fit, "warm_up"):  # compile the fitter's kernels before the first frame, not on it
                 self.status.tick(state="warming_up", force=True)
