@@ -4,8 +4,8 @@ have/demand notices.
 All of them are UTF-8 JSON objects so that any zenoh client in any language can read them.  The pose
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
-``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``effort``, ``missing_cameras``: the
-names of the cameras a live set went on without).  Status, credit, have and demand records carry
+``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``fit_cpu_ms``, ``effort``,
+``missing_cameras``: the names of the cameras a live set went on without).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -75,7 +75,7 @@ class PoseRecord:
                 raise MessageError(f"joints: expected an object of at most {_MAX_JOINTS} joints")
             obj["joints"] = {check_name(k, "joint name"): _finite_list(v, f"joints.{k}", length=3)
                              for k, v in joints.items()}
-        for key in ("rms_px", "latency_ms", "fit_ms"):
+        for key in ("rms_px", "latency_ms", "fit_ms", "fit_cpu_ms"):
             if obj.get(key) is not None:
                 obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):

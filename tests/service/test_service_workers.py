@@ -3,6 +3,7 @@ offline result; live mode with a camera gone keeps publishing with fewer cameras
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -34,8 +35,14 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
     track_s = studio.session(listen=True)
     client = studio.session()
     pose_inbox = Inbox(client, keys.pose, PoseRecord.from_bytes, mode="lossless", depth=1000)
-    studio.start("track", run_track_worker, track_s, keys, CAMS, fitter, mode="lossless", stop=studio.stop,
-                 max_frames=len(offline), on_pose=poses.append)
+    niceness = []  # the fitting thread's, at each fit
+
+    def nice_fitter(*args):
+        niceness.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+        return fitter(*args)
+
+    studio.start("track", run_track_worker, track_s, keys, CAMS, nice_fitter, mode="lossless", stop=studio.stop,
+                 max_frames=len(offline), on_pose=poses.append, priority_boost=2)
     studio.start("segment", run_segment_worker, studio.session(), keys, {c: segmenter for c in CAMS},
                  mode="lossless", stop=studio.stop)
     sources = {c: ReplaySource(session, c) for c in CAMS}
@@ -49,6 +56,12 @@ def test_lossless_replay_equals_offline(tmp_path, rng, studio):
     assert [p.to_dict()["params"] for p in poses] == [o["params"] for o in offline]
     assert [p.frame for p in poses] == [o["frame"] for o in offline]
     assert all(p.get("latency_ms") > 0 for p in poses)
+    # the fit's thread CPU time: never more than its wall time (1 ms for the clocks' resolution)
+    assert all(0 <= p.get("fit_cpu_ms") <= p.get("fit_ms") + 1.0 for p in poses)
+    # the fitting thread ran 2 nice levels above the process, or the worker said it could not
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    assert niceness == [base - 2] * len(offline) or (studio.results["track"].get("priority_refused")
+                                                      and niceness == [base] * len(offline))
     got = []
     assert wait_for(lambda: got.extend(pose_inbox.drain()) or len(got) >= len(offline), 5.0)
     assert [r.message.frame for r in got] == [o["frame"] for o in offline]

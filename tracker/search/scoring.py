@@ -97,10 +97,11 @@ class ScoreViews:
         for k, cam in enumerate(self.cameras):
             img = np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
             ok = cam.depth(pts) > 0.05
-            uv = np.nan_to_num(np.clip(cam.project(pts), -1e5, 1e5)) * 16.0  # 4 fractional bits
-            for p in range(len(pts)):
-                if ok[p].sum() >= 3:
-                    cv2.fillConvexPoly(img, cv2.convexHull(uv[p][ok[p]].astype(np.int32)), 1, shift=4)
+            uv = np.clip(cam.project(pts), -1e5, 1e5)
+            uv[np.isnan(uv)] = 0.0
+            uv = (uv * 16.0).astype(np.int32)  # 4 fractional bits
+            for p in np.flatnonzero(np.count_nonzero(ok, axis=1) >= 3):
+                cv2.fillConvexPoly(img, cv2.convexHull(uv[p][ok[p]]), 1, shift=4)
             out.append(img.astype(bool))
         return out
 
