@@ -293,8 +293,11 @@ class LiveTrackerFitter(TrackerFitter):
         ``min_search_cameras`` × the tracker's cameras (a set released before most cameras'
         chamfers came: a search on it finds a pose the full views refute)."""
         names = [n for n in self.tracker.cameras if n in images and np.any(silhouettes[n])]
-        need = max(1, int(np.ceil(self.min_search_cameras * len(self.tracker.cameras))))
-        return names if len(names) >= need else []
+        return names if len(names) >= self._min_cameras() else []
+
+    def _min_cameras(self) -> int:
+        """The least number of cameras a search or a catch-up fit needs (``min_search_cameras``)."""
+        return max(1, int(np.ceil(self.min_search_cameras * len(self.tracker.cameras))))
 
     def _take_found(self, frame_id: int, images: dict, silhouettes: dict) -> None:
         """A finished search's pose (no velocity across it) when it fits this set better.
@@ -356,7 +359,7 @@ class LiveTrackerFitter(TrackerFitter):
         if found is None or found[1] is None:
             return
         frame_id, params = int(found[0]), np.asarray(found[1], dtype=float)
-        need = max(1, int(np.ceil(self.min_search_cameras * len(tr.cameras))))
+        need = self._min_cameras()
         for fid, chs in held:
             names = [n for n in tr.cameras if n in chs]
             if fid <= frame_id or len(names) < need:

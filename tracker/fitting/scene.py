@@ -147,7 +147,6 @@ class SceneTracker:
         self.set_props(list(props or ()))
         self.floor = floor
         self.backgrounds = dict(backgrounds)
-        self.options = options
         self.segmentation = segmentation or SegmentationParams()
         self.ignore = {n: np.asarray(m, dtype=bool) for n, m in (ignore or {}).items()}
         for n, m in self.ignore.items():

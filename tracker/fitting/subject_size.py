@@ -144,10 +144,13 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     dims = [d for d in dims if d in nominal]
     values = {d: nominal[d] for d in dims}
 
+    def by_kind(vals) -> dict[str, dict[str, float]]:
+        return {kind: {n: v for (k, n), v in vals.items() if k == kind} for kind in sigma}
+
     def build(vals) -> BodyModel:
-        by_kind = {kind: {n: v for (k, n), v in vals.items() if k == kind} for kind in sigma}
-        return load_model(model.name, height_m=model.height_m, segment_lengths=by_kind["length"],
-                          widths=by_kind["width"], radius_scale=by_kind["radius"])
+        parts = by_kind(vals)
+        return load_model(model.name, height_m=model.height_m, segment_lengths=parts["length"],
+                          widths=parts["width"], radius_scale=parts["radius"])
 
     params = [model.clamp(np.asarray(p, dtype=float)) for p in poses]
     current = model
@@ -189,5 +192,5 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
             values[dim] = best
             current = build(values)
     iou_after = float(np.mean([v.with_model(current).score(p) for v, p in zip(views, params)]))
-    pick = lambda kind: {n: v for (k, n), v in values.items() if k == kind}  # noqa: E731
-    return SubjectFit(pick("length"), current, params, iou_before, iou_after, pick("width"), pick("radius"))
+    fitted = by_kind(values)
+    return SubjectFit(fitted["length"], current, params, iou_before, iou_after, fitted["width"], fitted["radius"])
