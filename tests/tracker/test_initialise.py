@@ -285,6 +285,44 @@ def test_score_views_partial_render_equals_full(rng):
                                                              views.render(y)))
 
 
+def test_score_views_render_is_each_camera_s_hull_union(rng):
+    """``ScoreViews.render`` (every view projected at once) draws, per camera, the union of the
+    convex hulls of each part's points in front of that camera, and ``ious`` is their IoU with
+    the masks: checked against a per-camera drawing at random poses, some with parts behind a
+    camera (a camera inside the volume)."""
+    import cv2
+
+    from tracker.body.kinematics import forward as fk
+    from tracker.imaging.render import cone_points
+
+    model = load_model("knossow40")
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _reference(model, np.random.default_rng(5), 0.0)
+    sils, _ = _views(model, truth, cams)
+    views = ScoreViews(model, cams, list(sils.values()))
+    local = cone_points(model, n_theta=12, n_z=2)
+    behind = 0
+    for i in range(12):
+        x = truth.copy()
+        x[:2] += rng.uniform(-1.0, 1.0, 2) * (1.0 if i % 3 else 4.0)  # every third one far out: past a camera
+        x = model.clamp(x + np.where(model.param_kind == 2, rng.normal(0.0, 0.5, model.n_params), 0.0))
+        pose = fk(model, x)
+        pts = np.einsum("pij,pmj->pmi", pose.rotation, local) + pose.translation[:, None, :]
+        got, ious = views.render(x), views.ious(x)
+        for k, cam in enumerate(views.cameras):
+            want = np.zeros((cam.height, cam.width), np.uint8)
+            for p in range(model.n_parts):
+                front = cam.depth(pts[p]) > 0.05
+                behind += int(not front.all())
+                if front.sum() >= 3:
+                    uv = np.nan_to_num(np.clip(cam.project(pts[p][front]), -1e5, 1e5))
+                    cv2.fillConvexPoly(want, cv2.convexHull((uv * 16.0).astype(np.int32)), 1, shift=4)
+            assert np.array_equal(got[k], want > 0)
+            union = np.count_nonzero(got[k] | views.masks[k])
+            assert ious[k] == pytest.approx(np.count_nonzero(got[k] & views.masks[k]) / union if union else 1.0)
+    assert behind > 0
+
+
 def test_elbow_search_bends_the_forearms_four_cameras_hide():
     """Hop frames 20 and 30 (crouched, arms hanging with the elbows bent in front of the body)
     seen by four cameras: the elbow search finds the bent forearms the silhouettes hide (measured

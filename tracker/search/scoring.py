@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 import cv2
 import numpy as np
 
-from capture.camera import Camera
+from capture.camera import Camera, project_many, stack_cameras
 from segmentation.distance import ChamferImages, chamfer_images
 from segmentation.edges import silhouette_boundary
 from tracker.body.kinematics import forward
@@ -62,6 +62,9 @@ class ScoreViews:
             self.cameras.append(Camera(cam.name, S @ cam.matrix, cam.distortion, cam.rotation, cam.translation, (w, h)))
             small = cv2.resize((np.asarray(sil) > 0).astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
             self.masks.append(small >= 0.5)
+        self._masks_u8 = [m.view(np.uint8) for m in self.masks]
+        self._areas = [np.count_nonzero(m) for m in self.masks]
+        self._stack = stack_cameras(self.cameras)
         self._local = cone_points(model, n_theta=12, n_z=2)  # (n_parts, 24, 3) part frames
         self.n_scored = 0
 
@@ -69,6 +72,28 @@ class ScoreViews:
         """The same views and silhouettes scoring another model (e.g. resized): a shallow copy."""
         out = copy.copy(self)
         out.model, out._local = model, cone_points(model, n_theta=12, n_z=2)
+        return out
+
+    def _draw(self, params: np.ndarray, parts: np.ndarray | None,
+              base: Sequence[np.ndarray] | None) -> list[np.ndarray]:
+        """``render``'s masks as uint8 images, 1 = model."""
+        pose = forward(self.model, params)
+        sel = np.arange(self.model.n_parts) if parts is None else np.asarray(parts, dtype=int)
+        pts = np.einsum("pij,pmj->pmi", pose.rotation[sel], self._local[sel]) + pose.translation[sel, None, :]
+        n_cams, shape = len(self.cameras), pts.shape[:2]
+        flat = pts.reshape(-1, 3)
+        # every view at once: depths (n_cams, n_parts, m), fixed-point pixels with 4 fractional bits
+        ok = (flat @ self._stack.rotation[:, 2].T + self._stack.translation[:, 2]).T.reshape(n_cams, *shape) > 0.05
+        uv = project_many(self.cameras, np.broadcast_to(flat, (n_cams,) + flat.shape))
+        np.clip(uv, -1e5, 1e5, out=uv)
+        uv[np.isnan(uv)] = 0.0
+        uv = (uv * 16.0).astype(np.int32).reshape(n_cams, *shape, 2)
+        counts = np.count_nonzero(ok, axis=2).ravel()  # (n_cams * n_parts,) points in front
+        polys = np.split(uv[ok], np.cumsum(counts)[:-1])  # each (count, 2), camera-major
+        out = [np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
+               for k, cam in enumerate(self.cameras)]
+        for i in np.flatnonzero(counts >= 3).tolist():  # the parts with a polygon in front
+            cv2.fillConvexPoly(out[i // shape[0]], cv2.convexHull(polys[i]), 1, shift=4)
         return out
 
     def render(self, params: np.ndarray, parts: np.ndarray | None = None,
@@ -90,20 +115,7 @@ class ScoreViews:
         -------
         list of ndarray of bool, each shape (h', w')
         """
-        pose = forward(self.model, params)
-        sel = np.arange(self.model.n_parts) if parts is None else np.asarray(parts, dtype=int)
-        pts = np.einsum("pij,pmj->pmi", pose.rotation[sel], self._local[sel]) + pose.translation[sel, None, :]
-        out = []
-        for k, cam in enumerate(self.cameras):
-            img = np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
-            ok = cam.depth(pts) > 0.05
-            uv = np.clip(cam.project(pts), -1e5, 1e5)
-            uv[np.isnan(uv)] = 0.0
-            uv = (uv * 16.0).astype(np.int32)  # 4 fractional bits
-            for p in np.flatnonzero(np.count_nonzero(ok, axis=1) >= 3):
-                cv2.fillConvexPoly(img, cv2.convexHull(uv[p][ok[p]]), 1, shift=4)
-            out.append(img.astype(bool))
-        return out
+        return [img.astype(bool) for img in self._draw(params, parts, base)]
 
     def ious(self, params: np.ndarray, parts: np.ndarray | None = None,
              base: Sequence[np.ndarray] | None = None) -> np.ndarray:
@@ -120,11 +132,13 @@ class ScoreViews:
             IoU in [0, 1] (1 where both are empty).
         """
         self.n_scored += 1
-        out = []
-        for mask, r in zip(self.masks, self.render(params, parts, base)):
-            union = np.count_nonzero(r | mask)
-            out.append(np.count_nonzero(r & mask) / union if union else 1.0)
-        return np.array(out)
+        out = np.ones(len(self.masks))
+        for k, (mask, area, r) in enumerate(zip(self._masks_u8, self._areas, self._draw(params, parts, base))):
+            inter = np.count_nonzero(r & mask)
+            union = np.count_nonzero(r) + area - inter
+            if union:
+                out[k] = inter / union
+        return out
 
     def expected_iou(self, *, loss_per_boundary: float = 0.28) -> float:
         """The mean IoU a correct pose reaches on these views.
