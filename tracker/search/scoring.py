@@ -88,12 +88,13 @@ class ScoreViews:
         np.clip(uv, -1e5, 1e5, out=uv)
         uv[np.isnan(uv)] = 0.0
         uv = (uv * 16.0).astype(np.int32).reshape(n_cams, *shape, 2)
-        counts = np.count_nonzero(ok, axis=2).ravel()  # (n_cams * n_parts,) points in front
-        polys = np.split(uv[ok], np.cumsum(counts)[:-1])  # each (count, 2), camera-major
+        counts = np.count_nonzero(ok, axis=2).ravel()  # (n_cams * n_parts,) points in front, camera-major
+        front = uv[ok]  # their pixels, part after part
+        ends = [0] + np.cumsum(counts).tolist()
         out = [np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
                for k, cam in enumerate(self.cameras)]
         for i in np.flatnonzero(counts >= 3).tolist():  # the parts with a polygon in front
-            cv2.fillConvexPoly(out[i // shape[0]], cv2.convexHull(polys[i]), 1, shift=4)
+            cv2.fillConvexPoly(out[i // shape[0]], cv2.convexHull(front[ends[i]:ends[i + 1]]), 1, shift=4)
         return out
 
     def render(self, params: np.ndarray, parts: np.ndarray | None = None,
