@@ -1,11 +1,15 @@
 """Benchmark: the search's silhouette IoU (``ScoreViews.ious``), CPU time per call (JSON).
 
-    python bench/iou_render.py [--cameras 6] [--size 320x240] [--poses 300] [--repeat 5]
+    python bench/iou_render.py [--cameras 6] [--size 320x240] [--poses 300] [--repeat 5] [--rejoin]
 
 Random knossow40 poses (place, heading and joint angles jittered around a standing pose) scored
 against the rendered silhouettes of the standing pose by ``--cameras`` ring cameras; prints the
 best of ``--repeat`` passes' mean thread CPU per call (``ious_cpu_ms``), the sum of all the IoUs
-(``iou_sum``: equal before and after a change that keeps the scores) and ``machine_ref_ms``.
+(``iou_sum``: equal before and after a change that keeps the scores), the same poses scored
+together (``ious_many_cpu_ms`` per pose) and ``machine_ref_ms``.  ``--rejoin``: also the live
+fitter's cheap recovery (``tracker.search.recovery.rejoin``, 12 headings) on 9 frames of the
+bundled hop seen by the ring cameras, seeded with the true poses 6 and 3 frames before:
+``rejoin_cpu_ms`` (summed CPU) and the IoUs it returns (``rejoin_scores``).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ def main(argv=None) -> int:
     parser.add_argument("--size", default="320x240", help="camera image size WxH (pixels)")
     parser.add_argument("--poses", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--rejoin", action="store_true", help="also time the cheap recovery on hop frames")
     opts = parser.parse_args(argv)
     w, h = (int(v) for v in opts.size.lower().split("x"))
     ref = machine_ref_ms()
@@ -58,10 +63,36 @@ def main(argv=None) -> int:
         for p in poses:
             views.ious(p)
         passes.append(1e3 * (time.thread_time() - t) / len(poses))
-    print(json.dumps({"cameras": opts.cameras, "size": [w, h], "poses": opts.poses,
-                      "ious_cpu_ms": round(min(passes), 3), "ious_cpu_ms_passes": [round(v, 3) for v in passes],
-                      "iou_sum": round(total, 9), "machine_ref_ms": round(ref, 2)}))
+    t = time.thread_time()
+    views.ious_many(poses)
+    out = {"cameras": opts.cameras, "size": [w, h], "poses": opts.poses,
+           "ious_cpu_ms": round(min(passes), 3), "ious_cpu_ms_passes": [round(v, 3) for v in passes],
+           "ious_many_cpu_ms": round(1e3 * (time.thread_time() - t) / len(poses), 3),
+           "iou_sum": round(total, 9), "machine_ref_ms": round(ref, 2)}
+    if opts.rejoin:
+        out.update(time_rejoin(cams))
+    print(json.dumps(out))
     return 0
+
+
+def time_rejoin(cams) -> dict:
+    """CPU of ``rejoin`` on 9 hop frames (see the module docstring)."""
+    from tracker.search.initialise import SearchOptions
+    from tracker.search.recovery import rejoin
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.retarget import retarget_bvh
+    from tracker.synthetic.synth import bundled_motion
+
+    mot = retarget_bvh(load_bvh(bundled_motion("scaled_131_03")), frames=120, start_s=0.0)
+    cpu, scores = 0.0, []
+    for k in range(10, 110, 12):
+        sils, chamfer = rendered_views(mot.model, mot.params[k + 6], cams)
+        t = time.thread_time()
+        res = rejoin(mot.model, cams, sils, chamfer, [mot.params[k], mot.params[k + 3]],
+                     options=SearchOptions.for_recovery(), n_headings=12)
+        cpu += time.thread_time() - t
+        scores.append(None if res is None else round(float(res.score), 9))
+    return {"rejoin_cpu_ms": round(1e3 * cpu, 1), "rejoin_scores": scores}
 
 
 if __name__ == "__main__":

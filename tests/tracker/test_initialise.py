@@ -323,6 +323,33 @@ def test_score_views_render_is_each_camera_s_hull_union(rng):
     assert behind > 0
 
 
+def test_score_views_many_poses_score_as_one_at_a_time(rng):
+    """``ious_many`` / ``scores`` (poses projected and drawn together, in batches) give each pose
+    the IoUs ``ious`` / ``score`` give it alone, with and without ``parts`` and ``base``, across a
+    batch boundary, and count every pose in ``n_scored``."""
+    from tracker.search.candidates import limb_chains
+
+    model = load_model("knossow40")
+    cams = ring_cameras(5, size=(320, 240))
+    truth = _reference(model, np.random.default_rng(6), -45.0)
+    sils, _ = _views(model, truth, cams)
+    views = ScoreViews(model, cams, list(sils.values()))
+    poses = [model.clamp(truth + np.where(model.param_kind == 2, rng.normal(0.0, 0.4, model.n_params), 0.0))
+             for _ in range(7)]
+    before = views.n_scored
+    many = views.ious_many(poses, batch=3)
+    assert views.n_scored == before + len(poses)
+    assert many.shape == (len(poses), len(cams))
+    assert np.array_equal(many, np.array([views.ious(p) for p in poses]))
+    assert np.array_equal(views.scores(poses), np.array([views.score(p) for p in poses]))
+    idx = next(iter(limb_chains(model).values()))
+    moved = model.affects[:, idx].any(axis=1)
+    base = views.render(poses[0], np.flatnonzero(~moved))
+    got = views.scores(poses, np.flatnonzero(moved), base)
+    assert np.array_equal(got, np.array([views.score(p, np.flatnonzero(moved), base) for p in poses]))
+    assert views.ious_many([]).shape == (0, len(cams))
+
+
 def test_elbow_search_bends_the_forearms_four_cameras_hide():
     """Hop frames 20 and 30 (crouched, arms hanging with the elbows bent in front of the body)
     seen by four cameras: the elbow search finds the bent forearms the silhouettes hide (measured

@@ -359,11 +359,14 @@ def limb_search(model: BodyModel, views: ScoreViews, params: np.ndarray, score: 
             options.append(x[[mirror[i] for i in idx]])
         moved = model.affects[:, idx].any(axis=1)  # the chain's parts and everything below them
         base = views.render(x, np.flatnonzero(~moved))  # the rest is drawn once per chain
+        # the options differ from x only in the chain's angles (and clamp is per parameter), so
+        # they are scored together and taken in order as if one after the other
+        tried = []
         for vals in options:
             y = x.copy()
             y[idx] = vals
-            y = model.clamp(y)
-            s = views.score(y, np.flatnonzero(moved), base)
+            tried.append(model.clamp(y))
+        for y, s in zip(tried, views.scores(tried, np.flatnonzero(moved), base)):
             if s > score:
-                x, score = y, s
+                x, score = y, float(s)
     return x, score

@@ -178,8 +178,10 @@ def local_search(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
         runs the full search).
     """
     turned = [p for _, _, p in hull_placements(model, last, hull, n_headings)]
-    starts = [(views.score(p), p) for p in [last] + turned]
-    score, start = max(starts, key=lambda sp: sp[0])
+    poses = [last] + turned
+    scores = views.scores(poses)
+    best = int(np.argmax(scores))  # the first of equal ones
+    score, start = float(scores[best]), poses[best]
     start, _ = limb_search(model, views, start, score)
     x, terms = refine(model, cameras, chamfer, start, max_iterations=max_iterations, n_samples=n_samples,
                       prior_rad=prior_rad, reverse_weight=reverse_weight)

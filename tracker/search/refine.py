@@ -181,7 +181,7 @@ def refine_best(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVie
     -------
     InitResult
     """
-    scores = np.array([views.score(p) for _, _, p in candidates])
+    scores = views.scores([p for _, _, p in candidates])
     best = None
     for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
         label, psi, p0 = candidates[i]

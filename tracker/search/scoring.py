@@ -74,25 +74,31 @@ class ScoreViews:
         out.model, out._local = model, cone_points(model, n_theta=12, n_z=2)
         return out
 
-    def _draw(self, params: np.ndarray, parts: np.ndarray | None,
+    def _draw(self, poses: Sequence[np.ndarray], parts: np.ndarray | None,
               base: Sequence[np.ndarray] | None) -> list[np.ndarray]:
-        """``render``'s masks as uint8 images, 1 = model."""
-        pose = forward(self.model, params)
+        """``render``'s masks of several poses as uint8 images (1 = model), pose-major: image
+        ``j * n_cams + k`` is pose j in camera k; every pose and view projected at once."""
         sel = np.arange(self.model.n_parts) if parts is None else np.asarray(parts, dtype=int)
-        pts = np.einsum("pij,pmj->pmi", pose.rotation[sel], self._local[sel]) + pose.translation[sel, None, :]
-        n_cams, shape = len(self.cameras), pts.shape[:2]
-        flat = pts.reshape(-1, 3)
-        # every view at once: depths (n_cams, n_parts, m), fixed-point pixels with 4 fractional bits
-        ok = (flat @ self._stack.rotation[:, 2].T + self._stack.translation[:, 2]).T.reshape(n_cams, *shape) > 0.05
+        local = self._local[sel]
+        pts = []
+        for params in poses:
+            pose = forward(self.model, params)
+            pts.append(np.einsum("pij,pmj->pmi", pose.rotation[sel], local) + pose.translation[sel, None, :])
+        n_cams, n_poses, shape = len(self.cameras), len(pts), local.shape[:2]
+        flat = np.concatenate(pts).reshape(-1, 3) if pts else np.zeros((0, 3))
+        # depths and fixed-point pixels (4 fractional bits), (n_cams, n_poses, n_parts, m) -> pose-major
+        ok = (flat @ self._stack.rotation[:, 2].T + self._stack.translation[:, 2]).T > 0.05
         uv = project_many(self.cameras, np.broadcast_to(flat, (n_cams,) + flat.shape))
         np.clip(uv, -1e5, 1e5, out=uv)
         uv[np.isnan(uv)] = 0.0
-        uv = (uv * 16.0).astype(np.int32).reshape(n_cams, *shape, 2)
-        counts = np.count_nonzero(ok, axis=2).ravel()  # (n_cams * n_parts,) points in front, camera-major
+        uv = (uv * 16.0).astype(np.int32)
+        ok = ok.reshape(n_cams, n_poses, *shape).swapaxes(0, 1)
+        uv = uv.reshape(n_cams, n_poses, *shape, 2).swapaxes(0, 1)
+        counts = np.count_nonzero(ok, axis=3).ravel()  # points in front per (pose, camera, part)
         front = uv[ok]  # their pixels, part after part
         ends = [0] + np.cumsum(counts).tolist()
         out = [np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
-               for k, cam in enumerate(self.cameras)]
+               for _ in range(n_poses) for k, cam in enumerate(self.cameras)]
         for i in np.flatnonzero(counts >= 3).tolist():  # the parts with a polygon in front
             cv2.fillConvexPoly(out[i // shape[0]], cv2.convexHull(front[ends[i]:ends[i + 1]]), 1, shift=4)
         return out
@@ -116,7 +122,7 @@ class ScoreViews:
         -------
         list of ndarray of bool, each shape (h', w')
         """
-        return [img.astype(bool) for img in self._draw(params, parts, base)]
+        return [img.astype(bool) for img in self._draw([params], parts, base)]
 
     def ious(self, params: np.ndarray, parts: np.ndarray | None = None,
              base: Sequence[np.ndarray] | None = None) -> np.ndarray:
@@ -132,13 +138,36 @@ class ScoreViews:
         ndarray, shape (n_cams,)
             IoU in [0, 1] (1 where both are empty).
         """
-        self.n_scored += 1
-        out = np.ones(len(self.masks))
-        for k, (mask, area, r) in enumerate(zip(self._masks_u8, self._areas, self._draw(params, parts, base))):
-            inter = np.count_nonzero(r & mask)
-            union = np.count_nonzero(r) + area - inter
-            if union:
-                out[k] = inter / union
+        return self.ious_many([params], parts, base)[0]
+
+    def ious_many(self, poses: Sequence[np.ndarray], parts: np.ndarray | None = None,
+                  base: Sequence[np.ndarray] | None = None, *, batch: int = 32) -> np.ndarray:
+        """``ious`` of several poses, rendered ``batch`` at a time (the same values).
+
+        Parameters
+        ----------
+        poses : sequence of ndarray, each shape (n_params,)
+        parts, base
+            As ``render``, for every pose.
+        batch : int
+            Poses projected and drawn together (bounds the images held at once).
+
+        Returns
+        -------
+        ndarray, shape (n_poses, n_cams)
+        """
+        poses = list(poses)
+        n_cams = len(self.masks)
+        out = np.ones((len(poses), n_cams))
+        for start in range(0, len(poses), max(1, int(batch))):
+            chunk = poses[start:start + max(1, int(batch))]
+            for i, r in enumerate(self._draw(chunk, parts, base)):
+                j, k = divmod(i, n_cams)
+                inter = np.count_nonzero(r & self._masks_u8[k])
+                union = np.count_nonzero(r) + self._areas[k] - inter
+                if union:
+                    out[start + j, k] = inter / union
+        self.n_scored += len(poses)
         return out
 
     def expected_iou(self, *, loss_per_boundary: float = 0.28) -> float:
@@ -177,6 +206,11 @@ class ScoreViews:
         float
         """
         return float(self.ious(params, parts, base).mean())
+
+    def scores(self, poses: Sequence[np.ndarray], parts: np.ndarray | None = None,
+               base: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """``score`` of several poses at once (``ious_many``): shape (n_poses,)."""
+        return self.ious_many(poses, parts, base).mean(axis=1)
 
 
 @dataclass(frozen=True, eq=False)
