@@ -344,7 +344,7 @@ def compare_front_back(model: BodyModel, cameras: Sequence[Camera], silhouettes:
         outs.append(x)
         terms_list.append(terms)
     rms = np.array([t.rms_px() for t in terms_list])
-    iou = np.array([views.score(x) for x in outs])
+    iou = views.scores(outs)
     lim = np.array([joints_at_limits(model, x) for x in outs])
     feet = np.zeros(len(outs))
     if feet_direction is not None and all(_straight_legs(model, x) for x in outs):

@@ -109,7 +109,7 @@ def _seated_search(model: BodyModel, cams, sils, chs, hull: VoxelHull, *, n_head
     """Best seated pose on ``hull``: ``(IoU, params, heading, views)``."""
     views = ScoreViews(model, cams, sils, scale=score_scale)
     cands = seated_candidates(model, hull, n_headings=n_headings)
-    scores = np.array([views.score(p) for _, _, p in cands])
+    scores = views.scores([p for _, _, p in cands])
     root = [np.flatnonzero(model.param_kind != JOINT_ROTATION)]
     best = None
     for i in np.argsort(-scores, kind="stable")[: max(1, int(keep))]:
