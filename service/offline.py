@@ -103,7 +103,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
     stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
-    props : sequence of PropBox, optional, world boxes never body (with ``scene``; ``tracker.fitting.props``)
+    props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs)
 
     Yields
     ------
@@ -119,7 +119,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         backgrounds, _ = background_models(session, names, frames=frames)
     if method == "blobs":
         yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                                stream_check)
+                                stream_check, props=props)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
@@ -143,13 +143,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                 stream_check=None) -> Iterator[dict]:
+                 stream_check=None, props=None) -> Iterator[dict]:
     from tracker.blobs import BlobOptions, BlobTracker
     from tracker.blobs.start import ContourStart
 
     tracker = BlobTracker(body, cams, backgrounds, initial_params=initial_params,
-                          initialiser=ContourStart(body, cams, backgrounds),
-                          options=blob_options or BlobOptions(), clock=clock)
+                          initialiser=ContourStart(body, cams, backgrounds, props=props or ()),
+                          options=blob_options or BlobOptions(), clock=clock, props=props or ())
     for fid, group in _frame_sets(session, [c.name for c in cams], frames, stream_check):
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})

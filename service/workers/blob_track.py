@@ -60,11 +60,12 @@ class BlobFitter:
         Not-ok frames in a row after which the tracker starts again from the silhouette search (0: never).
     clock : callable () -> float
         Seconds, for the tracker's latency figures.
+    props : sequence of ``tracker.fitting.props.PropBox``, world boxes never body (``tracker.blobs.props``)
     """
 
     def __init__(self, model, cameras: Sequence, *, backgrounds: Mapping | None = None, learn_frames: int = 30,
                  initial_params=None, options=None, reinit_after: int = 15,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter, props: Sequence = ()) -> None:
         from tracker.blobs import BlobOptions
 
         self.model, self.cameras = model, list(cameras)
@@ -72,6 +73,7 @@ class BlobFitter:
         self.learn_frames, self.initial_params = int(learn_frames), initial_params
         self.options = options or BlobOptions()
         self.reinit_after, self.clock = int(reinit_after), clock
+        self.props = list(props)
         self.tracker = None
         self.bad_streak = 0
         self.restarts = 0
@@ -81,14 +83,17 @@ class BlobFitter:
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", replayed: Sequence[str] = (),
                      **options) -> "BlobFitter":
-        """A fitter on ``session``'s calibration and subject; ``replayed`` cameras take their background
-        model from the session (``service.backgrounds``), the others learn it from their first frames."""
+        """A fitter on ``session``'s calibration, subject (its subject file too) and ``[[prop]]`` boxes;
+        ``replayed`` cameras take their background model from the session (``service.backgrounds``), the
+        others learn it from their first frames."""
         from service.backgrounds import background_models
-        from tracker.body.model import load_model
+        from service.offline import session_model
+        from tracker.fitting.props import PropBox
 
-        body = load_model(model, height_m=session.height_m, segment_lengths=session.segment_lengths)
+        body = session_model(session, model)
+        props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
         bgs = background_models(session, list(replayed))[0] if replayed else {}
-        return cls(body, list(session.calibration), backgrounds=bgs, **options)
+        return cls(body, list(session.calibration), backgrounds=bgs, props=props, **options)
 
     def _learn(self, images: Mapping[str, np.ndarray]) -> str | None:
         """Feed cameras still learning their background; a reason while any of those in ``images`` is."""
@@ -115,8 +120,8 @@ class BlobFitter:
         bgs = dict(self.backgrounds)
         settle = min(30, self.reinit_after) if self.reinit_after > 0 else 30  # handed over before a restart
         return BlobTracker(self.model, cams, bgs, initial_params=start,
-                           initialiser=ContourStart(self.model, cams, bgs, max_frames=settle),
-                           options=self.options, clock=self.clock)
+                           initialiser=ContourStart(self.model, cams, bgs, max_frames=settle, props=self.props),
+                           options=self.options, clock=self.clock, props=self.props)
 
     def __call__(self, frame_id: int, timestamp_ns: int, frames: Mapping[str, FrameMessage]) -> dict:
         """The pose record of one frame set (``frames``: camera name -> FrameMessage)."""

@@ -11,6 +11,7 @@ A second tracking method beside the contour tracker (``tracker.fitting.tracking`
 - ``blobset``: blobs attached to the body model's parts, learned at initialisation;
 - ``ik``: the root by least squares, the limbs by cyclic coordinate descent, the floor contact;
 - ``static_voxels``: hull cubes that stay away from the body (furniture), left out of the fit;
+- ``props``: the operator's prop boxes carved from the hull and kept out of by the IK;
 - ``tracking``: the per-frame loop.
 """
 

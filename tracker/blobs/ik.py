@@ -127,11 +127,15 @@ def ccd(model: BodyModel, params, part, point, goals, weights=None, *, free=None
 
 
 def damped_least_squares(model: BodyModel, params, part, point, goals, weights=None, *, free=None,
-                         iterations: int = 3, damping: float = 1e-3, root: bool = False) -> np.ndarray:
+                         iterations: int = 3, damping: float = 1e-3, root: bool = False,
+                         penalty=None) -> np.ndarray:
     """Damped Gauss–Newton on the free joint angles (module docstring); returns params within limits.
 
     ``root``: the root's translation and rotation are free too (every goal then pulls the whole body,
-    e.g. the legs' goals lower the trunk into a crouch)."""
+    e.g. the legs' goals lower the trunk into a crouch).  ``penalty``: optional extra residuals, a
+    callable ``(params, pose, jacobian) -> (r (k,), J (k, n_params) or None)`` minimised with the goals (``r`` in the
+    goals' units, metres × √weight; e.g. ``PropPenalty.residuals``), then a step that raises the cost
+    is halved (at most 5 times, else the pose stays)."""
     params, part, point, goals, w = _check(model, params, part, point, goals, weights)
     kinds = (JOINT_ROTATION, ROOT_TRANSLATION, ROOT_ROTATION) if root else (JOINT_ROTATION,)
     movable = np.isin(model.param_kind, kinds)
@@ -146,9 +150,38 @@ def damped_least_squares(model: BodyModel, params, part, point, goals, weights=N
         Jw = (J * sw[:, :, None]).reshape(-1, len(idx))
         r = ((goals - X) * sw).ravel()
         A = Jw.T @ Jw
+        b = Jw.T @ r
+        rp = None
+        if penalty is not None:
+            rp, Jp = penalty(out, pose, True)
+            Jp = Jp[:, idx]
+            A += Jp.T @ Jp
+            b -= Jp.T @ rp
         A[np.diag_indices_from(A)] += damping * max(w.sum(), 1e-9)
-        out[idx] = np.clip(out[idx] + np.linalg.solve(A, Jw.T @ r), model.lower[idx], model.upper[idx])
+        step = np.linalg.solve(A, b)
+        if rp is None:
+            out[idx] = np.clip(out[idx] + step, model.lower[idx], model.upper[idx])
+            continue
+        cost = r @ r + rp @ rp
+        for _ in range(_MAX_HALVINGS):  # the limit is a hinge: a long step may jump into a box
+            trial = out.copy()
+            trial[idx] = np.clip(out[idx] + step, model.lower[idx], model.upper[idx])
+            if _cost(model, trial, part, point, goals, sw, penalty) <= cost:
+                out = trial
+                break
+            step = 0.5 * step
     return out
+
+
+_MAX_HALVINGS = 5
+
+
+def _cost(model: BodyModel, params, part, point, goals, sw, penalty) -> float:
+    """The damped least squares' cost at ``params``: weighted squared goal distances plus the penalty's."""
+    pose = forward(model, params)
+    r = (goals - pose.to_world(part, point)) * sw
+    rp, _ = penalty(params, pose, False)
+    return float(np.sum(r * r) + rp @ rp)
 
 
 def floor_contact(model: BodyModel, params, *, floor_z: float = 0.0, snap_m: float = 0.02) -> np.ndarray:

@@ -40,6 +40,7 @@ from tracker.blobs.blobset import BlobSet, blob_layout, learn_blobs
 from tracker.blobs.colour_hull import ColourHull, HullOptions, coloured_hull, zone_of_interest
 from tracker.blobs.em import expectation, maximisation
 from tracker.blobs.floor_samples import SampleFloorTest
+from tracker.blobs.props import carve
 from tracker.blobs.start import StartPending
 from tracker.blobs.static_voxels import StaticVoxels
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
@@ -80,7 +81,8 @@ class BlobOptions:
     floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras);
     static_scene : voxels of lattice cubes that stay occupied away from the fitted body are left out of the EM and
     of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
-    ``static_clearance_m``; e.g. a chair not in the background).
+    ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
+    squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -118,6 +120,7 @@ class BlobOptions:
     static_rate: float = 0.05
     static_threshold: float = 0.7
     static_clearance_m: float = 0.1
+    prop_weight: float = 10.0
 
     def __post_init__(self):
         if self.ik not in ("ccd", "dls"):
@@ -222,6 +225,7 @@ class BlobTracker:
         ``initial_params`` (may raise ValueError)
     options : BlobOptions
     clock : callable returning seconds, default ``time.perf_counter``
+    props : sequence of ``tracker.fitting.props.PropBox``, world boxes never body (``tracker.blobs.props``)
 
     Attributes
     ----------
@@ -232,8 +236,14 @@ class BlobTracker:
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], backgrounds: Mapping[str, BackgroundModel], *,
                  initial_params=None, initialiser: Callable | None = None, options: BlobOptions = BlobOptions(),
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter, props: Sequence = ()) -> None:
         self.model = model
+        self.props = list(props)
+        self._prop_penalty = None
+        if self.props:
+            from tracker.fitting.props import PropPenalty
+
+            self._prop_penalty = PropPenalty(self.props, weight=options.prop_weight)
         self.cameras = {c.name: c for c in cameras}
         if len(self.cameras) != len(cameras):
             raise ValueError("cameras: names must be unique")
@@ -278,9 +288,10 @@ class BlobTracker:
 
     def _hull(self, cams, images, params) -> ColourHull:
         zone = zone_of_interest(self.model, params, margin_m=self.options.zone_margin_m)
-        return coloured_hull(cams, [images[c.name] for c in cams], [self.backgrounds[c.name] for c in cams], zone,
+        hull = coloured_hull(cams, [images[c.name] for c in cams], [self.backgrounds[c.name] for c in cams], zone,
                              options=self.options.hull,
                              floor=None if self._floor is None else self._floor.for_frame(images))
+        return carve(hull, self.props)
 
     def _ik(self, params: np.ndarray, goals: np.ndarray, weights: np.ndarray) -> np.ndarray:
         o, lay, m = self.options, self.layout, self.model
@@ -292,8 +303,13 @@ class BlobTracker:
                          attenuation=o.ccd_attenuation, damping=o.ccd_damping)
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
-                                          iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root)
+                                          iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root,
+                                          penalty=self._penalty if self._prop_penalty is not None else None)
         return params
+
+    def _penalty(self, params: np.ndarray, pose, jacobian: bool) -> tuple:
+        """The props' residuals (k,) and, with ``jacobian``, their Jacobian (k, n_params) at ``params``."""
+        return self._prop_penalty.residuals(self.model, params, jacobian=jacobian, pose=pose)
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
         """Per part (``model.part_names`` but the clavicles, in order) the fraction of its interior
