@@ -38,8 +38,9 @@ json.dump({"frame_range": [first, last], "frames": frames}, open(out, "w"))
 """
 PART_JOINT = {"pelvis": "pelvis", "torso": "spine", "left_upper_arm": "left_shoulder", "left_forearm": "left_elbow",
               "left_hand": "left_wrist", "right_upper_arm": "right_shoulder", "right_forearm": "right_elbow",
-              "right_hand": "right_wrist", "left_thigh": "left_hip", "left_shank": "left_knee",
-              "right_thigh": "right_hip", "right_shank": "right_knee"}
+              "right_hand": "right_wrist", "left_shank": "left_knee", "right_shank": "right_knee"}
+# (the thigh bones start at the thighs' origins, the model's pivots; the reported hip joint centres
+# are points of the pelvis inside them: tracker.body.model.PIVOT_PART)
 
 
 @pytest.mark.skipif(BLENDER is None, reason="blender not installed (Debian: apt-get install blender)")

@@ -33,8 +33,9 @@ UNITY_PARENT = {  # Unity's HumanBodyBones hierarchy (Neck/UpperChest may be abs
 }
 JOINT_BONE = {"spine": "Chest", "left_shoulder": "LeftUpperArm", "left_elbow": "LeftLowerArm",
               "left_wrist": "LeftHand", "right_shoulder": "RightUpperArm", "right_elbow": "RightLowerArm",
-              "right_wrist": "RightHand", "left_hip": "LeftUpperLeg", "left_knee": "LeftLowerLeg",
-              "right_hip": "RightUpperLeg", "right_knee": "RightLowerLeg"}
+              "right_wrist": "RightHand", "left_knee": "LeftLowerLeg", "right_knee": "RightLowerLeg"}
+# (the upper legs start at the thighs' origins, the model's pivots; the reported hip joint centres
+# are points of the pelvis inside them: tracker.body.model.PIVOT_PART)
 
 
 @pytest.fixture(scope="module")

@@ -43,6 +43,23 @@ def _frame(seed: int, *, sided: bool = True, cameras: int = 4):
     return load_model("knossow40"), truth, cams, images, chamfer
 
 
+def test_feet_cue_follows_the_legs_not_the_reported_hip_centres(tmp_path):
+    """The feet are looked for under the thighs' origins (``PIVOT_PART``): a model reporting its
+    hip joint centres at those origins instead of inside them gets the same cue."""
+    from tracker.body.model import MODELS_DIR
+
+    model, truth, cams, _, chamfer = _frame(2)
+    text = (MODELS_DIR / "knossow40.toml").read_text()
+    for side in ("left", "right"):
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"{side}_hip = "))
+        text = text.replace(line, f'{side}_hip = {{ part = "{side}_thigh" }}')
+    (tmp_path / "thigh_hips.toml").write_text(text)
+    variant = load_model(tmp_path / "thigh_hips.toml")
+    assert not np.allclose(variant.joint_point, model.joint_point)
+    for p in (truth, mirror_params(model, truth)):
+        assert feet_forward(variant, p, cams, chamfer) == feet_forward(model, p, cams, chamfer)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_colour_and_feet_prefer_the_true_hypothesis(seed):
     model, truth, cams, images, chamfer = _frame(seed)

@@ -90,7 +90,11 @@ def test_widths_set_the_part_origins_and_nothing_else(name):
         for i in (thigh, arm):
             assert tw[i][[0, 2]] == pytest.approx(tb[i][[0, 2]])
         assert jw[f"{side}_knee"] - tw[thigh] == pytest.approx(jb[f"{side}_knee"] - tb[thigh])
-        assert jw[f"{side}_hip"] == pytest.approx(tw[thigh])
+        # the hip joint centre is a point of the pelvis (Bell et al.), not the thighs' origin: the
+        # flesh's spacing does not move it
+        assert jw[f"{side}_hip"] == pytest.approx(jb[f"{side}_hip"])
+        assert jw[f"{side}_hip"][1] == pytest.approx(sign * 0.045 * 1.7)
+        assert abs(tb[thigh][1]) > abs(jb[f"{side}_hip"][1]) + 0.05
     for j in ("pelvis", "spine", "neck", "head"):
         assert jw[j] == pytest.approx(jb[j])
     assert (wide.cones == base.cones).all()

@@ -47,7 +47,7 @@ import numpy as np
 from capture.tomlio import load_file
 from tracker.errors import TrackerError
 
-__all__ = ["BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES"]
+__all__ = ["BodyModel", "ModelError", "load_model", "available_models", "JOINT_NAMES", "PIVOT_PART"]
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_HEIGHT_M = 1.75
@@ -58,6 +58,11 @@ JOINT_NAMES = (
     "left_shoulder", "left_elbow", "left_wrist", "right_shoulder", "right_elbow", "right_wrist",
     "left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle",
 )  # fmt: skip
+
+#: Joint -> the part whose origin the limb below turns about, where the reported joint centre
+#: (``[joints]``) is not that origin: the hip joint centres are points of the pelvis inside the
+#: thighs' origins.
+PIVOT_PART = {"left_hip": "left_thigh", "right_hip": "right_thigh"}
 
 _AXES = {
     "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),

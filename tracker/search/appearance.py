@@ -31,7 +31,7 @@ import numpy as np
 
 from capture.camera import Camera
 from tracker.body.kinematics import forward
-from tracker.body.model import BodyModel
+from tracker.body.model import PIVOT_PART, BodyModel
 
 __all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "mirror_samples", "AppearanceModel", "head_cue",
            "feet_forward", "colour_features", "SKIN_BGR"]
@@ -258,9 +258,9 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     """Whether the feet reach forward the way the pelvis faces, for a standing pose.
 
     For each leg whose ankle is near the floor (``max_ankle_m``) and within ``max_offset_m`` of
-    the vertical through its hip, points ``reach_m`` ahead of the hip joint along the pelvis
-    heading and as far behind it, ``height_m`` above the floor, are tested against the
-    silhouettes (inside: silhouette distance at most ``inside_px`` in a camera).  Returns the mean
+    the vertical through its hip (the thigh's origin, ``PIVOT_PART``; not the hip joint centre),
+    points ``reach_m`` ahead of it along the pelvis heading and as far behind it, ``height_m``
+    above the floor, are tested against the silhouettes (inside: silhouette distance at most ``inside_px`` in a camera).  Returns the mean
     fractions of cameras holding them ``(ahead, behind)`` (NaN, NaN when no leg stands or no camera
     sees the points).  ``pose``: ``forward(model, params)`` when the caller has it.  It does not
     follow the model's feet: a turned-round fit can slide and twist its legs until its feet lie in
@@ -270,13 +270,17 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     from tracker.search.mirror import pelvis_heading
 
     p = np.asarray(params, dtype=float)
-    jc = joint_centre_array(model, forward(model, p) if pose is None else pose)
+    pose = forward(model, p) if pose is None else pose
+    jc = joint_centre_array(model, pose)
     names = list(model.joint_names)
     refs = []
     for side in ("left", "right"):
         if f"{side}_ankle" not in names or f"{side}_hip" not in names:
             continue
         ankle, hip = jc[names.index(f"{side}_ankle")], jc[names.index(f"{side}_hip")]
+        pivot = PIVOT_PART.get(f"{side}_hip")
+        if pivot in model.part_names:  # the leg hangs from the thigh's origin, not the hip centre
+            hip = pose.translation[model.part_index(pivot)]
         if ankle[2] < max_ankle_m and np.hypot(*(ankle[:2] - hip[:2])) < max_offset_m:
             refs.append(hip[:2])
     h = pelvis_heading(model, p)

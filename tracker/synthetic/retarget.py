@@ -10,7 +10,8 @@ Steps (``retarget_bvh``):
    style).  For CMU: pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm above
    the hip joints), spine = Chest, neck = Neck, head = midpoint of Head and its end site,
    shoulder = LeftShoulder (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist, hip,
-   knee, ankle by name.
+   knee, ankle by name.  The IK matches each to the model's pivot (``ik_points``: the hips to
+   the thighs' origins, not the reported hip centres inside them).
 3. **Size.** Subject height by a least-squares scale fit of the model's segment lengths (at
    height 1) to the BVH's in its rest pose: ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper
    arm, forearm (left and right), shoulder width and pelvis-to-neck.  With ``fit_segments=True``
@@ -39,10 +40,10 @@ from scipy.optimize import least_squares
 
 from tracker.synthetic.bvh import Bvh, bvh_forward
 from tracker.body.kinematics import forward, joint_centre_array, point_jacobian
-from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel, load_model
+from tracker.body.model import JOINT_ROTATION, PIVOT_PART, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel, load_model
 from tracker.imaging.render import body_points
 
-__all__ = ["JOINT_MAP", "Retargeted", "retarget_bvh", "palindrome", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
+__all__ = ["JOINT_MAP", "ik_points", "Retargeted", "retarget_bvh", "palindrome", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
 
 #: BVH (Y up) -> world (Z up): x_w = z_b, y_w = x_b, z_w = y_b (a proper rotation).
 BVH_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -166,6 +167,33 @@ def bvh_joint_targets(bvh: Bvh, joint_names, frames=None) -> np.ndarray:
     return T @ BVH_TO_WORLD.T
 
 
+def ik_points(model: BodyModel, names) -> tuple[np.ndarray, np.ndarray]:
+    """The model points the IK matches to the BVH joints ``names``: each joint's pivot.
+
+    Parameters
+    ----------
+    model : BodyModel
+    names : sequence of str
+        Model joint names.
+
+    Returns
+    -------
+    part : ndarray of int, shape (n,)
+    point : ndarray, shape (n, 3)
+        Metres in the part's frame: the ``PIVOT_PART`` origin where one is named and the model has
+        it, else the reported joint centre.
+    """
+    part, point = [], []
+    for name in names:
+        j = model.joint_names.index(name)
+        pivot = PIVOT_PART.get(name)
+        if pivot in model.part_names:
+            part.append(model.part_index(pivot)), point.append(np.zeros(3))
+        else:
+            part.append(model.joint_part[j]), point.append(model.joint_point[j])
+    return np.asarray(part, dtype=int), np.asarray(point, dtype=float).reshape(-1, 3)
+
+
 def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool = False) -> tuple[float, dict]:
     """Subject height (and optionally limb lengths) from the BVH's rest pose; see the module docstring.
 
@@ -187,7 +215,7 @@ def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool
                np.zeros((1, bvh.motion.shape[1])), bvh.frame_time_s, bvh.source)  # fmt: skip
     names = sorted({j for _, a, b in _SEGMENTS for j in (a, b)})
     T = dict(zip(names, bvh_joint_targets(rest, names)[0]))
-    M = dict(zip(unit.joint_names, joint_centre_array(unit, forward(unit, unit.zero()))))
+    M = dict(zip(names, forward(unit, unit.zero()).to_world(*ik_points(unit, names))))
     L = np.array([np.linalg.norm(T[a] - T[b]) for _, a, b in _SEGMENTS])
     r = np.array([np.linalg.norm(M[a] - M[b]) for _, a, b in _SEGMENTS])
     height = float(np.sum(L * r) / np.sum(r * r))
@@ -212,10 +240,8 @@ def _initial_root(model: BodyModel, targets: np.ndarray, names) -> np.ndarray:
     return p
 
 
-def _solve_frame(model, target, start, prev, mu, mu_t, joints=None):
-    """One frame of IK: ``target`` (n, 3) for the model joints ``joints`` (indices, default all)."""
-    jidx = np.arange(len(model.joint_names)) if joints is None else np.asarray(joints)
-    jpart, jpoint = model.joint_part[jidx], model.joint_point[jidx]
+def _solve_frame(model, target, start, prev, mu, mu_t, jpart, jpoint):
+    """One frame of IK: ``target`` (n, 3) for the model points ``jpoint`` (n, 3) of parts ``jpart``."""
     joint_dof = model.param_kind == JOINT_ROTATION
     lo = np.where(np.isfinite(model.lower), model.lower, -np.inf)
     hi = np.where(np.isfinite(model.upper), model.upper, np.inf)
@@ -305,11 +331,12 @@ def retarget_bvh(
         pel = T[:, ji["pelvis"], :2]
         T[:, :, :2] -= 0.5 * (pel.min(axis=0) + pel.max(axis=0))
     params = np.empty((n_out, mdl.n_params))
+    pivots = ik_points(mdl, names)
     p = _initial_root(mdl, T[0], names)
     prev = p.copy()
     for k in range(n_out):
         # the first frame has no predecessor to stay close to
-        p = _solve_frame(mdl, T[k], p, prev, damping, smoothing if k else 0.0, jidx)
+        p = _solve_frame(mdl, T[k], p, prev, damping, smoothing if k else 0.0, *pivots)
         params[k] = prev = p
     # floor: the lowest foot-surface point of the clip on z = 0
     feet = [mdl.part_index(n) for n in mdl.part_names if n.endswith("foot") or n.endswith("shank")]
