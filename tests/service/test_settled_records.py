@@ -109,5 +109,8 @@ def test_track_session_retrack_changes_only_the_warm_up(hop):
     k = 5  # the start frame and the 4 warm-up frames after it
     for a, b in zip(plain[k:], settled[k:]):
         np.testing.assert_array_equal(a["params"], b["params"])
-    assert sum(r["ok"] for r in settled[:k]) >= sum(r["ok"] for r in plain[:k])
+    # measured: the first two frames' first fits are not ok (front/back still ambiguous), every
+    # refit from the settled, resolved state is
+    assert not all(r["ok"] for r in plain[:k])
+    assert all(r["ok"] for r in settled[:k]), [r.get("reason") for r in settled[:k]]
     assert any(a["params"] != b["params"] for a, b in zip(plain[:k], settled[:k]))
