@@ -126,9 +126,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation), props=props)
-        sets = ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
-                for fid, group in _frame_sets(session, names, frames, stream_check))
-        yield from (settled_records(st, sets) if retrack else (st.step(*s) for s in sets))
+        def read(fids, check=None):
+            return ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
+                    for fid, group in _frame_sets(session, names, fids, check))
+
+        sets = read(frames, stream_check)
+        yield from (settled_records(st, sets, lambda a, b: read(range(a, b + 1))) if retrack
+                    else (st.step(*s) for s in sets))
         return
     floor = floor_test(cams, backgrounds, segmentation)
     for fid, group in _frame_sets(session, names, frames, stream_check):
@@ -142,26 +146,33 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                            images={n: f.image for n, f in group.items()} if colour else None)
 
 
-def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]]) -> Iterator[dict]:
+def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
+                    reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None
+                    ) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up fitted again once it is over.
 
     The frames a warm-up fits (``SceneTracker.warming``: reverse term off, clutter not yet learned)
     are held with their records; at the first frame after it, ``SceneTracker.retrack`` fits them
     again latest first from the settled state, and a held frame's record is the refit's when the
-    gate passes it, else the first fit's.  Frames still in a warm-up when ``sets`` ends keep
-    their first records.  The held images are the only memory cost (one warm-up's frame sets).
+    gate passes it, else the first fit's.  Frames still in a warm-up when ``sets`` ends keep their
+    first records.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
+    (so that the held frames' images need not stay in memory; None: they are held).
     """
     held: list[tuple[tuple, dict]] = []
     for item in sets:
         rec = st.step(*item)
         if st.warming:
-            held.append((item, rec))
+            held.append((item if reread is None else item[:2], rec))
             continue
         if held:
-            again = st.retrack([it for it, _ in reversed(held)])
-            for (_, first), refit in zip(held, reversed(again)):
-                yield refit if refit.get("ok") else first
+            firsts = {it[0]: r for it, r in held}
+            again = list(held) if reread is None else [(it, firsts[it[0]]) for it in
+                                                        reread(held[0][0][0], held[-1][0][0]) if it[0] in firsts]
+            refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
+            for (it, first) in held:
+                refit = refits.get(it[0])
+                yield refit if refit is not None and refit.get("ok") else first
             held = []
         yield rec
     yield from (r for _, r in held)

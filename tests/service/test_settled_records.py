@@ -31,14 +31,21 @@ class _Scripted:
         return [{"frame": f, "ok": self.refit_ok[f], "pass": "refit"} for f, _, _ in frames]
 
 
+@pytest.mark.parametrize("reread", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed):
+def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
     rng = np.random.default_rng(seed)
     n = 40
     warm = rng.random(n) < 0.5
     ok, refit_ok = rng.random(n) < 0.5, rng.random(n) < 0.5
     st = _Scripted(warm, ok, refit_ok)
-    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n))))
+    reads = []
+
+    def read(a, b):  # the frames a..b read again (with one before and after, to be left out)
+        reads.append((a, b))
+        return ((i, 1000 * i, {}) for i in range(max(a - 1, 0), min(b + 2, n)))
+
+    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n)), read if reread else None))
     assert [r["frame"] for r in out] == list(range(n))
     # every maximal run of warm frames followed by a settled frame is refitted once, latest first
     runs, cur = [], []
@@ -49,6 +56,7 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed):
             runs.append(cur[::-1])
             cur = []
     assert st.retracked == runs
+    assert reads == ([(r[-1], r[0]) for r in runs] if reread else [])
     refitted = {f for run in runs for f in run}
     for r in out:
         f = r["frame"]
