@@ -122,3 +122,21 @@ def test_track_session_retrack_changes_only_the_warm_up(hop):
     assert not all(r["ok"] for r in plain[:k])
     assert all(r["ok"] for r in settled[:k]), [r.get("reason") for r in settled[:k]]
     assert any(a["params"] != b["params"] for a, b in zip(plain[:k], settled[:k]))
+
+
+@pytest.mark.parametrize("flag", [[], ["--no-retrack"]])
+def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, flag):
+    import service.commands.track as track_cmd
+    from service.cli import main
+
+    seen = {}
+
+    def spy(*args, **kwargs):
+        seen.update(kwargs)
+        return track_session(*args, **kwargs)
+
+    monkeypatch.setattr(track_cmd, "track_session", spy)
+    out = tmp_path / "poses.jsonl"
+    assert main(["track", str(hop), "--out", str(out), "--frames", "0:3", *flag]) == 0
+    assert seen["retrack"] is (not flag)
+    assert len(out.read_text().splitlines()) == 3
