@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -27,7 +27,8 @@ from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
-__all__ = ["background_models", "floor_test", "session_model", "track_session", "summarise", "TrackSummary"]
+__all__ = ["background_models", "floor_test", "session_model", "settled_records", "track_session", "summarise",
+           "TrackSummary"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -79,21 +80,19 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   blob_options=None, scene: SceneOptions | None = None,
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
-                  stream_check: StreamCheck | None = None, props=None) -> Iterator[dict]:
+                  stream_check: StreamCheck | None = None, props=None, retrack: bool = True) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
     ----------
     session : Session
-    model : str or BodyModel
-        Body model (a name is sized by the session's subject).
+    model : str or BodyModel, the body model (a name is sized by the session's subject)
     sliding, solver, options, segmentation
         Contour tracker settings (``tracker.fitting.tracking.Tracker``, ``SegmentationParams``).
     frames, cameras : range or None, sequence of str or None; frame ids, camera names (None: all)
     initial_params : ndarray, shape (n_params,), optional
         Start pose; else automatic initialisation on the first frame.
-    backgrounds : dict, optional
-        Camera name -> BackgroundModel; learnt (``service.backgrounds``) when None.
+    backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}
         ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``).
@@ -103,7 +102,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
     stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
-    props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs)
+    props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
+    retrack : bool, with ``scene``: fit a warm-up's frames again once it is over (``settled_records``)
 
     Yields
     ------
@@ -126,9 +126,13 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation), props=props)
-        for fid, group in _frame_sets(session, names, frames, stream_check):
-            ts = next(iter(group.values())).timestamp_ns
-            yield st.step(fid, ts, {n: f.image for n, f in group.items()})
+        def read(fids, check=None):
+            return ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
+                    for fid, group in _frame_sets(session, names, fids, check))
+
+        sets = read(frames, stream_check)
+        yield from (settled_records(st, sets, lambda a, b: read(range(a, b + 1))) if retrack
+                    else (st.step(*s) for s in sets))
         return
     floor = floor_test(cams, backgrounds, segmentation)
     for fid, group in _frame_sets(session, names, frames, stream_check):
@@ -140,6 +144,38 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
                            silhouettes={n: s.silhouette for n, s in segs.items()},
                            images={n: f.image for n, f in group.items()} if colour else None)
+
+
+def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
+                    reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None
+                    ) -> Iterator[dict]:
+    """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
+    the frames of each warm-up fitted again once it is over.
+
+    The frames a warm-up fits (``SceneTracker.warming``: reverse term off, clutter not yet learned)
+    are held with their records; at the first frame after it, ``SceneTracker.retrack`` fits them
+    again latest first from the settled state, and a held frame's record is the refit's when the
+    gate passes it, else the first fit's.  Frames still in a warm-up when ``sets`` ends keep their
+    first records.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
+    (so that the held frames' images need not stay in memory; None: they are held).
+    """
+    held: list[tuple[tuple, dict]] = []
+    for item in sets:
+        rec = st.step(*item)
+        if st.warming:
+            held.append((item if reread is None else item[:2], rec))
+            continue
+        if held:
+            firsts = {it[0]: r for it, r in held}
+            again = list(held) if reread is None else [(it, firsts[it[0]]) for it in
+                                                        reread(held[0][0][0], held[-1][0][0]) if it[0] in firsts]
+            refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
+            for (it, first) in held:
+                refit = refits.get(it[0])
+                yield refit if refit is not None and refit.get("ok") else first
+            held = []
+        yield rec
+    yield from (r for _, r in held)
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,

@@ -45,6 +45,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                              "(repeatable; adds to session.toml's [[prop]] boxes; --prop=-0.3,... when it starts with -)")
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
+    parser.add_argument("--no-retrack", action="store_true",
+                        help="fit the scene tracker's warm-up frames once, as a live tracker does (default: fitted "
+                             "again backwards from the settled state once the warm-up is over)")
     parser.add_argument("--allow-missing-cameras", action="store_true",
                         help="track on with the cameras that have frames when a camera's video is cut short or "
                              "corrupt (reported per camera: frames read of frames expected); default: exit 2")
@@ -118,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
                                  frames=frames, cameras=cameras, initial_params=init, backgrounds=backgrounds,
                                  method=args.method, stream_check=check, ignore=ignore, props=props,
                                  segmentation=SegmentationParams(floor_test=args.floor_test),
-                                 scene=None if args.no_scene or args.method != "contours" else SceneOptions()):
+                                 scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
+                                 retrack=not args.no_retrack):
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
             _progress(len(records), total, time.perf_counter() - t0, rec)

@@ -80,10 +80,16 @@ def prop_session(tmp_path_factory) -> Path:
 def test_prop_beside_subject_is_learned_and_cut(prop_session):
     truth = _truth(prop_session)
     session = load_session(prop_session)
-    scene = list(track_session(session, scene=SceneOptions()))
+    first = list(track_session(session, scene=SceneOptions(), retrack=False))
     # before anything is learned the box is in every silhouette and the gate sees it
     # (measured: IoU 0.59-0.60; tracked without the scene handling 0 of 60 frames ok, IoU 0.56-0.62)
-    assert not scene[0]["ok"] and "IoU" in scene[0]["reason"], scene[0].get("reason")
+    assert not first[0]["ok"] and "IoU" in first[0]["reason"], first[0].get("reason")
+    scene = list(track_session(session, scene=SceneOptions()))
+    # offline, the warm-up is fitted again from the settled state, the box learned (measured: 25 of
+    # 25 ok at 20-29 mm; their first fits 0 ok at 16-35 mm): ok, and honestly so
+    early = scene[:FRAMES // 2]
+    assert np.mean([r["ok"] for r in early]) >= 0.9, [r.get("reason") for r in early]
+    assert all(_mean_error_mm(r, truth) < 40.0 for r in early if r["ok"])
     late = slice(FRAMES // 2, None)  # after the learning (SceneOptions.learn_frames + warm-up)
     ok_scene = np.mean([r["ok"] for r in scene[late]])
     err_scene = [_mean_error_mm(r, truth) for r in scene[late]]

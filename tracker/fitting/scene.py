@@ -18,6 +18,8 @@ and the clutter of ``segmentation.clutter``:
    recovery searches wait too, and later keep to a CPU budget (``recovery_gap``,
    ``recovery_share``);
 5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``);
+   an offline caller may fit the warm-up's frames again, backwards from the settled state
+   (``retrack``: the reverse term on, the clutter learned and the props cut);
 6. operator props (``tracker.fitting.props``: world boxes such as the chair) are clutter where the
    body's projection does not cover them, and the fit may not put the body inside them.
 
@@ -27,9 +29,10 @@ the real body as clutter; a fit that starts on the prop and stays there can lear
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, replace
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import cv2
 import numpy as np
@@ -132,6 +135,7 @@ class SceneTracker:
     ----------
     learners : camera name -> StaticClutter (empty when ``options.learn`` is False)
     last_segmentation : camera name -> FrameSegmentation of the last frame (the body's silhouettes)
+    warming : the last frame was fitted in the warm-up (reverse term off, no recovery)
     """
 
     def __init__(self, tracker: Tracker, backgrounds: Mapping[str, BackgroundModel], *,
@@ -167,6 +171,7 @@ class SceneTracker:
         self._explained: dict[str, np.ndarray] = {}
         self._prop_keep: dict[str, np.ndarray] = {}  # with prop_margin_m: the body's projection so grown
         self.last_segmentation: dict = {}
+        self.warming = False
 
     def set_props(self, props: "list[PropBox]") -> None:
         """Use ``props`` from the next frame on (their masks and the fit's limit)."""
@@ -246,6 +251,7 @@ class SceneTracker:
             self._initialise(segs)
         inits = tr.n_initialisations  # after this class's own start search (not a recovery)
         warm = self._since_init < self.options.warmup_frames and self.options.learn
+        self.warming = warm
         tr.options = replace(self._base_options, reverse_weight=0.0) if warm else self._base_options
         tr.recover = self._recover and not warm and self.budget.allows()
         t0 = time.perf_counter()
@@ -276,6 +282,20 @@ class SceneTracker:
                 for n, img in images.items():
                     self.learners[n].update(img, raws[n], self._explained[n])
         return rec
+
+    def retrack(self, frames: Sequence[tuple[int, int, Mapping[str, np.ndarray]]]) -> list[dict]:
+        """Fit ``frames`` again, in the order given, from this tracker's state, on a copy (this
+        tracker is left as it is); their pose records in that order.
+
+        ``frames``: ``(frame id, timestamp ns, camera name -> BGR image)``, usually the warm-up's
+        frames latest first, so that each fit starts from its successor's: the copy fits them with
+        the reverse term on (its warm-up is over), the clutter learned so far, the props cut where
+        the body does not cover them, and no velocity into the first of them.  The background
+        models, which nothing changes, are shared with the copy."""
+        twin = copy.deepcopy(self, {id(bg): bg for bg in self.backgrounds.values()})
+        twin._since_init = max(twin._since_init, self.options.warmup_frames)
+        twin.tracker.previous = None
+        return [twin.step(fid, ts, images) for fid, ts, images in frames]
 
     def _initialise(self, segs: Mapping) -> None:
         """The first pose: standing or seated search on the frame's silhouettes (nothing learned
