@@ -8,8 +8,8 @@ deterministic).  Prints the segment-length error of the default and the calibrat
 rendered truth, the held-out IoU it was judged by, whether it was adopted and at which frame, the
 poses' mean joint error (MPJPE) on the frames after the swap in both runs, and the calibration's CPU
 seconds (and as a ratio to ``machine_ref_ms``).  ``--live``: the fitter is instead fed in real time
-(the session's fps) with the calibration in its thread, and the sets fitted per second before and
-while it runs are printed.
+(the session's fps) with the calibration in its thread, and the sets fitted per second before,
+while it runs and after are printed.
 
     python bench/auto_subject.py [--json] [--seed 0] [--frames 150] [--cameras 4] [--size 320x240]
 """
@@ -113,6 +113,8 @@ def live(args, clip, options) -> dict:
     log, fid = [], 0
     deadline = t0 + args.live_s
     while time.perf_counter() < deadline:
+        if fit.auto_subject.state.state in ("adopted", "rejected", "failed"):  # then 10 s more with the result
+            deadline = min(deadline, time.perf_counter() + 10.0) if log[-1][1] == "fitting" else deadline
         now = time.perf_counter()
         fid = max(fid + 1, int((now - t0) / period))  # the newest frame, as a live tracker demands it
         k = fid % clip.n_frames
@@ -147,7 +149,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--lengths-only", action="store_true")
     ap.add_argument("--live", action="store_true")
-    ap.add_argument("--live-s", type=float, default=60.0)
+    ap.add_argument("--live-s", type=float, default=400.0, help="--live: at most this long (else until 10 s after the result)")
     ap.add_argument("--cache-dir", default="/tmp/contourcap_auto_subject")
     args = ap.parse_args(argv)
     from service.live_replay import load_clip
