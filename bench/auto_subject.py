@@ -9,7 +9,8 @@ rendered truth, the held-out IoU it was judged by, whether it was adopted and at
 poses' mean joint error (MPJPE) on the frames after the swap in both runs, and the calibration's CPU
 seconds (and as a ratio to ``machine_ref_ms``).  ``--live``: the fitter is instead fed in real time
 (the session's fps) with the calibration in its thread, and the sets fitted per second before,
-while it runs and after are printed.
+while it runs and after are printed.  ``--offline``: ``contourcap track`` with and without
+``--calibrate-subject 0:N`` on the session (MPJPE of both, whether it was adopted, CPU seconds).
 
     python bench/auto_subject.py [--json] [--seed 0] [--frames 150] [--cameras 4] [--size 320x240]
 """
@@ -138,6 +139,44 @@ def live(args, clip, options) -> dict:
     return out
 
 
+def offline(args, root: Path, true: dict) -> dict:
+    """``contourcap track`` without and with ``--calibrate-subject``: MPJPE against the rendered truth."""
+    import contextlib
+    import io
+    import tempfile
+
+    from service.cli import main as cli
+
+    truth = {json.loads(line)["frame"]: json.loads(line)["joints"]
+             for line in (root / "ground_truth.jsonl").read_text().splitlines() if line.strip()}
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="autocal_") as tmp:
+        for name, extra in (("default", []), ("calibrated", ["--calibrate-subject", f"0:{args.frames}",
+                                                             "--calibrate-samples", str(args.sample)])):
+            poses = Path(tmp) / f"{name}.jsonl"
+            err = io.StringIO()
+            c0 = time.process_time()
+            with contextlib.redirect_stderr(err):
+                rc = cli(["track", str(root), "--out", str(poses), *extra])
+            out[f"cpu_s_{name}"] = round(time.process_time() - c0, 1)
+            recs = [json.loads(line) for line in poses.read_text().splitlines() if line.strip()] if rc == 0 else []
+            e = [np.mean([np.linalg.norm(np.subtract(r["joints"][k], truth[r["frame"]][k])) for k in truth[r["frame"]]])
+                 for r in recs if r.get("joints")]
+            out[f"mpjpe_mm_{name}"] = round(1e3 * float(np.mean(e)), 1) if e else None
+            out[f"ok_{name}"] = sum(bool(r.get("ok")) for r in recs)
+            line = next((x for x in err.getvalue().splitlines() if "subject" in x and "contourcap track:" in x), "")
+            if name == "calibrated":
+                out["calibration"] = line[:400]
+                sub = Path(tmp) / "calibrated.subject.toml"
+                if sub.is_file():
+                    from tracker.body.subject import read_subject
+
+                    cal = read_subject(sub).segment_lengths
+                    out["length_err_cm_mean_calibrated"] = round(100 * float(np.mean([abs(cal[k] - true[k])
+                                                                                       for k in true])), 2)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", action="store_true")
@@ -149,7 +188,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--lengths-only", action="store_true")
     ap.add_argument("--live", action="store_true")
-    ap.add_argument("--live-s", type=float, default=400.0, help="--live: at most this long (else until 10 s after the result)")
+    ap.add_argument("--offline", action="store_true")
+    ap.add_argument("--live-s", type=float, default=400.0,
+                    help="--live: at most this long (else until 10 s after the result)")
     ap.add_argument("--cache-dir", default="/tmp/contourcap_auto_subject")
     args = ap.parse_args(argv)
     from service.live_replay import load_clip
@@ -163,7 +204,10 @@ def main(argv=None) -> int:
                                  widths_and_radii=not args.lengths_only)
     out = {"machine_ref_ms": round(ref, 1), "seed": args.seed, "frames": clip.n_frames, "cameras": args.cameras,
            "size": args.size, "sample": args.sample, "rounds": args.rounds, "lengths_only": args.lengths_only}
-    out.update(live(args, clip, options) if args.live else replay(args, clip, true, options))
+    if args.offline:
+        out.update(offline(args, root, true))
+    else:
+        out.update(live(args, clip, options) if args.live else replay(args, clip, true, options))
     if out.get("calibration_cpu_s") is not None:
         out["calibration_cpu_per_ref"] = round(1e3 * out["calibration_cpu_s"] / ref, 1)
     print(json.dumps(out) if args.json else json.dumps(out, indent=1))

@@ -68,9 +68,7 @@ def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOpt
     sampled (``tracker.fitting.subject_auto.SubjectSample``, at most ``options.frames`` sets spread in
     time and pose), a subject fitted to them and judged on the held-out ones (``calibrate_sample``:
     check ``adopted``); None when fewer than two sets could be sampled."""
-    if options is None:
-        spacing = max(1, len(frames) // (4 * AutoSubjectOptions.frames))
-        options = AutoSubjectOptions(min_gap=spacing)
+    options = options or AutoSubjectOptions(min_gap=max(1, len(frames) // (4 * AutoSubjectOptions.frames)))
     sample = SubjectSample(model, options.frames, options.min_gap)
     fitted = track_range(session, names, frames, model,
                          lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet)

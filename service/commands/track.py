@@ -35,6 +35,9 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                         help="when no subject file is given: calibrate the subject's body on frames A:B first "
                              "(default 0:100; their trusted fits, a third held out: kept only when it explains "
                              "those better), track with it and write it beside --out as OUT.subject.toml")
+    parser.add_argument("--calibrate-samples", type=int, default=9, metavar="N",
+                        help="--calibrate-subject: frame sets sampled, a third held out (default 9; the "
+                             "calibration's CPU time grows with it)")
     parser.add_argument("--no-sliding", action="store_true", help="drop the sliding term of the contour Jacobian")
     parser.add_argument("--solver", choices=("lm", "lsq"), default="lm",
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
@@ -151,6 +154,7 @@ def _calibrated(session, args, model, cameras):
     """``--calibrate-subject``: (the body to track with, its subject file's name or None)."""
     from service.atomic import write_text_atomic
     from service.commands.calibrate_subject import auto_calibrate
+    from tracker.fitting.subject_auto import AutoSubjectOptions
     from tracker.body.subject import subject_toml
 
     frames = parse_frame_range(args.calibrate_subject)
@@ -158,7 +162,11 @@ def _calibrated(session, args, model, cameras):
         raise SessionError(f"--calibrate-subject {args.calibrate_subject!r}: expected a range A:B of at least 2 frames")
     names = list(session.camera_names if cameras is None else cameras)
     c0 = time.process_time()
-    res = auto_calibrate(session, names, frames, model, quiet=False)
+    if not 3 <= args.calibrate_samples <= 64:
+        raise SessionError(f"--calibrate-samples: expected 3..64, got {args.calibrate_samples}")
+    n = args.calibrate_samples
+    options = AutoSubjectOptions(frames=n, held_out=max(1, n // 3), offers=n, min_gap=max(1, len(frames) // (4 * n)))
+    res = auto_calibrate(session, names, frames, model, options, quiet=False)
     cpu = time.process_time() - c0
     if res is None:
         print(f"contourcap track: subject not calibrated: no trusted fits in frames {args.calibrate_subject} "

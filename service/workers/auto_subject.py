@@ -1,7 +1,8 @@
 """The live tracker's automatic subject calibration: sampled while tracking, fitted beside it.
 
 When the studio names no subject file, :class:`AutoSubject` offers every usable fit (the search
-idle; ``tracker.fitting.subject_auto.usable_record``) with its silhouettes to a bounded, diverse ``tracker.fitting.subject_auto.SubjectSample``;
+idle; ``tracker.fitting.subject_auto.usable_record``) with its silhouettes to a bounded, diverse
+``tracker.fitting.subject_auto.SubjectSample``;
 once ``options.offers`` sets were offered it fits and judges the subject (``calibrate_sample``) in
 a daemon thread whose niceness is raised by ``nice`` (the fitting thread keeps its priority: poses
 go on going out, one per set).  Once, it calibrates; when the calibrated body explains the

@@ -29,7 +29,8 @@ from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, SubjectFit, 
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
-__all__ = ["AutoSubjectOptions", "usable_record", "SubjectSample", "SampleCalibration", "calibrate_sample", "held_out_iou"]
+__all__ = ["AutoSubjectOptions", "usable_record", "SubjectSample", "SampleCalibration", "calibrate_sample",
+           "held_out_iou"]
 
 
 @dataclass(frozen=True)
