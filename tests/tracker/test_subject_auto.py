@@ -88,3 +88,21 @@ def test_a_better_body_is_adopted_and_the_right_one_kept():
     # the tracker's body is the subject's: a calibration must not replace it with another
     same = calibrate_sample(model, cams, _rendered(model, rng, 5, cams), opts)
     assert not same.adopted, same
+
+
+def test_tracker_resize_keeps_the_pose_and_refuses_other_parameters():
+    from tracker.body.model import available_models
+    from tracker.fitting.tracking import Tracker
+
+    model = load_model("knossow40")
+    tr = Tracker(model, ring_cameras(2, size=(80, 60)), initial_params=model.zero())
+    p = tr.params.copy()
+    big = load_model("knossow40", segment_lengths={"thigh": 0.5})
+    tr.resize(big)
+    assert tr.model is big and tr.guard.model is big and tr.guard.appearance.model is big
+    np.testing.assert_array_equal(tr.params, p)
+    others = [m for m in available_models() if load_model(m).param_names != model.param_names]
+    for name in others:
+        with pytest.raises(ValueError, match="other parameters"):
+            tr.resize(load_model(name))
+    assert others  # the refusal was exercised
