@@ -100,8 +100,9 @@ def run(args: argparse.Namespace) -> int:
     frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
     model = session_model(session, args.model) if args.subject is None else read_subject(args.subject).body()
+    from_file = session.subject_file is not None and read_subject(session.subject_file).model == model.name
     subject_name = (args.subject.name if args.subject is not None else
-                    session.subject_file.name if session.subject_file is not None else None)
+                    session.subject_file.name if from_file else None)
     if args.calibrate_subject is not None and subject_name is None:
         model, subject_name = _calibrated(session, args, model, cameras)
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
