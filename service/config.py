@@ -27,6 +27,9 @@
     set_timeout_ms = 80               # live: wait this long for missing cameras
     window = 8                        # lossless: frames in flight before the cameras wait
     method = "contours"               # contours (Knossow) | blobs (BMVC'04: the track worker reads the frames)
+    auto_subject = true               # live, no subject file: calibrate the subject beside the stream
+    auto_subject_frames = 9           # frame sets it samples (a third held out to judge the result)
+    auto_subject_nice = 10            # nice levels the calibration thread runs below the process
 
     [router]                          # optional: `contourcap run` on this host also runs the router
     host = "host-a"
@@ -122,8 +125,7 @@ class StudioConfig:
         Replay session; calibration file (None: the session's).
     model : str
         Body model name or file.
-    jpeg_quality : int
-        1..100, for ``encoding = "jpeg"`` cameras.
+    jpeg_quality : int, 1..100, for ``encoding = "jpeg"`` cameras
     zenoh : ZenohSettings
     trigger : TriggerConfig
     tracker_host : str
@@ -138,6 +140,7 @@ class StudioConfig:
     method : {"contours", "blobs"}
         ``[tracker] method``: the contour tracker on the segment workers' chamfer images, or the blob
         tracker (``tracker.blobs``) on the camera frames themselves (no segment worker runs).
+    auto_subject, auto_subject_frames, auto_subject_nice : ``[tracker]`` (module docstring)
     """
 
     path: Path | None
@@ -156,6 +159,9 @@ class StudioConfig:
     router: ZenohSettings | None
     cameras: tuple[CameraConfig, ...]
     method: str = "contours"
+    auto_subject: bool = True
+    auto_subject_frames: int = 9
+    auto_subject_nice: int = 10
 
     @property
     def hosts(self) -> tuple[str, ...]:
@@ -283,7 +289,8 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
                                  width=spec.width, height=spec.height, fps=spec.fps, exposure=spec.exposure))
     trigger = TriggerConfig(cap.trigger, cap.fps, dict(cap.trigger_options))
     tr = r.get(data, "tracker", "", (dict,), {})
-    r.unknown(tr, {"host", "set_timeout_ms", "window", "method"}, "tracker")
+    r.unknown(tr, {"host", "set_timeout_ms", "window", "method", "auto_subject", "auto_subject_frames",
+                   "auto_subject_nice"}, "tracker")
     ro = r.get(data, "router", "", (dict,), None)
     zen = _zenoh(r, r.get(data, "zenoh", "", (dict,), {}))
     router = None
@@ -297,6 +304,10 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
     window = r.get(tr, "window", "tracker", (int,), 8)
     timeout = float(r.get(tr, "set_timeout_ms", "tracker", (int, float), 80.0))
     quality = r.get(s, "jpeg_quality", "studio", (int,), 90)
+    auto_frames = r.get(tr, "auto_subject_frames", "tracker", (int,), 9)
+    auto_nice = r.get(tr, "auto_subject_nice", "tracker", (int,), 10)
+    if not 3 <= auto_frames <= 64 or not 0 <= auto_nice <= 19:
+        raise r.err("tracker", "auto_subject_frames in 3..64, auto_subject_nice in 0..19")
     if window < 1 or timeout <= 0 or not 1 <= quality <= 100:
         raise r.err("tracker" if quality in range(1, 101) else "studio.jpeg_quality",
                     "window >= 1, set_timeout_ms > 0, jpeg_quality in 1..100")
@@ -309,7 +320,9 @@ def parse_config(data: Mapping[str, Any], *, where: str = "<config>", base: Path
         router_host=r.name(ro, "host", "router") if ro is not None else None,
         router=router,
         cameras=tuple(cams),
-        method=r.get(tr, "method", "tracker", (str,), "contours", choices=METHODS))
+        method=r.get(tr, "method", "tracker", (str,), "contours", choices=METHODS),
+        auto_subject=r.get(tr, "auto_subject", "tracker", (bool,), True), auto_subject_frames=auto_frames,
+        auto_subject_nice=auto_nice)
 
 
 def load_config(path) -> StudioConfig:

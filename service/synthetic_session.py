@@ -29,7 +29,7 @@ from tracker.synthetic.bvh import load_bvh
 from tracker.synthetic.retarget import Retargeted, retarget_bvh
 from tracker.synthetic.synth import Palette, add_noise, ground_truth_record, synthetic_studio
 
-__all__ = ["make_synthetic_session", "CODECS"]
+__all__ = ["make_synthetic_session", "make_proportioned_session", "CODECS"]
 
 CODECS = ("ffv1", "png", "mjpg")
 _FOURCC = {"ffv1": "FFV1", "mjpg": "MJPG"}
@@ -207,3 +207,23 @@ def make_synthetic_session(
     for s in sinks:
         s.check()
     return out
+
+
+def make_proportioned_session(out_dir, *, seed: int = 0, spread: float = 0.15, frames: int = 120,
+                              motion: str = "scaled_131_03", **options) -> tuple[Path, dict]:
+    """A synthetic session of a body whose segment lengths are drawn within ``±spread`` of the model's
+    anthropometric ones (seeded), moving as ``motion`` (a bundled BVH); session.toml gives the height
+    only, so a tracker starts from the model's default proportions.  ``options``: as
+    :func:`make_synthetic_session`.  Returns ``(out_dir, true segment lengths in metres)``."""
+    from dataclasses import replace
+
+    from tracker.body.model import load_model
+    from tracker.fitting.subject_size import nominal_segment_lengths
+    from tracker.synthetic.synth import bundled_motion
+
+    base = retarget_bvh(load_bvh(bundled_motion(motion)), fps=options.get("fps", 30.0), frames=frames)
+    rng = np.random.default_rng(seed)
+    true = {k: v * float(rng.uniform(1 - spread, 1 + spread)) for k, v in nominal_segment_lengths(base.model).items()}
+    body = load_model(base.model.name, height_m=base.height_m, segment_lengths=true)
+    return make_synthetic_session(bundled_motion(motion), out_dir, retargeted=replace(base, model=body), seed=seed,
+                                  **options), true

@@ -25,6 +25,7 @@ from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
 from tracker.fitting.props import PropBox
 from tracker.fitting.scene import SceneOptions, SceneTracker
+from tracker.fitting.subject_auto import AutoSubjectOptions, SampleCalibration, SubjectSample, calibrate_sample
 from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
 from tracker.fitting.tracking import Tracker
 
@@ -40,6 +41,44 @@ def add_subject_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress")
 
 
+def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = True):
+    """Track ``frames`` as ``contourcap track`` does (``SceneTracker``: clutter learned, the session's
+    props, seated or standing start) and call ``on_fit(frame_id, record, silhouettes)`` for every
+    fit of the range's second half (after the clutter is learned) the scene tracker trusts, with its
+    clutter-cut silhouettes (camera -> mask); returns the tracker's model (the start may resize it)."""
+    backgrounds, _ = background_models(session, names, frames=frames)
+    tracker = Tracker(model, [session.camera_model(n) for n in names])
+    props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+    st = SceneTracker(tracker, backgrounds, props=props)
+    half = frames.start + len(frames) // 2
+    for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
+        rec = st.step(fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
+        if fid >= half and rec.get("params") is not None and st.trusted(rec):
+            on_fit(fid, rec, {n: s.silhouette.copy() for n, s in st.last_segmentation.items()})
+        if not quiet:
+            print(f"\rtracking frame {fid}", end="", file=sys.stderr, flush=True)
+    if not quiet:
+        print(file=sys.stderr)
+    return st.tracker.model
+
+
+def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOptions | None = None, *,
+                   quiet: bool = True) -> SampleCalibration | None:
+    """``contourcap track --calibrate-subject``: the trusted fits of ``frames`` (:func:`track_range`)
+    sampled (``tracker.fitting.subject_auto.SubjectSample``, at most ``options.frames`` sets spread in
+    time and pose), a subject fitted to them and judged on the held-out ones (``calibrate_sample``:
+    check ``adopted``); None when fewer than two sets could be sampled."""
+    options = options or AutoSubjectOptions(min_gap=max(1, len(frames) // (4 * AutoSubjectOptions.frames)))
+    sample = SubjectSample(model, options.frames, options.min_gap)
+    fitted = track_range(session, names, frames, model,
+                         lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet)
+    if len(sample) < 2:
+        return None
+    first, last = frames.start, frames.stop
+    return calibrate_sample(fitted, [session.camera_model(n) for n in names], sample.sets(), options,
+                            where=f"contourcap track --calibrate-subject, frames {first}:{last}")
+
+
 def run_subject(args: argparse.Namespace) -> int:
     try:
         session = load_session(args.session)
@@ -50,27 +89,20 @@ def run_subject(args: argparse.Namespace) -> int:
             raise ValueError(f"--samples: expected >= 1, got {args.samples}")
         model = session_model(session, args.model)
         names = list(session.camera_names)
-        backgrounds, _ = background_models(session, names, frames=frames)
-        tracker = Tracker(model, [session.camera_model(n) for n in names])
-        props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
-        st = SceneTracker(tracker, backgrounds, props=props)
         half = frames.start + len(frames) // 2
         want = set(np.linspace(half, frames.stop - 1, args.samples).round().astype(int).tolist())
         poses, sils = [], []
-        for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
-            rec = st.step(fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
-            if fid >= half and rec.get("params") is not None and st.trusted(rec) and (fid in want or len(poses) < 1):
+
+        def take(fid, rec, silhouettes):
+            if fid in want or len(poses) < 1:
                 poses.append(np.asarray(rec["params"], float))
-                sils.append({n: s.silhouette.copy() for n, s in st.last_segmentation.items()})
-            if not args.quiet:
-                print(f"\rtracking frame {fid} ({len(poses)} sampled)", end="", file=sys.stderr, flush=True)
-        if not args.quiet:
-            print(file=sys.stderr)
+                sils.append(silhouettes)
+
+        fitted_model = track_range(session, names, frames, model, take, quiet=args.quiet)
         if not poses:
             print(f"contourcap calibrate subject: no trusted fit in frames {args.frames}; try other frames",
                   file=sys.stderr)
             return 1
-        fitted_model = st.tracker.model
         more = {} if args.lengths_only else {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER}
         fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils, **more)
         subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,

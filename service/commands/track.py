@@ -31,6 +31,13 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="knossow40", choices=available_models(), help="body model")
     parser.add_argument("--subject", type=Path, default=None, metavar="SUBJECT.toml",
                         help="the subject's body (contourcap calibrate subject); overrides session.toml's [subject]")
+    parser.add_argument("--calibrate-subject", nargs="?", const="0:100", default=None, metavar="A:B",
+                        help="when no subject file is given: calibrate the subject's body on frames A:B first "
+                             "(default 0:100; their trusted fits, a third held out: kept only when it explains "
+                             "those better), track with it and write it beside --out as OUT.subject.toml")
+    parser.add_argument("--calibrate-samples", type=int, default=9, metavar="N",
+                        help="--calibrate-subject: frame sets sampled, a third held out (default 9; the "
+                             "calibration's CPU time grows with it)")
     parser.add_argument("--no-sliding", action="store_true", help="drop the sliding term of the contour Jacobian")
     parser.add_argument("--solver", choices=("lm", "lsq"), default="lm",
                         help="lm: analytic Levenberg–Marquardt; lsq: scipy least_squares, finite differences")
@@ -96,6 +103,11 @@ def run(args: argparse.Namespace) -> int:
     frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
     model = session_model(session, args.model) if args.subject is None else read_subject(args.subject).body()
+    from_file = session.subject_file is not None and read_subject(session.subject_file).model == model.name
+    subject_name = (args.subject.name if args.subject is not None else
+                    session.subject_file.name if from_file else None)
+    if args.calibrate_subject is not None and subject_name is None:
+        model, subject_name = _calibrated(session, args, model, cameras)
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
     names = list(session.camera_names if cameras is None else cameras)
     ignore = _ignore_masks(session, args.ignore_region)
@@ -123,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
                                  segmentation=SegmentationParams(floor_test=args.floor_test),
                                  scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
                                  retrack=not args.no_retrack):
+            if subject_name is not None:
+                rec["subject"] = subject_name
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
             _progress(len(records), total, time.perf_counter() - t0, rec)
@@ -139,6 +153,40 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     print("summary: " + json.dumps(summary), file=sys.stderr)
     return 0 if summary["frames"] else 1
+
+
+def _calibrated(session, args, model, cameras):
+    """``--calibrate-subject``: (the body to track with, its subject file's name or None)."""
+    from service.atomic import write_text_atomic
+    from service.commands.calibrate_subject import auto_calibrate
+    from tracker.fitting.subject_auto import AutoSubjectOptions
+    from tracker.body.subject import subject_toml
+
+    frames = parse_frame_range(args.calibrate_subject)
+    if frames is None or len(frames) < 2:
+        raise SessionError(f"--calibrate-subject {args.calibrate_subject!r}: expected a range A:B of at least 2 frames")
+    names = list(session.camera_names if cameras is None else cameras)
+    c0 = time.process_time()
+    if not 3 <= args.calibrate_samples <= 64:
+        raise SessionError(f"--calibrate-samples: expected 3..64, got {args.calibrate_samples}")
+    n = args.calibrate_samples
+    options = AutoSubjectOptions(frames=n, held_out=max(1, n // 3), offers=n, min_gap=max(1, len(frames) // (4 * n)))
+    res = auto_calibrate(session, names, frames, model, options, quiet=False)
+    cpu = time.process_time() - c0
+    if res is None:
+        print(f"contourcap track: subject not calibrated: no trusted fits in frames {args.calibrate_subject} "
+              f"({cpu:.0f} s CPU); tracking with the model's proportions", file=sys.stderr)
+        return model, None
+    info = {"adopted": res.adopted, "held_out_iou": [round(res.iou_current, 4), round(res.iou_calibrated, 4)],
+            "frames_fitted": list(res.fit_frames), "frames_held_out": list(res.held_out_frames), "cpu_s": round(cpu, 1)}
+    if not res.adopted:
+        print(f"contourcap track: calibrated subject not better on held-out frames, not used: {json.dumps(info)}",
+              file=sys.stderr)
+        return model, None
+    path = args.out.with_name(args.out.name.split(".")[0] + ".subject.toml")
+    write_text_atomic(path, subject_toml(res.subject))
+    print(f"contourcap track: subject calibrated, written to {path}: {json.dumps(info)}", file=sys.stderr)
+    return res.fit.model, path.name
 
 
 def _ignore_masks(session, texts) -> dict:

@@ -74,6 +74,11 @@ class Keys:
         """``hull``: the blob tracker's coloured hull per frame (``service.wire.hull.HullMessage``)."""
         return f"{self.root}/hull"
 
+    @property
+    def subject(self) -> str:
+        """``subject``: a fitted subject, subject-file TOML text (``service.wire.subject.SubjectMessage``)."""
+        return f"{self.root}/subject"
+
     def status(self, component: str = "*") -> str:
         """``status/<component>``: StatusMessages and liveliness tokens."""
         return f"{self.root}/status/{component}"

@@ -5,7 +5,8 @@ All of them are UTF-8 JSON objects so that any zenoh client in any language can 
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
 ``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``fit_cpu_ms``, ``effort``,
-``missing_cameras``: the names of the cameras a live set went on without).  Status, credit, have and demand records carry
+``missing_cameras``: the names of the cameras a live set went on without; ``subject``: the name of the
+subject body the pose is of).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -81,6 +82,8 @@ class PoseRecord:
         for key in ("iterations", "cameras"):
             if key in obj:
                 meta_int(obj, key)
+        if "subject" in obj and (not isinstance(obj["subject"], str) or not 0 < len(obj["subject"]) <= 200):
+            raise MessageError("subject: expected the subject's name, a string of 1 to 200 characters")
         if "missing_cameras" in obj:
             missing = obj["missing_cameras"]
             if not isinstance(missing, list) or len(missing) > _MAX_CAMERAS:

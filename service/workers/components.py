@@ -135,7 +135,8 @@ class TrackerFitter:
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None) -> "TrackerFitter":
-        """A tracker on ``session``'s calibration with ``model`` sized by its subject.
+        """A tracker on ``session``'s calibration with ``model`` sized by its subject (its subject file
+        when session.toml names one for this model, else height and segment lengths).
 
         Parameters
         ----------
@@ -145,11 +146,10 @@ class TrackerFitter:
         initial_params : ndarray, shape (n_params,), optional
             Start pose; else automatic initialisation on the first frame set.
         """
-        from tracker.body.model import load_model
+        from service.offline import session_model
         from tracker.fitting.tracking import Tracker
 
-        body = load_model(model, height_m=session.height_m, segment_lengths=session.segment_lengths)
-        return cls(Tracker(body, list(session.calibration), initial_params=initial_params))
+        return cls(Tracker(session_model(session, model), list(session.calibration), initial_params=initial_params))
 
     def __call__(self, frame_id: int, timestamp_ns: int, chamfer: dict) -> dict:
         """The pose record of one frame set (``chamfer``: camera name -> ChamferMessage)."""

@@ -24,6 +24,8 @@
   each camera's rectangle around the last fitted and the predicted pose
   (``tracker.imaging.roi.pose_rois``), its margin growing with the frames since the last fit; None (whole frames) before the first pose, while
   searching, after a bad frame or when a silhouette touched its ROI's border (``roi_clipped``).
+- **The subject's body.**  An ``auto_subject`` (``service.workers.auto_subject``) is offered the good
+  sets; its adopted body is taken at a set's start, no search running, and named by the records' ``subject``.
 - ``fit_ms``: the time this set's fit took, milliseconds (``latency_ms`` is set by the worker:
   capture to publish).
 """
@@ -211,6 +213,8 @@ class LiveTrackerFitter(TrackerFitter):
         self.min_search_cameras = float(min_search_cameras)
         self.catch_up_sets = int(catch_up_sets)
         self._held: list[tuple[int, dict]] = []  # (frame id, chamfer images) of sets seen while searching
+        #: ``service.workers.auto_subject.AutoSubject`` or None (module docstring); the adopted subject's name
+        self.auto_subject, self.subject_name = None, None
 
     @classmethod
     def from_session(cls, session, *, model: str = "knossow40", initial_params=None, **options) -> "LiveTrackerFitter":
@@ -421,6 +425,10 @@ class LiveTrackerFitter(TrackerFitter):
         t0 = self.clock()
         self._clipped = any(msg.attrs.get("roi_clipped", 0.0) > 0 for msg in chamfer.values())
         tr = self.tracker
+        body = None if self.auto_subject is None or self.searching else self.auto_subject.take_body()
+        if body is not None:  # a frame boundary, no search holding the old body
+            tr.resize(body)
+            self.subject_name = self.auto_subject.name
         if tr.params is None and self.searching:  # initialising: nothing to fit from yet
             record = self._prediction_record(frame_id, timestamp_ns, len(chamfer))
             if self.catch_up_sets > 0:
@@ -445,6 +453,8 @@ class LiveTrackerFitter(TrackerFitter):
                     self._hold(frame_id, images)
                 else:
                     self.effort.update(self.clock() - t0, bool(record.get("ok")))
+                    if self.auto_subject is not None:
+                        self.auto_subject.observe(frame_id, record, silhouettes)
                 if not record.get("ok"):
                     poor = str(record.get("reason", "")).startswith("poor fit")
                     if self.searching:
@@ -464,6 +474,8 @@ class LiveTrackerFitter(TrackerFitter):
             self._last_frame = int(frame_id)
             self._sets_since_rejoin += 1
         self._last_ok = bool(record.get("ok"))
+        if self.subject_name is not None:
+            record["subject"] = self.subject_name
         record["fit_ms"] = 1e3 * (self.clock() - t0)
         return record
 

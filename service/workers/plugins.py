@@ -58,7 +58,8 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
     """The track worker's ``Fitter``: a plug-in factory ``f(cfg) -> Fitter``, else the tracker
     (:class:`~service.workers.components.TrackerFitter`; live delivery:
     :class:`~service.workers.live_fit.LiveTrackerFitter`) on the session's subject and calibration
-    (``[studio] calibration`` replaces the session's)."""
+    (``[studio] calibration`` replaces the session's); a live one without a subject file calibrates
+    the subject beside the stream unless ``[tracker] auto_subject = false``."""
     if plugin:
         return load_plugin(plugin)(cfg)
     if cfg.method == "blobs":  # [tracker] method = "blobs": the blob tracker reads the frames itself
@@ -73,7 +74,13 @@ def build_fitter(cfg: StudioConfig, *, plugin: str | None = None) -> Callable:
     if cfg.delivery == "live":
         from service.workers.live_fit import LiveTrackerFitter
 
-        return LiveTrackerFitter.from_session(session, model=cfg.model)
+        fitter = LiveTrackerFitter.from_session(session, model=cfg.model)
+        if cfg.auto_subject and session.subject_file is None:
+            from service.workers.auto_subject import studio_auto_subject
+
+            fitter.auto_subject = studio_auto_subject(fitter.tracker, session.root, cfg.auto_subject_frames,
+                                                      nice=cfg.auto_subject_nice)
+        return fitter
     return TrackerFitter.from_session(session, model=cfg.model)
 
 

@@ -20,6 +20,10 @@ thread; threads it starts inherit it): the camera and segment workers feeding it
 and without it the fit waits for a core while they run ahead.  Raising priority needs
 ``CAP_SYS_NICE`` or an ``RLIMIT_NICE`` allowance; when refused the worker logs it, counts
 ``priority_refused`` and runs as it is.
+
+A fitter with an ``auto_subject`` (``service.workers.auto_subject``) that has adopted a calibrated
+subject gets it published on ``contourcap/<studio>/subject`` after the next pose, and again every
+:data:`SUBJECT_REPUBLISH_S` (late subscribers), counted as ``subject_published``.
 """
 
 from __future__ import annotations
@@ -45,6 +49,8 @@ __all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
 log = logging.getLogger("contourcap.worker")
 
 LOSSLESS_SET_TIMEOUT_S = 60.0
+SUBJECT_REPUBLISH_S = 10.0
+"""Seconds between two publications of an adopted subject."""
 DEFAULT_PRIORITY_BOOST = 5
 """Nice levels the fitting thread is raised by (see the module docstring)."""
 # the largest chamfer message taken (a 1920x1200 camera's two uint16 images are ~9 MB): with the inbox
@@ -121,6 +127,9 @@ class TrackWorker:
         self.demand_pub = None if lossless else declare_publisher(session, keys.demand(TRACK_CONSUMER),
                                                                   mode="lossless")
         self.status = StatusReporter(session, keys, component, clock=clock)
+        self.subject_pub = (declare_publisher(session, keys.subject, mode="lossless")
+                            if getattr(fit, "auto_subject", None) is not None else None)
+        self._subject_sent: float | None = None
         self.sent: dict[int, int] = {}  # frame id -> earliest capture wall time (ns) of its pending set
         self._demanded_at: float | None = None
 
@@ -197,10 +206,21 @@ class TrackWorker:
         self.pose_pub.put(pose.to_bytes())
         if self.on_pose is not None:
             self.on_pose(pose)
+        self._publish_subject()
         if self.credit_pub is not None:
             self.credit_pub.put(CreditMessage(TRACK_CONSUMER, fs.frame_id).to_bytes())
         self.status.count("processed")
         self.status.count("missing_cameras", len(fs.missing))
+
+    def _publish_subject(self) -> None:
+        """The fitter's adopted subject on ``keys.subject`` (see the module docstring)."""
+        msg = None if self.subject_pub is None else self.fit.auto_subject.message()
+        now = self.clock()
+        if msg is None or (self._subject_sent is not None and now - self._subject_sent < SUBJECT_REPUBLISH_S):
+            return
+        self.subject_pub.put(msg.to_bytes())
+        self._subject_sent = now
+        self.status.count("subject_published")
 
     def _idle(self, last_input: float | None) -> bool:
         """Input came, none for ``idle_exit_s`` and nothing is pending."""

@@ -23,7 +23,7 @@ from typing import Mapping
 from capture.tomlio import dumps, load_file
 from tracker.body.model import BodyModel, ModelError, load_model
 
-__all__ = ["Subject", "read_subject", "write_subject"]
+__all__ = ["Subject", "read_subject", "parse_subject", "subject_toml", "write_subject"]
 
 
 @dataclass(frozen=True)
@@ -47,16 +47,20 @@ class Subject:
 def read_subject(path) -> Subject:
     """Read and validate a subject file; ModelError naming the file and the key on bad content."""
     path = Path(path)
-    data = load_file(path, error=ModelError, what="subject file")
-    sub = data.get("subject")
+    return parse_subject(load_file(path, error=ModelError, what="subject file"), str(path))
+
+
+def parse_subject(data, where: str) -> Subject:
+    """Validate a parsed subject TOML document (a dict); ModelError naming ``where`` and the key."""
+    sub = data.get("subject") if isinstance(data, dict) else None
     if not isinstance(sub, dict):
-        raise ModelError(f"{path}: no [subject] table")
+        raise ModelError(f"{where}: no [subject] table")
     name = sub.get("model", "knossow40")
     height = sub.get("height_m", 1.75)
     if not isinstance(name, str) or not name:
-        raise ModelError(f"{path}: [subject] model must be a model name")
+        raise ModelError(f"{where}: [subject] model must be a model name")
     if isinstance(height, bool) or not isinstance(height, (int, float)) or not 0.5 <= height <= 2.6:
-        raise ModelError(f"{path}: [subject] height_m must be metres in [0.5, 2.6], got {height!r}")
+        raise ModelError(f"{where}: [subject] height_m must be metres in [0.5, 2.6], got {height!r}")
     tables = {}
     for key, what in (("segment_lengths", "segment names to positive metres"),
                       ("widths", "width names to positive metres"),
@@ -64,19 +68,21 @@ def read_subject(path) -> Subject:
         table = sub.get(key, {})
         if not isinstance(table, dict) or len(table) > 64 or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < 10 for v in table.values()):
-            raise ModelError(f"{path}: [subject.{key}] must map {what}")
+            raise ModelError(f"{where}: [subject.{key}] must map {what}")
         tables[key] = {str(k): float(v) for k, v in table.items()}
-    subject = Subject(name, float(height), tables["segment_lengths"], str(sub.get("fitted", "")),
-                      tables["widths"], tables["radius_scale"])
+    fitted = sub.get("fitted", "")
+    if not isinstance(fitted, str) or len(fitted) > 1000:
+        raise ModelError(f"{where}: [subject] fitted must be text of at most 1000 characters")
+    subject = Subject(name, float(height), tables["segment_lengths"], fitted, tables["widths"], tables["radius_scale"])
     try:
         subject.body()
     except ModelError as exc:
-        raise ModelError(f"{path}: {exc}") from None
+        raise ModelError(f"{where}: {exc}") from None
     return subject
 
 
-def write_subject(path, subject: Subject) -> None:
-    """Write ``subject`` as a subject file at ``path``."""
+def subject_toml(subject: Subject) -> str:
+    """``subject`` as subject-file TOML text (what :func:`write_subject` writes)."""
     data = {"subject": {"model": subject.model, "height_m": round(float(subject.height_m), 4),
                         "fitted": subject.fitted,
                         "segment_lengths": {k: round(float(v), 4) for k, v in subject.segment_lengths.items()}}}
@@ -84,4 +90,9 @@ def write_subject(path, subject: Subject) -> None:
         table = getattr(subject, key)
         if table:
             data["subject"][key] = {k: round(float(v), 4) for k, v in table.items()}
-    Path(path).write_text(dumps(data), encoding="utf-8")
+    return dumps(data)
+
+
+def write_subject(path, subject: Subject) -> None:
+    """Write ``subject`` as a subject file at ``path``."""
+    Path(path).write_text(subject_toml(subject), encoding="utf-8")

@@ -125,6 +125,10 @@ class FrontBackGuard:
         self.appearance = AppearanceModel(model)
         self.reset()
 
+    def resize(self, model: BodyModel) -> None:
+        """Go on with ``model`` (the same parts, other sizes); the colours learned per part are kept."""
+        self.model = self.appearance.model = self._pending.model = model
+
     def reset(self) -> None:
         """Open the question (first frame, re-initialisation): the mirror is tracked again."""
         self.state = AMBIGUOUS

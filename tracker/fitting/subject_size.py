@@ -34,7 +34,7 @@ from tracker.body.model import MODELS_DIR, BodyModel, load_model
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
-__all__ = ["SubjectFit", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
+__all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
            "WIDTH_ORDER", "RADIUS_ORDER"]
 
 #: Search order, trunk first.
@@ -88,7 +88,9 @@ def nominal_widths(model: BodyModel) -> dict[str, float]:
             for name, parts in plain.width_parts.items()}
 
 
-def _pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
+def pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
+    """Parameter name -> ``polish_iou`` step: ``factor`` × 0.03 m (root translation), 0.08 rad (root
+    rotation), 0.12 rad (joints)."""
     steps = {}
     for name, kind in zip(model.param_names, model.param_kind):
         steps[name] = factor * (0.03 if kind == 0 else (0.08 if kind == 1 else 0.12))
@@ -155,7 +157,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     params = [model.clamp(np.asarray(p, dtype=float)) for p in poses]
     current = model
     iou_before = float(np.mean([v.score(p) for v, p in zip(views, params)]))
-    steps = _pose_steps(model, pose_step)
+    steps = pose_steps(model, pose_step)
 
     root = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
     # a width moves a joint sideways: the joints below it re-polished too (else their angles, polished

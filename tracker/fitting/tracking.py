@@ -317,6 +317,15 @@ class Tracker:
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
+    def resize(self, model: BodyModel) -> None:
+        """Track with ``model`` from the next frame on: the same model's parameters, other sizes
+        (a calibrated subject); the pose, its velocity and the front/back guard's state are kept."""
+        if model.param_names != self.model.param_names:
+            raise ValueError(f"resize: model {model.name!r} has other parameters than {self.model.name!r}")
+        self.model = model
+        if self.guard is not None:
+            self.guard.resize(model)
+
     def predict(self, frame_id: int | None = None) -> np.ndarray | None:
         """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
         before initialisation.
