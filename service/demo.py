@@ -160,8 +160,13 @@ def demo_session(opts: DemoOptions, *, progress: Callable[[str], None] = print) 
     from tracker.synthetic.retarget import palindrome, retarget_bvh
     from tracker.synthetic.synth import bundled_motion
 
+    # the model file is in the key: its ground truth joints are the model's (a changed joint table re-renders)
+    from tracker.body.model import MODELS_DIR
+
+    model_file = MODELS_DIR / "knossow40.toml"
     key = json.dumps([opts.motion, opts.cameras, list(opts.size), opts.frames, opts.fps]
-                     + (["bounce"] if opts.bounce else []), sort_keys=True)
+                     + (["bounce"] if opts.bounce else [])
+                     + [hashlib.sha1(model_file.read_bytes()).hexdigest()], sort_keys=True)
     root = Path(opts.cache_dir) / f"demo-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
     if (root / "ground_truth.jsonl").is_file() and (root / "session.toml").is_file():
         progress(f"demo session (cached): {root}")
@@ -185,7 +190,8 @@ def write_studio(session_root: Path, out_dir: Path, *, port: int, delivery: str)
     session = load_session(session_root)
     data = {"studio": {"name": STUDIO, "delivery": delivery, "session": str(session_root.resolve())},
             "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]},
-            "tracker": {"host": HOST, "set_timeout_ms": 200, "window": 4},
+            # the demo's subject is rendered from the model at the session's height: nothing to calibrate
+            "tracker": {"host": HOST, "set_timeout_ms": 200, "window": 4, "auto_subject": False},
             "camera": [{"name": c, "host": HOST, "backend": "replay", "encoding": "raw"}
                        for c in session.camera_names]}
     out_dir.mkdir(parents=True, exist_ok=True)
