@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from service.workers.base import WorkerError
 
     finished = False
+    fitter = None
     try:
         if args.role == "camera":
             from service.workers.camera import EpochPacer, run_camera_worker
@@ -140,6 +141,21 @@ def run(args: argparse.Namespace) -> int:
         if finished:
             time.sleep(LINGER_S)  # its last messages reach slow readers (see LINGER_S)
         session.close()
+        _leave_running_calibration(fitter, 0 if finished else 1, log)
+
+
+def _leave_running_calibration(fitter, code: int, log: logging.Logger) -> None:
+    """End the process now, with ``code``, when ``fitter``'s automatic subject calibration
+    (``service.workers.auto_subject``) still runs: that thread cannot be interrupted, and the
+    interpreter's exit would stop it inside compiled code and abort the process."""
+    auto = getattr(fitter, "auto_subject", None)
+    if auto is None or not auto.running:
+        return
+    log.info("automatic subject calibration still running: dropped at exit")
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -156,6 +156,11 @@ class AutoSubject:
         with self._lock:
             return self._message
 
+    @property
+    def running(self) -> bool:
+        """A calibration thread is running."""
+        return self._thread is not None and self._thread.is_alive()
+
     def join(self, timeout_s: float | None = None) -> None:
         """Wait for a running calibration thread (tests, shutdown)."""
         if self._thread is not None:
