@@ -135,21 +135,18 @@ class SubjectSample:
         if any(abs(int(frame_id) - k.frame_id) < self.min_gap for k in self.kept):
             return False
         self.offered += 1
-        new = _Kept(int(frame_id), p.copy(), p[self._joints].copy(),
-                    {n: (np.shape(s), np.packbits(np.asarray(s) > 0)) for n, s in silhouettes.items()})
-        if len(self.kept) < self.capacity:
-            self.kept.append(new)
-            return True
-        every = self.kept + [new]
-        ang = np.stack([k.angles for k in every])
-        d = np.sqrt(((ang[:, None, :] - ang[None, :, :]) ** 2).sum(-1))
-        np.fill_diagonal(d, np.inf)
-        nearest = d.min(axis=1)
-        drop = int(np.argmin(nearest))  # the set nearest another: the newest on a tie (argmin takes the first)
-        if drop == len(self.kept):
-            return False
-        del self.kept[drop]
-        self.kept.append(new)
+        angles = p[self._joints]
+        if len(self.kept) >= self.capacity:
+            ang = np.stack([k.angles for k in self.kept] + [angles])
+            d = np.sqrt(((ang[:, None, :] - ang[None, :, :]) ** 2).sum(-1))
+            np.fill_diagonal(d, np.inf)
+            drop = int(np.argmin(d.min(axis=1)))  # the set nearest another (on a tie the older: argmin takes the first)
+            if drop == len(self.kept):
+                return False
+            del self.kept[drop]
+        # packed only once kept
+        self.kept.append(_Kept(int(frame_id), p.copy(), angles.copy(),
+                               {n: (np.shape(s), np.packbits(np.asarray(s) > 0)) for n, s in silhouettes.items()}))
         return True
 
     def sets(self) -> list[tuple[int, np.ndarray, dict]]:
