@@ -199,9 +199,8 @@ def main(argv=None) -> int:
     ref = machine_ref_ms()
     root, true = build(args)
     clip = load_clip(root)
-    options = AutoSubjectOptions(frames=args.sample, held_out=max(1, args.sample // 3), offers=3 * args.sample,
-                                 min_gap=max(1, clip.n_frames // (4 * args.sample)), rounds=args.rounds,
-                                 widths_and_radii=not args.lengths_only)
+    options = AutoSubjectOptions.for_sample(args.sample, span=clip.n_frames, rounds=args.rounds,
+                                            widths_and_radii=not args.lengths_only)
     out = {"machine_ref_ms": round(ref, 1), "seed": args.seed, "frames": clip.n_frames, "cameras": args.cameras,
            "size": args.size, "sample": args.sample, "rounds": args.rounds, "lengths_only": args.lengths_only}
     if args.offline:

@@ -62,13 +62,12 @@ def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = T
     return st.tracker.model
 
 
-def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOptions | None = None, *,
+def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOptions, *,
                    quiet: bool = True) -> SampleCalibration | None:
     """``contourcap track --calibrate-subject``: the trusted fits of ``frames`` (:func:`track_range`)
     sampled (``tracker.fitting.subject_auto.SubjectSample``, at most ``options.frames`` sets spread in
     time and pose), a subject fitted to them and judged on the held-out ones (``calibrate_sample``:
     check ``adopted``); None when fewer than two sets could be sampled."""
-    options = options or AutoSubjectOptions(min_gap=max(1, len(frames) // (4 * AutoSubjectOptions.frames)))
     sample = SubjectSample(model, options.frames, options.min_gap)
     fitted = track_range(session, names, frames, model,
                          lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet)

@@ -103,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
     frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
     model = session_model(session, args.model) if args.subject is None else read_subject(args.subject).body()
-    from_file = session.subject_file is not None and read_subject(session.subject_file).model == model.name
+    from_file = (args.subject is None and session.subject_file is not None
+                 and read_subject(session.subject_file).model == model.name)
     subject_name = (args.subject.name if args.subject is not None else
                     session.subject_file.name if from_file else None)
     if args.calibrate_subject is not None and subject_name is None:
@@ -169,8 +170,7 @@ def _calibrated(session, args, model, cameras):
     c0 = time.process_time()
     if not 3 <= args.calibrate_samples <= 64:
         raise SessionError(f"--calibrate-samples: expected 3..64, got {args.calibrate_samples}")
-    n = args.calibrate_samples
-    options = AutoSubjectOptions(frames=n, held_out=max(1, n // 3), offers=n, min_gap=max(1, len(frames) // (4 * n)))
+    options = AutoSubjectOptions.for_sample(args.calibrate_samples, span=len(frames), offers_per_set=1)
     res = auto_calibrate(session, names, frames, model, options, quiet=False)
     cpu = time.process_time() - c0
     if res is None:

@@ -173,6 +173,5 @@ def studio_auto_subject(tracker, root, frames: int, *, nice: int = DEFAULT_NICE)
     to ``root / AUTO_SUBJECT_FILE`` when ``root`` is a writable directory."""
     root = Path(root)
     writable = root.is_dir() and os.access(root, os.W_OK)
-    opts = AutoSubjectOptions(frames=int(frames), held_out=max(1, int(frames) // 3), offers=3 * int(frames))
-    return AutoSubject(tracker.model, list(tracker.cameras.values()), opts,
+    return AutoSubject(tracker.model, list(tracker.cameras.values()), AutoSubjectOptions.for_sample(frames),
                        out_path=root / AUTO_SUBJECT_FILE if writable else None, nice=nice)

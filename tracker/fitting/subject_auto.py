@@ -83,6 +83,16 @@ class AutoSubjectOptions:
         if not (0.1 <= float(self.scale) <= 1.0) or int(self.judge_rounds) < 0 or not float(self.min_gain) >= 0:
             raise ValueError("scale in [0.1, 1], judge_rounds >= 0 and min_gain >= 0 expected")
 
+    @classmethod
+    def for_sample(cls, n: int, *, span: int | None = None, offers_per_set: int = 3,
+                   **options) -> "AutoSubjectOptions":
+        """Options for a sample of ``n`` sets, a third held out, calibrated after ``offers_per_set``
+        × ``n`` offers; with ``span`` (frames the sample is drawn from) the sets at least a quarter
+        of ``span / n`` apart.  ``options``: the other fields."""
+        n = int(n)
+        gap = {} if span is None else {"min_gap": max(1, int(span) // (4 * n))}
+        return cls(frames=n, held_out=max(1, n // 3), offers=int(offers_per_set) * n, **gap, **options)
+
 
 def usable_record(record: Mapping, min_iou: float) -> bool:
     """Whether a pose record's fit may be sampled (``AutoSubjectOptions.min_iou``): it has a pose and
