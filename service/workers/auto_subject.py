@@ -26,6 +26,7 @@ import numpy as np
 
 from service.atomic import write_text_atomic
 from service.wire.subject import SubjectMessage
+from service.workers.base import renice_thread
 from tracker.fitting.subject_auto import (AutoSubjectOptions, SampleCalibration, SubjectSample, calibrate_sample,
                                          usable_record)
 
@@ -112,12 +113,8 @@ class AutoSubject:
         self._thread.start()
 
     def _lower_priority(self) -> None:
-        if self.nice <= 0 or not self.background or not hasattr(os, "setpriority"):
-            return
-        tid = threading.get_native_id()
-        try:
-            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + self.nice)
-        except OSError as exc:
+        exc = renice_thread(self.nice) if self.nice > 0 and self.background else None
+        if exc is not None:
             log.info("subject calibration's priority not lowered (%s)", exc)
 
     def _calibrate(self, sets, model) -> None:

@@ -14,11 +14,13 @@ worker forwards it, and the tracker reports ``latency_ms = now - earliest captur
 
 from __future__ import annotations
 
+import os
+import threading
 from typing import Callable
 
 from service.wire.messages import ChamferMessage, FrameMessage
 
-__all__ = ["WorkerError", "Segmenter", "Fitter", "TRACK_CONSUMER", "segment_token"]
+__all__ = ["WorkerError", "Segmenter", "Fitter", "TRACK_CONSUMER", "renice_thread", "segment_token"]
 
 Segmenter = Callable[[FrameMessage, object], ChamferMessage]
 Fitter = Callable[[int, int, dict], dict]
@@ -33,3 +35,16 @@ class WorkerError(RuntimeError):
 def segment_token(camera: str) -> str:
     """Liveliness name of "camera ``camera`` is being segmented" (lossless cameras wait for it)."""
     return f"segment.{camera}"
+
+
+def renice_thread(delta: int) -> OSError | None:
+    """Change the calling thread's niceness by ``delta`` levels (negative: a higher priority); the
+    refusal, or None (also where the OS has no per-thread niceness: nothing changed)."""
+    if delta == 0 or not hasattr(os, "setpriority"):
+        return None
+    tid = threading.get_native_id()  # Linux: PRIO_PROCESS of a thread id is that thread's niceness
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + int(delta))
+    except OSError as exc:
+        return exc
+    return None

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import os
 import threading
 import time
 from typing import Callable
@@ -42,7 +41,7 @@ from service.flow.demand import DemandPlanner
 from service.wire.bus import Inbox, Keys, StatusReporter, declare_publisher, wait_any
 from service.wire.messages import ChamferMessage, FrameMessage, MessageError
 from service.wire.records import CreditMessage, DemandMessage, HaveMessage, PoseRecord
-from service.workers.base import TRACK_CONSUMER, Fitter
+from service.workers.base import TRACK_CONSUMER, Fitter, renice_thread
 
 __all__ = ["LOSSLESS_SET_TIMEOUT_S", "TrackWorker", "run_track_worker"]
 
@@ -230,12 +229,8 @@ class TrackWorker:
 
     def _raise_priority(self) -> None:
         """Raise the calling thread's priority by ``priority_boost`` nice levels (see the module docstring)."""
-        if self.priority_boost <= 0 or not hasattr(os, "setpriority"):
-            return
-        tid = threading.get_native_id()  # Linux: PRIO_PROCESS of a thread id is that thread's niceness
-        try:
-            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) - self.priority_boost)
-        except OSError as exc:
+        exc = renice_thread(-self.priority_boost) if self.priority_boost > 0 else None
+        if exc is not None:
             log.info("fitting thread's priority not raised (%s): it shares the cores as it is", exc)
             self.status.count("priority_refused")
 
