@@ -29,7 +29,7 @@ from tracker.body.kinematics import forward, point_jacobian
 from tracker.body.model import BodyModel
 from tracker.errors import TrackerError
 
-__all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks"]
+__all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks", "seat_box"]
 
 _MAX_COORD_M = 100.0
 _MAX_SIZE_M = 10.0
@@ -205,7 +205,7 @@ def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained
     underside (the lower hip joint minus ``thigh_radius``, metres: a seat supports the thighs; the
     hull under them is hidden by the body).  ``joints``: the fit's joint centres (name -> (3,) m).  None when the fit is not seated (a thigh more than 35° off
     the horizontal) or fewer than 50 voxels are left."""
-    from tracker.search.hull import visual_hull
+    from tracker.search.hull import centres_inside, visual_hull
 
     hips = 0.5 * (np.asarray(joints["left_hip"], float) + np.asarray(joints["right_hip"], float))
     knees = 0.5 * (np.asarray(joints["left_knee"], float) + np.asarray(joints["right_knee"], float))
@@ -224,13 +224,7 @@ def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained
     X = hull.centres
     if len(X) == 0:
         return None
-    covered = np.ones(len(X), bool)
-    for cam in cams:
-        uv = np.round(cam.project(X)).astype(int)
-        inside = (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
-        hit = np.zeros(len(X), bool)
-        hit[inside] = explained[cam.name][uv[inside, 1], uv[inside, 0]]
-        covered &= hit
+    covered = centres_inside(X, cams, [explained[c.name] for c in cams])
     rel = X - hips
     along, across = rel @ fwd, rel @ left
     keep = (~covered & (X[:, 2] < hips[2]) & (along > -behind_hip_m) & (along < reach - behind_knee_m)

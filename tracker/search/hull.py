@@ -30,7 +30,8 @@ import numpy as np
 
 from capture.camera import Camera
 
-__all__ = ["VoxelHull", "visual_hull", "common_view_bounds", "render_hull", "silhouette_iou", "project_with_depth"]
+__all__ = ["VoxelHull", "visual_hull", "centres_inside", "common_view_bounds", "render_hull", "silhouette_iou",
+           "project_with_depth"]
 
 # the 8 corners of the unit cube, (8, 3)
 _CORNERS = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
@@ -333,7 +334,7 @@ def _classify(lower: np.ndarray, size: float, cameras, integrals, tolerance: int
     return empty, (n_partial <= tolerance) & ~empty
 
 
-def _centres_inside(centres: np.ndarray, cameras, masks, tolerance: int = 0) -> np.ndarray:
+def centres_inside(centres: np.ndarray, cameras, masks, tolerance: int = 0) -> np.ndarray:
     """Whether points (n, 3) project onto the silhouette in all but ``tolerance`` views, (n,) bool."""
     misses = np.zeros(len(centres), int)
     for cam, m in zip(cameras, masks):
@@ -405,7 +406,7 @@ def visual_hull(
             break
         if level == levels:  # finest level: a cube is kept when its centre is on every silhouette
             centre = lower + 0.5 * size
-            on = _centres_inside(centre, cameras, masks, int(tolerance))
+            on = centres_inside(centre, cameras, masks, int(tolerance))
             kept_c.append(centre[on])
             kept_s.append(np.full(int(on.sum()), size))
             kept_f.append(np.zeros(int(on.sum()), bool))
