@@ -312,7 +312,7 @@ class SceneTracker:
         except ValueError:
             return
         if model is not tr.model:
-            tr.model = model
+            tr.resize(model)  # the front/back guard follows the body too
             self._views = self._render_views()
         tr.params = tr.model.clamp(np.asarray(res.params, dtype=float))
         tr.n_initialisations += 1
