@@ -203,16 +203,20 @@ class SampleCalibration:
     cpu_s: float
 
 
-def held_out_iou(model: BodyModel, cameras: Sequence[Camera], sets, *, scale: float, rounds: int) -> float:
-    """Mean silhouette IoU of ``model`` over ``sets`` (``(frame id, params, camera -> mask)``), each
-    pose first polished to the model by ``rounds`` of ``polish_iou``."""
+def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
+                 rounds: int) -> list[float]:
+    """Mean silhouette IoU of each of ``models`` (same parameters, other sizes) over ``sets``
+    (``(frame id, params, camera -> mask)``), each pose first polished to the model by ``rounds`` of
+    ``polish_iou``; one list entry per model."""
     names = [c.name for c in cameras]
-    steps = pose_steps(model, 0.5)
-    ious = []
-    for _, p, sils in sets:
-        views = ScoreViews(model, cameras, [np.asarray(sils[n]) for n in names], scale=scale)
-        ious.append(polish_iou(model, views, p, steps=steps, rounds=rounds)[1] if rounds else views.score(p))
-    return float(np.mean(ious))
+    ious = np.zeros((len(sets), len(models)))
+    for i, (_, p, sils) in enumerate(sets):
+        base = ScoreViews(models[0], cameras, [np.asarray(sils[n]) for n in names], scale=scale)
+        for j, model in enumerate(models):
+            views = base if j == 0 else base.with_model(model)
+            ious[i, j] = (polish_iou(model, views, p, steps=pose_steps(model, 0.5), rounds=rounds)[1] if rounds
+                          else views.score(p))
+    return [float(v) for v in ious.mean(axis=0)]
 
 
 def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options: AutoSubjectOptions,
@@ -242,8 +246,7 @@ def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options:
     more = {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER} if options.widths_and_radii else {}
     fit = estimate_segment_lengths(model, cameras, [s[1] for s in fit_sets], [s[2] for s in fit_sets],
                                    rounds=int(options.rounds), scale=float(options.scale), **more)
-    before = held_out_iou(model, cameras, held, scale=options.scale, rounds=options.judge_rounds)
-    after = held_out_iou(fit.model, cameras, held, scale=options.scale, rounds=options.judge_rounds)
+    before, after = held_out_iou([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds)
     adopted = after >= before + float(options.min_gain)
     subject = Subject(model.name, model.height_m, fit.segment_lengths,
                       f"{where}: {len(fit_sets)} frame sets fitted, held-out IoU {before:.3f} -> {after:.3f} "
