@@ -372,7 +372,7 @@ class BlobTracker:
         act = weights > 0
         rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
         if self._static is not None:
-            self._static.update(hull.centres, ~body_contains(m, pose, hull.centres, margin_m=o.static_clearance_m))
+            self._static.update(hull.centres, ~body_contains(m, pose, hull.centres, margin_m=self._static.clearance_m))
         return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms, "static_fraction": float(scene.mean()),
                         **self.explains(hull, pose, scene)}
 
