@@ -127,10 +127,10 @@ def run(session_dir: Path, reference_path: Path, *, frames: range | None, every:
     """Track ``frames`` with the scene tracker; floor, objective and basin at every ``every``-th.
     ``model_name``: a bundled model or a model TOML file (default: the session's knossow40);
     ``props``: ``--prop`` boxes (with the session's ``[[prop]]`` ones: as ``contourcap track``)."""
-    from service.offline import background_models, session_model
+    from service.offline import background_models, session_model, session_props
     from tracker.body.model import load_model
     from tracker.fitting.cost import ChamferCost
-    from tracker.fitting.props import PropBox, parse_prop
+    from tracker.fitting.props import parse_prop
     from tracker.fitting.scene import SceneOptions, SceneTracker
     from tracker.fitting.tracking import Tracker, TrackerOptions, fit_frame
     from tracker.search.scoring import ScoreViews
@@ -143,7 +143,7 @@ def run(session_dir: Path, reference_path: Path, *, frames: range | None, every:
         model = model.with_height(height_m)
     cams = [session.camera_model(n) for n in names]
     backgrounds, _ = background_models(session, names, frames=frames)
-    boxes = [PropBox.from_values(b) for b in session.props] + [parse_prop(t) for t in props]
+    boxes = session_props(session) + [parse_prop(t) for t in props]
     scene = SceneTracker(Tracker(model, cams), backgrounds, options=SceneOptions(), props=boxes)
     rows = {"tracker": [], "floor": [], "basin": []}
     objective = {k: {"iou": [], "rms_px": []} for k in rows}

@@ -27,8 +27,8 @@ from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
-__all__ = ["background_models", "floor_test", "session_model", "settled_records", "track_session", "summarise",
-           "TrackSummary"]
+__all__ = ["background_models", "floor_test", "session_model", "session_props", "settled_records", "track_session",
+           "summarise", "TrackSummary"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -41,6 +41,13 @@ def session_model(session: Session, name: str = "knossow40") -> BodyModel:
         if subject.model == name:
             return subject.body()
     return load_model(name, height_m=session.height_m, segment_lengths=session.segment_lengths)
+
+
+def session_props(session: Session) -> list:
+    """The session's ``[[prop]]`` boxes as ``tracker.fitting.props.PropBox`` (world metres, never body)."""
+    from tracker.fitting.props import PropBox
+
+    return [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
 
 
 def floor_test(cameras, backgrounds: dict[str, BackgroundModel],

@@ -20,10 +20,9 @@ import numpy as np
 
 from capture.replay import iter_frame_sets, parse_frame_range
 from capture.session import SessionError, load_session
-from service.offline import background_models, session_model
+from service.offline import background_models, session_model, session_props
 from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
-from tracker.fitting.props import PropBox
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.subject_auto import AutoSubjectOptions, SampleCalibration, SubjectSample, calibrate_sample
 from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
@@ -48,7 +47,7 @@ def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = T
     clutter-cut silhouettes (camera -> mask); returns the tracker's model (the start may resize it)."""
     backgrounds, _ = background_models(session, names, frames=frames)
     tracker = Tracker(model, [session.camera_model(n) for n in names])
-    props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+    props = session_props(session)
     st = SceneTracker(tracker, backgrounds, props=props)
     half = frames.start + len(frames) // 2
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):

@@ -16,8 +16,8 @@ from capture.session import SessionError, load_session
 from service.atomic import JsonlWriter
 from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
-from tracker.fitting.props import PropBox, parse_prop
-from service.offline import background_models, session_model, summarise, track_session
+from tracker.fitting.props import parse_prop
+from service.offline import background_models, session_model, session_props, summarise, track_session
 from segmentation.pipeline import SegmentationParams
 from tracker.fitting.scene import SceneOptions
 from tracker.body.model import available_models
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     init = None if args.initial_pose is None else read_initial_pose(args.initial_pose, model.n_params)
     names = list(session.camera_names if cameras is None else cameras)
     ignore = _ignore_masks(session, args.ignore_region)
-    props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+    props = session_props(session)
     props += [parse_prop(t) for t in args.prop]
     media = check_media(session, names, frames=frames)  # unreadable, wrong size, range past the end: exit 2
     check = StreamCheck(media, allow_missing=args.allow_missing_cameras)

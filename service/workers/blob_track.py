@@ -87,11 +87,10 @@ class BlobFitter:
         ``replayed`` cameras take their background model from the session (``service.backgrounds``), the
         others learn it from their first frames."""
         from service.backgrounds import background_models
-        from service.offline import session_model
-        from tracker.fitting.props import PropBox
+        from service.offline import session_model, session_props
 
         body = session_model(session, model)
-        props = [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+        props = session_props(session)
         bgs = background_models(session, list(replayed))[0] if replayed else {}
         return cls(body, list(session.calibration), backgrounds=bgs, props=props, **options)
 
