@@ -63,6 +63,7 @@ __all__ = [
     "SessionCamera",
     "Session",
     "load_session",
+    "check_box",
     "write_session_toml",
     "read_timestamps",
     "image_frame_ids",
@@ -293,32 +294,39 @@ def _parse_subject(subject, where: str) -> tuple[float | None, dict[str, float] 
 
 MAX_PROPS = 16
 """At most this many ``[[prop]]`` tables."""
+MAX_BOX_COORD_M = 100.0
+"""A prop box's coordinates lie within this many metres of the origin."""
+MAX_BOX_SIDE_M = 10.0
+"""A prop box's sides are at most this long (metres)."""
+
+
+def check_box(values, where: str, error: type[Exception] = ValueError) -> tuple[float, ...]:
+    """A world box ``[x0, y0, z0, x1, y1, z1]`` (metres, corners in any order per axis) validated:
+    six finite numbers within 100 m, each side 0-10 m; returned ordered as (x0, y0, z0, x1, y1, z1)
+    with x0 < x1, y0 < y1, z0 < z1.  Otherwise ``error`` whose message starts with ``where``."""
+    if (isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or len(values) != 6
+            or any(isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) for v in values)):
+        raise error(f"{where}: expected [x0, y0, z0, x1, y1, z1] in metres, got {values!r}")
+    box = [float(v) for v in values]
+    if not all(math.isfinite(v) and abs(v) <= MAX_BOX_COORD_M for v in box):
+        raise error(f"{where}: coordinates must be finite and within {MAX_BOX_COORD_M:g} m, got {values!r}")
+    lo = [min(box[k], box[k + 3]) for k in range(3)]
+    hi = [max(box[k], box[k + 3]) for k in range(3)]
+    if not all(0.0 < h - l <= MAX_BOX_SIDE_M for l, h in zip(lo, hi)):
+        raise error(f"{where}: every side must be > 0 and <= {MAX_BOX_SIDE_M:g} m, got {values!r}")
+    return tuple(lo + hi)
 
 
 def _parse_props(tables, where: str) -> tuple[tuple[float, ...], ...]:
-    """The ``[[prop]]`` tables' boxes, validated (six finite numbers within 100 m, each side
-    0-10 m), each ordered as (x0, y0, z0, x1, y1, z1) with x0 < x1, y0 < y1, z0 < z1."""
+    """The ``[[prop]]`` tables' boxes, validated by :func:`check_box`."""
     if tables is None:
         return ()
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise SessionError(f"{where}: 'prop' must be [[prop]] tables")
     if len(tables) > MAX_PROPS:
         raise SessionError(f"{where}: at most {MAX_PROPS} [[prop]] tables, got {len(tables)}")
-    out = []
-    for i, t in enumerate(tables):
-        box = t.get("box")
-        key = f"{where} [[prop]] #{i + 1} key 'box'"
-        if (not isinstance(box, list) or len(box) != 6
-                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in box)):
-            raise SessionError(f"{key}: expected [x0, y0, z0, x1, y1, z1] in metres, got {box!r}")
-        if not all(math.isfinite(v) and abs(v) <= 100.0 for v in box):
-            raise SessionError(f"{key}: coordinates must be finite and within 100 m, got {box!r}")
-        lo = [min(box[k], box[k + 3]) for k in range(3)]
-        hi = [max(box[k], box[k + 3]) for k in range(3)]
-        if not all(0.0 < h - l <= 10.0 for l, h in zip(lo, hi)):
-            raise SessionError(f"{key}: every side must be > 0 and <= 10 m, got {box!r}")
-        out.append(tuple(float(v) for v in lo + hi))
-    return tuple(out)
+    return tuple(check_box(t.get("box"), f"{where} [[prop]] #{i + 1} key 'box'", SessionError)
+                 for i, t in enumerate(tables))
 
 
 def load_session(path, *, require_calibration: bool = True) -> Session:

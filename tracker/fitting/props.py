@@ -25,14 +25,13 @@ from typing import Iterable, Mapping, Sequence
 import cv2
 import numpy as np
 
+from capture.session import check_box
 from tracker.body.kinematics import forward, point_jacobian
 from tracker.body.model import BodyModel
 from tracker.errors import TrackerError
 
 __all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks", "seat_box"]
 
-_MAX_COORD_M = 100.0
-_MAX_SIZE_M = 10.0
 _NUMBER = r"\s*(-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 _PROP = re.compile(r"^" + ",".join([_NUMBER] * 6) + r"$")
 
@@ -57,18 +56,9 @@ class PropBox:
     @classmethod
     def from_values(cls, values: Sequence, where: str = "prop") -> "PropBox":
         """A box from ``[x0, y0, z0, x1, y1, z1]`` (metres, the corners in any order per axis);
-        PropError naming ``where`` unless six finite numbers within 100 m, each side 0-10 m."""
-        if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or len(values) != 6:
-            raise PropError(f"{where}: expected [x0, y0, z0, x1, y1, z1] in metres, got {values!r}")
-        if any(isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) for v in values):
-            raise PropError(f"{where}: expected six numbers, got {values!r}")
-        v = np.asarray(values, dtype=float)
-        if not np.all(np.isfinite(v)) or np.any(np.abs(v) > _MAX_COORD_M):
-            raise PropError(f"{where}: coordinates must be finite and within {_MAX_COORD_M} m, got {values!r}")
-        lo, hi = np.minimum(v[:3], v[3:]), np.maximum(v[:3], v[3:])
-        size = hi - lo
-        if np.any(size <= 0) or np.any(size > _MAX_SIZE_M):
-            raise PropError(f"{where}: every side must be > 0 and <= {_MAX_SIZE_M} m, got {values!r}")
+        PropError naming ``where`` unless ``capture.session.check_box`` accepts them."""
+        box = np.asarray(check_box(values, where, PropError))
+        lo, hi = box[:3].copy(), box[3:].copy()
         lo.setflags(write=False)
         hi.setflags(write=False)
         return cls(lo, hi)
