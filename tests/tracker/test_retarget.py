@@ -123,11 +123,10 @@ def test_palindrome_loops_without_a_jump():
 
 
 def test_the_motion_does_not_depend_on_where_the_hips_are_reported(tmp_path):
-    """The IK matches the BVH's hips to the thighs' origins (the pivots, ``ik_points``), so a model
+    """The IK matches the BVH's hips to the thighs' origins (the pivots, ``BodyModel.pivots``), so a model
     reporting its hip joint centres elsewhere is posed the same; its reported hips are where the
     ``[joints]`` table puts them."""
     from tracker.body.model import MODELS_DIR
-    from tracker.synthetic.retarget import ik_points
     from tracker.synthetic.synth import bundled_motion
 
     cmu = load_bvh(bundled_motion("scaled_131_03"))
@@ -144,7 +143,7 @@ def test_the_motion_does_not_depend_on_where_the_hips_are_reported(tmp_path):
     assert moved.height_m == pytest.approx(shipped.height_m)
     assert np.allclose(moved.params, shipped.params, atol=1e-9)
     m = shipped.model
-    part, point = ik_points(m, ["left_hip", "pelvis"])
+    part, point = m.pivots(["left_hip", "pelvis"])
     assert part[0] == m.part_index("left_thigh") and np.all(point[0] == 0.0)
     assert part[1] == m.joint_part[m.joint_names.index("pelvis")]
     hips = [shipped.joint_names.index(n) for n in ("left_hip", "right_hip")]

@@ -169,6 +169,26 @@ class BodyModel:
         except ValueError:
             raise KeyError(f"model {self.name!r} has no part {name!r}") from None
 
+    def pivots(self, names) -> tuple[np.ndarray, np.ndarray]:
+        """Where the limbs below the joints ``names`` turn: each joint's ``PIVOT_PART`` origin where
+        one is named and the model has that part, else its reported joint centre.
+
+        Returns
+        -------
+        part : ndarray of int, shape (n,)
+        point : ndarray, shape (n, 3)
+            Metres in the part's frame.
+        """
+        part, point = [], []
+        for name in names:
+            pivot = PIVOT_PART.get(name)
+            if pivot in self.part_names:
+                part.append(self.part_index(pivot)), point.append(np.zeros(3))
+            else:
+                j = self.joint_names.index(name)
+                part.append(self.joint_part[j]), point.append(self.joint_point[j])
+        return np.asarray(part, dtype=int), np.asarray(point, dtype=float).reshape(-1, 3)
+
     def param_index(self, name: str) -> int:
         """Index of a parameter (``"<part>.<dof>"``) by name; KeyError naming the model when absent."""
         try:

@@ -31,7 +31,7 @@ import numpy as np
 
 from capture.camera import Camera
 from tracker.body.kinematics import forward
-from tracker.body.model import PIVOT_PART, BodyModel
+from tracker.body.model import BodyModel
 
 __all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "mirror_samples", "AppearanceModel", "head_cue",
            "feet_forward", "colour_features", "SKIN_BGR"]
@@ -258,7 +258,7 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     """Whether the feet reach forward the way the pelvis faces, for a standing pose.
 
     For each leg whose ankle is near the floor (``max_ankle_m``) and within ``max_offset_m`` of
-    the vertical through its hip (the thigh's origin, ``PIVOT_PART``; not the hip joint centre),
+    the vertical through its hip (its pivot, ``BodyModel.pivots``: the thigh's origin),
     points ``reach_m`` ahead of it along the pelvis heading and as far behind it, ``height_m``
     above the floor, are tested against the silhouettes (inside: silhouette distance at most ``inside_px`` in a camera).  Returns the mean
     fractions of cameras holding them ``(ahead, behind)`` (NaN, NaN when no leg stands or no camera
@@ -277,10 +277,8 @@ def feet_forward(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera]
     for side in ("left", "right"):
         if f"{side}_ankle" not in names or f"{side}_hip" not in names:
             continue
-        ankle, hip = jc[names.index(f"{side}_ankle")], jc[names.index(f"{side}_hip")]
-        pivot = PIVOT_PART.get(f"{side}_hip")
-        if pivot in model.part_names:  # the leg hangs from the thigh's origin, not the hip centre
-            hip = pose.translation[model.part_index(pivot)]
+        ankle = jc[names.index(f"{side}_ankle")]
+        hip = pose.to_world(*model.pivots([f"{side}_hip"]))[0]  # the leg hangs from the thigh's origin
         if ankle[2] < max_ankle_m and np.hypot(*(ankle[:2] - hip[:2])) < max_offset_m:
             refs.append(hip[:2])
     h = pelvis_heading(model, p)

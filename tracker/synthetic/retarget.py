@@ -10,7 +10,7 @@ Steps (``retarget_bvh``):
    style).  For CMU: pelvis = midpoint of LeftHip/RightHip (CMU's ``Hips`` root sits ~9 cm above
    the hip joints), spine = Chest, neck = Neck, head = midpoint of Head and its end site,
    shoulder = LeftShoulder (the humeral head; ``LeftCollar`` is the clavicle), elbow, wrist, hip,
-   knee, ankle by name.  The IK matches each to the model's pivot (``ik_points``: the hips to
+   knee, ankle by name.  The IK matches each to the model's pivot (``BodyModel.pivots``: the hips to
    the thighs' origins, not the reported hip centres inside them).
 3. **Size.** Subject height by a least-squares scale fit of the model's segment lengths (at
    height 1) to the BVH's in its rest pose: ``H = Σ L_s r_s / Σ r_s²`` over thigh, shank, upper
@@ -40,10 +40,10 @@ from scipy.optimize import least_squares
 
 from tracker.synthetic.bvh import Bvh, bvh_forward
 from tracker.body.kinematics import forward, joint_centre_array, point_jacobian
-from tracker.body.model import JOINT_ROTATION, PIVOT_PART, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel, load_model
+from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, ROOT_TRANSLATION, BodyModel, load_model
 from tracker.imaging.render import body_points
 
-__all__ = ["JOINT_MAP", "ik_points", "Retargeted", "retarget_bvh", "palindrome", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
+__all__ = ["JOINT_MAP", "Retargeted", "retarget_bvh", "palindrome", "bvh_joint_targets", "estimate_size", "BVH_TO_WORLD"]
 
 #: BVH (Y up) -> world (Z up): x_w = z_b, y_w = x_b, z_w = y_b (a proper rotation).
 BVH_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -167,33 +167,6 @@ def bvh_joint_targets(bvh: Bvh, joint_names, frames=None) -> np.ndarray:
     return T @ BVH_TO_WORLD.T
 
 
-def ik_points(model: BodyModel, names) -> tuple[np.ndarray, np.ndarray]:
-    """The model points the IK matches to the BVH joints ``names``: each joint's pivot.
-
-    Parameters
-    ----------
-    model : BodyModel
-    names : sequence of str
-        Model joint names.
-
-    Returns
-    -------
-    part : ndarray of int, shape (n,)
-    point : ndarray, shape (n, 3)
-        Metres in the part's frame: the ``PIVOT_PART`` origin where one is named and the model has
-        it, else the reported joint centre.
-    """
-    part, point = [], []
-    for name in names:
-        j = model.joint_names.index(name)
-        pivot = PIVOT_PART.get(name)
-        if pivot in model.part_names:
-            part.append(model.part_index(pivot)), point.append(np.zeros(3))
-        else:
-            part.append(model.joint_part[j]), point.append(model.joint_point[j])
-    return np.asarray(part, dtype=int), np.asarray(point, dtype=float).reshape(-1, 3)
-
-
 def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool = False) -> tuple[float, dict]:
     """Subject height (and optionally limb lengths) from the BVH's rest pose; see the module docstring.
 
@@ -215,7 +188,7 @@ def estimate_size(bvh: Bvh, model_name: str = "knossow40", *, fit_segments: bool
                np.zeros((1, bvh.motion.shape[1])), bvh.frame_time_s, bvh.source)  # fmt: skip
     names = sorted({j for _, a, b in _SEGMENTS for j in (a, b)})
     T = dict(zip(names, bvh_joint_targets(rest, names)[0]))
-    M = dict(zip(names, forward(unit, unit.zero()).to_world(*ik_points(unit, names))))
+    M = dict(zip(names, forward(unit, unit.zero()).to_world(*unit.pivots(names))))
     L = np.array([np.linalg.norm(T[a] - T[b]) for _, a, b in _SEGMENTS])
     r = np.array([np.linalg.norm(M[a] - M[b]) for _, a, b in _SEGMENTS])
     height = float(np.sum(L * r) / np.sum(r * r))
@@ -331,7 +304,7 @@ def retarget_bvh(
         pel = T[:, ji["pelvis"], :2]
         T[:, :, :2] -= 0.5 * (pel.min(axis=0) + pel.max(axis=0))
     params = np.empty((n_out, mdl.n_params))
-    pivots = ik_points(mdl, names)
+    pivots = mdl.pivots(names)
     p = _initial_root(mdl, T[0], names)
     prev = p.copy()
     for k in range(n_out):
