@@ -43,6 +43,7 @@ fits a blob best (``tracker.blobs.em``).  The result is a ``tracker.search.hull.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -50,6 +51,7 @@ import numpy as np
 from capture.camera import Camera
 from segmentation.background import BackgroundModel
 from segmentation.samples import background_samples
+from tracker.blobs.kernels import pattern_pixels, sample_colours, view_classes
 from tracker.search.hull import VoxelHull, project_with_depth
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
@@ -138,8 +140,9 @@ def zone_of_interest(model: BodyModel, params: np.ndarray, *, margin_m: float = 
     return np.stack([lo, hi])
 
 
+@lru_cache(maxsize=16)
 def _pattern(k: int) -> np.ndarray:
-    """A ``k × k`` grid of offsets in the unit square centred on 0, shape (k², 2)."""
+    """A ``k × k`` grid of offsets in the unit square centred on 0, shape (k², 2) (cached: not to be written)."""
     g = (np.arange(k) + 0.5) / k - 0.5
     u, v = np.meshgrid(g, g)
     return np.column_stack([u.ravel(), v.ravel()])
@@ -154,39 +157,19 @@ def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, 
     front = z > 0.05
     f = float(cam.matrix[0, 0])
     side = np.where(front, f * size / np.where(front, z, 1.0), 0.0)
-    pat = _pattern(k)
     uv = np.nan_to_num(uv, nan=-1e6, posinf=-1e6, neginf=-1e6)
     inside = front & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= cam.width - 1) & (uv[:, 1] <= cam.height - 1)
-    cols = np.clip(np.rint(uv[:, None, 0] + side[:, None] * pat[None, :, 0]), 0, cam.width - 1).astype(np.intp)
-    rows = np.clip(np.rint(uv[:, None, 1] + side[:, None] * pat[None, :, 1]), 0, cam.height - 1).astype(np.intp)
+    cols, rows = pattern_pixels(uv, side, _pattern(k), cam.width, cam.height)
     if floor is None:
-        d, bgr = background_samples(background, image, cols.ravel(), rows.ravel())
+        d, bgr = background_samples(background, image, cols, rows)
     else:
-        d, bgr, plain, ratio = background_samples(background, image, cols.ravel(), rows.ravel(), terms=True)
-        d = floor(cam.name, cols.ravel(), rows.ravel(), d, plain, ratio, np.repeat(np.arange(m), k * k))
+        d, bgr, plain, ratio = background_samples(background, image, cols, rows, terms=True)
+        d = floor(cam.name, cols, rows, d, plain, ratio, np.repeat(np.arange(m), k * k))
     n = k * k
     d = d.reshape(m, n)
-    n_bg = np.count_nonzero(d < options.low, axis=1)
-    n_fg = np.count_nonzero(d > options.high, axis=1)
-    cls = np.full(m, UNKNOWN, np.int8)
-    cls[(n_bg > 0) & (n_fg > 0)] = EDGE
-    cls[n_fg == n] = FOREGROUND
-    bg = n_bg == n
-    if options.camouflage > 0:
-        bg &= d.mean(1) < options.camouflage
-    cls[bg | ~inside] = BACKGROUND
+    cls = view_classes(d, inside, float(options.low), float(options.high), float(options.camouflage),
+                       BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
     return cls, d, bgr.reshape(m, n, 3)
-
-
-def _colours(d: np.ndarray, bgr: np.ndarray, low: float) -> np.ndarray:
-    """Mean colour (m, 3) of the samples above ``low`` (all samples where none is) of distances
-    (m, n) and colours (m, n, 3)."""
-    on = d > low
-    cnt = on.sum(1)
-    none = cnt == 0
-    on[none] = True
-    cnt[none] = d.shape[1]
-    return np.einsum("mn,mnc->mc", on.astype(np.float32), bgr) / cnt[:, None]
 
 
 def _neighbour_vote(cells: np.ndarray, cls: np.ndarray, todo: np.ndarray) -> np.ndarray:
@@ -285,7 +268,7 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
             col = np.empty((sel.size, n_views, 3), np.float32)
             for vi, (idx, d, bgr) in enumerate(seen):
                 row = np.searchsorted(idx, sel)
-                col[:, vi] = _colours(d[row], bgr[row], options.low)
+                col[:, vi] = sample_colours(d, bgr, row, float(options.low))
             kept_c.append(centres[sel]), kept_s.append(np.full(sel.size, size))
             kept_f.append(np.ones(sel.size, bool) if not finest else cls[sel] == FOREGROUND)
             kept_col.append(col)

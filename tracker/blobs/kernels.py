@@ -1,0 +1,147 @@
+"""Compiled (numba) loops of the blob tracker's per-frame work.
+
+Each function is the loop form of a numpy computation documented in the module that calls it (that
+docstring is the reference; the tests compare both): the floor test's votes
+(``tracker.blobs.floor_samples``, after ``segmentation.floor.floor_votes``), the coloured hull's
+per-view cube classes and colours (``tracker.blobs.colour_hull``), the EM's expectation
+(``tracker.blobs.em``) and the body's point containment (``tracker.blobs.tracking.body_contains``).
+They take plain arrays only.  Compiled on first use and cached on disk (``cache=True``);
+:func:`warm_up` compiles them before a live worker's first frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "warm_up"]
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def floor_vote(points, ratio, R, t, K, dist, w, h, image, pdiag, pcross, a, big_a, yuv, low, body, shadow, seen):
+    """One camera's votes on floor points: ``segmentation.floor.floor_votes``' loop body for one
+    other camera, added in place to ``body``, ``shadow`` (m,) int32 and ``seen`` (m,) bool.
+
+    points (m, 3) world; ratio (m,) the darkening; R (3, 3), t (3,) world2cam, K (3, 3), dist (5,)
+    k1 k2 p1 p2 k3; image (h w, 3) uint8 and the model's flat terms (``segmentation.samples.model_terms``)."""
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    for i in range(points.shape[0]):
+        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
+        xc = R[0, 0] * X + R[0, 1] * Y + R[0, 2] * Z + t[0]
+        yc = R[1, 0] * X + R[1, 1] * Y + R[1, 2] * Z + t[1]
+        zc = R[2, 0] * X + R[2, 1] * Y + R[2, 2] * Z + t[2]
+        if not zc > 1e-6:
+            continue
+        x, y = xc / zc, yc / zc
+        u0 = K[0, 0] * x + K[0, 1] * y + K[0, 2]  # undistorted: in the image grown by a quarter
+        v0 = K[1, 0] * x + K[1, 1] * y + K[1, 2]
+        if not (-0.25 * w < u0 < 1.25 * w and -0.25 * h < v0 < 1.25 * h):
+            continue
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        u = np.rint(K[0, 0] * xd + K[0, 1] * yd + K[0, 2])
+        v = np.rint(K[1, 1] * yd + K[1, 2])
+        if not (0.0 <= u < w and 0.0 <= v < h):
+            continue
+        seen[i] = True
+        f = int(v) * w + int(u)
+        c0, c1, c2 = np.float32(image[f, 0]), np.float32(image[f, 1]), np.float32(image[f, 2])
+        py = yuv[0, 0] * c0 + yuv[0, 1] * c1 + yuv[0, 2] * c2
+        pu = yuv[1, 0] * c0 + yuv[1, 1] * c1 + yuv[1, 2] * c2
+        pv = yuv[2, 0] * c0 + yuv[2, 1] * c1 + yuv[2, 2] * c2
+        big_c = (py * py * pdiag[f, 0] + pu * pu * pdiag[f, 1] + pv * pv * pdiag[f, 2]
+                 + py * pu * pcross[f, 0] + pu * pv * pcross[f, 1] + pv * py * pcross[f, 2])
+        big_b = py * a[f, 0] + pu * a[f, 1] + pv * a[f, 2]
+        s = ratio[i]
+        unchanged = max(big_c - 2.0 * big_b + big_a[f], 0.0)
+        darkened = max(big_c - 2.0 * s * big_b + s * s * big_a[f], 0.0)
+        if unchanged <= low and unchanged < darkened:
+            body[i] += 1
+        if darkened <= low and darkened <= unchanged:
+            shadow[i] += 1
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def pattern_pixels(uv, side, pattern, w, h):
+    """Pixels of a sample pattern over each cube's footprint: ``clip(rint(uv_i + side_i · pattern_j))``
+    within the ``w × h`` image; uv (m, 2), side (m,), pattern (n, 2); returns cols, rows (m n,) intp."""
+    m, n = uv.shape[0], pattern.shape[0]
+    cols = np.empty(m * n, np.intp)
+    rows = np.empty(m * n, np.intp)
+    for i in range(m):
+        for j in range(n):
+            c = min(max(np.rint(uv[i, 0] + side[i] * pattern[j, 0]), 0.0), w - 1.0)
+            r = min(max(np.rint(uv[i, 1] + side[i] * pattern[j, 1]), 0.0), h - 1.0)
+            cols[i * n + j] = int(c)
+            rows[i * n + j] = int(r)
+    return cols, rows
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def view_classes(d, inside, low, high, camouflage, background, edge, foreground, unknown):
+    """Class (m,) int8 of each cube in one view from its samples' distances d (m, n)
+    (``tracker.blobs.colour_hull._classify_view``); ``inside`` (m,) False: background."""
+    m, n = d.shape
+    cls = np.empty(m, np.int8)
+    for i in range(m):
+        n_bg = n_fg = 0
+        total = 0.0
+        for j in range(n):
+            v = d[i, j]
+            n_bg += v < low
+            n_fg += v > high
+            total += v
+        if not inside[i] or (n_bg == n and (camouflage <= 0.0 or total / n < camouflage)):
+            cls[i] = background
+        elif n_fg == n:
+            cls[i] = foreground
+        elif n_bg > 0 and n_fg > 0:
+            cls[i] = edge
+        else:
+            cls[i] = unknown
+    return cls
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def sample_colours(d, bgr, rows, low):
+    """Mean colour (r, 3) float32 of the samples above ``low`` (all of them where none is) of cubes
+    ``rows`` (r,) of distances d (m, n) and colours bgr (m, n, 3) (``tracker.blobs.colour_hull``'s docstring)."""
+    n = d.shape[1]
+    out = np.zeros((rows.shape[0], 3), np.float32)
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        cnt = 0
+        s0 = s1 = s2 = 0.0
+        for j in range(n):
+            if d[i, j] > low:
+                cnt += 1
+                s0 += bgr[i, j, 0]
+                s1 += bgr[i, j, 1]
+                s2 += bgr[i, j, 2]
+        if cnt == 0:
+            for j in range(n):
+                s0 += bgr[i, j, 0]
+                s1 += bgr[i, j, 1]
+                s2 += bgr[i, j, 2]
+            cnt = n
+        out[k, 0], out[k, 1], out[k, 2] = s0 / cnt, s1 / cnt, s2 / cnt
+    return out
+
+
+def warm_up() -> None:
+    """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
+    read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
+    m = 2
+    plane, one = np.zeros((1, 3), np.float32), np.ones(1, np.float32)
+    for writable in (True, False):
+        image = np.zeros((1, 3), np.uint8)
+        image.setflags(write=writable)
+        floor_vote(np.zeros((m, 3)), np.ones(m, np.float32), np.eye(3), np.array([0.0, 0.0, 2.0]), np.eye(3),
+                   np.zeros(5), 1, 1, image, plane, plane, plane, one, np.eye(3, dtype=np.float32), 16.0,
+                   np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool))
+    cols, rows = pattern_pixels(np.zeros((m, 2)), np.ones(m), np.zeros((4, 2)), 4, 3)
+    d = np.zeros((m, 4), np.float32)
+    view_classes(d, np.ones(m, bool), 16.0, 64.0, 6.0, 0, 1, 2, 3)
+    sample_colours(d, np.zeros((m, 4, 3), np.float32), np.arange(m), 16.0)
