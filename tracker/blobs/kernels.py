@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "warm_up"]
+__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "warm_up"]
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -130,6 +130,131 @@ def sample_colours(d, bgr, rows, low):
     return out
 
 
+@njit(cache=True, nogil=True, boundscheck=False)
+def cones_contain(cones, R, t, points, margins):
+    """Whether each point lies in some part's cone grown by each margin
+    (``tracker.blobs.tracking.body_contains``); cones (p, 5) a b k z1 z2, R (p, 3, 3), t (p, 3)
+    part2world, points (m, 3), margins (k,) metres; returns (k, m) bool."""
+    n_m, n_p, m = margins.shape[0], cones.shape[0], points.shape[0]
+    out = np.zeros((n_m, m), np.bool_)
+    for i in range(m):
+        left = n_m
+        for p in range(n_p):
+            dx, dy, dz = points[i, 0] - t[p, 0], points[i, 1] - t[p, 1], points[i, 2] - t[p, 2]
+            x = R[p, 0, 0] * dx + R[p, 1, 0] * dy + R[p, 2, 0] * dz  # R^T (x - t)
+            y = R[p, 0, 1] * dx + R[p, 1, 1] * dy + R[p, 2, 1] * dz
+            z = R[p, 0, 2] * dx + R[p, 1, 2] * dy + R[p, 2, 2] * dz
+            r = max(1.0 + cones[p, 2] * z, 0.0)
+            for k in range(n_m):
+                if out[k, i]:
+                    continue
+                g = margins[k]
+                if z < cones[p, 3] - g or z > cones[p, 4] + g:
+                    continue
+                ra = max(cones[p, 0] * r + g, 1e-9)
+                rb = max(cones[p, 1] * r + g, 1e-9)
+                if (x / ra) ** 2 + (y / rb) ** 2 <= 1.0:
+                    out[k, i] = True
+                    left -= 1
+            if left == 0:
+                break
+    return out
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def assign(centres, colours, mean, precision, colour_mean, colour_precision, extra, use, colour_weight, gate, soft,
+           fallback):
+    """Eqs. 2–3 for every voxel (``tracker.blobs.em.expectation``, its docstring).
+
+    centres (n, 3), colours (n, v, 3); mean (b, 3), precision (b, 3, 3) the position Gaussians' inverse
+    covariances; colour_mean (b, 3), colour_precision (b, 3, 3); extra (b,) added to each blob's
+    distance (log-determinants or 0); use (b,) bool; soft ``k > 1`` shares among the k nearest;
+    fallback (n, 3) each voxel's colour when ``colour_weight <= 0``.  Returns labels (n,) int64, colour
+    (n, 3) float32, distance (n,), and the shares' voxel, blob (s,) int64, colour (s, 3) float32, weight (s,)."""
+    n, v, b = centres.shape[0], colours.shape[1], mean.shape[0]
+    k = min(soft, b) if soft > 1 else 0
+    labels = np.empty(n, np.int64)
+    dist = np.empty(n)
+    colour = np.empty((n, 3), np.float32)
+    s_vox = np.empty(n * k, np.int64)
+    s_blob = np.empty(n * k, np.int64)
+    s_col = np.empty((n * k, 3), np.float32)
+    s_w = np.empty(n * k)
+    n_s = 0
+    dpos = np.empty(b)
+    total = np.empty(b)
+    view = np.zeros(b, np.int64)
+    near = np.empty(max(k, 1), np.int64)
+    wk = np.empty(max(k, 1))
+    for i in range(n):
+        for j in range(b):
+            if not use[j]:
+                dpos[j] = np.inf
+                total[j] = np.inf
+                continue
+            x, y, z = centres[i, 0] - mean[j, 0], centres[i, 1] - mean[j, 1], centres[i, 2] - mean[j, 2]
+            P = precision[j]
+            q = (P[0, 0] * x * x + P[1, 1] * y * y + P[2, 2] * z * z
+                 + (P[0, 1] + P[1, 0]) * x * y + (P[0, 2] + P[2, 0]) * x * z + (P[1, 2] + P[2, 1]) * y * z)
+            dpos[j] = max(q, 0.0)
+            t = dpos[j] + extra[j]
+            if colour_weight > 0:
+                C = colour_precision[j]
+                best, arg = np.inf, 0
+                for w in range(v):
+                    x = colours[i, w, 0] - colour_mean[j, 0]
+                    y = colours[i, w, 1] - colour_mean[j, 1]
+                    z = colours[i, w, 2] - colour_mean[j, 2]
+                    c = (C[0, 0] * x * x + C[1, 1] * y * y + C[2, 2] * z * z
+                         + (C[0, 1] + C[1, 0]) * x * y + (C[0, 2] + C[2, 0]) * x * z + (C[1, 2] + C[2, 1]) * y * z)
+                    if c < best:
+                        best, arg = c, w
+                view[j] = arg
+                t += colour_weight * max(best, 0.0)
+            total[j] = t
+        lab = 0
+        for j in range(1, b):
+            if total[j] < total[lab]:
+                lab = j
+        if dpos[lab] > gate:
+            labels[i], dist[i] = -1, np.inf
+            lab_col = b - 1  # (the numpy form indexed the last blob's view for an unassigned voxel)
+        else:
+            labels[i], dist[i] = lab, total[lab]
+            lab_col = lab
+        for c in range(3):
+            colour[i, c] = colours[i, view[lab_col], c] if colour_weight > 0 else fallback[i, c]
+        if k == 0:
+            continue
+        for r in range(k):  # the k nearest by total distance, in order
+            best = -1
+            for j in range(b):
+                taken = False
+                for q in range(r):
+                    if near[q] == j:
+                        taken = True
+                        break
+                if not taken and (best < 0 or total[j] < total[best]):
+                    best = j
+            near[r] = best
+        t0 = total[near[0]]
+        s = 0.0
+        for r in range(k):
+            j = near[r]
+            wk[r] = 0.0 if dpos[j] > gate else np.exp(-0.5 * (total[j] - t0))
+            s += wk[r]
+        s = max(s, 1e-300)
+        for r in range(k):
+            wr = wk[r] / s
+            if wr > 1e-3:
+                j = near[r]
+                s_vox[n_s], s_blob[n_s], s_w[n_s] = i, j, wr
+                for c in range(3):
+                    s_col[n_s, c] = colours[i, view[j], c] if colour_weight > 0 else fallback[i, c]
+                n_s += 1
+    return labels, colour, dist, s_vox[:n_s], s_blob[:n_s], s_col[:n_s], s_w[:n_s]
+
+
 def warm_up() -> None:
     """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
     read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
@@ -145,3 +270,7 @@ def warm_up() -> None:
     d = np.zeros((m, 4), np.float32)
     view_classes(d, np.ones(m, bool), 16.0, 64.0, 6.0, 0, 1, 2, 3)
     sample_colours(d, np.zeros((m, 4, 3), np.float32), np.arange(m), 16.0)
+    cones_contain(np.ones((1, 5)), np.eye(3)[None], np.zeros((1, 3)), np.zeros((m, 3)), np.zeros(2))
+    eye = np.eye(3)[None]
+    assign(np.zeros((m, 3)), np.zeros((m, 2, 3), np.float32), np.zeros((1, 3)), eye, np.zeros((1, 3)), eye,
+           np.zeros(1), np.ones(1, bool), 1.0, 25.0, 3, np.zeros((m, 3), np.float32))
