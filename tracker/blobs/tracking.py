@@ -301,12 +301,8 @@ class BlobTracker:
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
                                           iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root,
-                                          penalty=self._penalty if self._prop_penalty is not None else None)
+                                          penalty=self._prop_penalty)
         return params
-
-    def _penalty(self, params: np.ndarray, pose, jacobian: bool) -> tuple:
-        """The props' residuals (k,) and, with ``jacobian``, their Jacobian (k, n_params) at ``params``."""
-        return self._prop_penalty.residuals(self.model, params, jacobian=jacobian, pose=pose)
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
         """Per part (``model.part_names`` but the clavicles, in order) the fraction of its interior
