@@ -129,6 +129,28 @@ def test_view_classes_and_sample_colours_follow_the_sample_counts(rng):
     np.testing.assert_allclose(sample_colours(d, bgr, rows, low), mean, rtol=1e-5)
 
 
+def test_neighbour_vote_is_the_majority_of_the_26_neighbours(rng):
+    # the compiled vote against a count over a dict of the cells, on a random sparse set of cells
+    from tracker.blobs.colour_hull import BACKGROUND, EDGE, FOREGROUND, UNKNOWN
+    from tracker.blobs.kernels import neighbour_vote
+
+    cells = np.unique(rng.integers(-4, 5, (400, 3)), axis=0)
+    cls = rng.integers(0, 4, len(cells)).astype(np.int8)
+    todo = np.flatnonzero(cls == UNKNOWN)
+    where = {tuple(c): k for c, k in zip(cells.tolist(), cls)}
+    want = []
+    for c in cells[todo].tolist():
+        near = [where.get((c[0] + a, c[1] + b, c[2] + e), -1) for a in (-1, 0, 1) for b in (-1, 0, 1)
+                for e in (-1, 0, 1) if (a, b, e) != (0, 0, 0)]
+        votes = [near.count(k) for k in (BACKGROUND, EDGE, FOREGROUND)]
+        best = max(votes)
+        want.append(UNKNOWN if best == 0 else EDGE if votes[1] == best else FOREGROUND if votes[2] == best
+                    else BACKGROUND)
+    got = neighbour_vote(cells, cls, todo, BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
+    assert len(set(want)) >= 3
+    np.testing.assert_array_equal(got, want)
+
+
 def test_coloured_hull_rejects_bad_input(rng):
     cams = _ring(2)
     models, images = _cube_scene(rng, cams, (0, 0, 0))

@@ -51,7 +51,7 @@ import numpy as np
 from capture.camera import Camera
 from segmentation.background import BackgroundModel
 from segmentation.samples import background_samples
-from tracker.blobs.kernels import pattern_pixels, sample_colours, view_classes
+from tracker.blobs.kernels import neighbour_vote, pattern_pixels, sample_colours, view_classes
 from tracker.search.hull import VoxelHull, project_with_depth
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
@@ -63,9 +63,7 @@ BACKGROUND, EDGE, FOREGROUND, UNKNOWN = 0, 1, 2, 3
 
 # the 8 children's lower-corner offsets in units of the child size, (8, 3)
 _CHILDREN = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
-# the 26 neighbours of a cell, (26, 3)
-_NEIGHBOURS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
-                        if (a, b, c) != (0, 0, 0)], dtype=np.int64)
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,20 +176,8 @@ def _neighbour_vote(cells: np.ndarray, cls: np.ndarray, todo: np.ndarray) -> np.
     absent and unknown cells do not vote, and a cell without voters stays UNKNOWN.  Shape (t,) int8."""
     if todo.size == 0:
         return np.zeros(0, np.int8)
-    lo = cells.min(0) - 1
-    dims = cells.max(0) - lo + 2
-    keys = np.ravel_multi_index((cells - lo).T, dims)
-    order = np.argsort(keys)
-    skeys = keys[order]
-    nb = (cells[todo][:, None, :] + _NEIGHBOURS[None]) - lo  # (t, 26, 3), all inside dims
-    nk = np.ravel_multi_index(nb.reshape(-1, 3).T, dims)
-    pos = np.clip(np.searchsorted(skeys, nk), 0, len(skeys) - 1)
-    found = skeys[pos] == nk
-    ncls = np.where(found, cls[order][pos], -1).reshape(-1, 26)
-    votes = np.stack([np.count_nonzero(ncls == c, axis=1) for c in (BACKGROUND, EDGE, FOREGROUND)], 1)
-    best = votes.max(1)
-    out = np.where(votes[:, 1] == best, EDGE, np.where(votes[:, 2] == best, FOREGROUND, BACKGROUND))
-    return np.where(best > 0, out, UNKNOWN).astype(np.int8)
+    return neighbour_vote(np.ascontiguousarray(cells, dtype=np.int64), np.ascontiguousarray(cls, dtype=np.int8),
+                          np.asarray(todo, dtype=np.intp), BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
 
 
 def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backgrounds: Sequence[BackgroundModel],

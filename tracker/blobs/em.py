@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracker.blobs.kernels import assign
+from tracker.blobs.kernels import assign, weighted_moments
 
 __all__ = ["Assignment", "BlobStats", "expectation", "maximisation"]
 
@@ -118,22 +118,10 @@ def maximisation(assignment: Assignment, centres: np.ndarray, sizes: np.ndarray,
         w = s**3
         count = np.bincount(lab, minlength=n_blobs)
     W = np.bincount(lab, weights=w, minlength=n_blobs)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inv = np.where(W > 0, 1.0 / W, np.nan)
-
-    def moments(X: np.ndarray, extra: np.ndarray | None):
-        mu = np.stack([np.bincount(lab, weights=w * X[:, i], minlength=n_blobs) for i in range(3)], 1) * inv[:, None]
-        d = X - mu[lab]
-        cov = np.empty((n_blobs, 3, 3))
-        for i in range(3):
-            for j in range(i, 3):
-                cov[:, i, j] = cov[:, j, i] = np.bincount(lab, weights=w * d[:, i] * d[:, j], minlength=n_blobs) * inv
-        if extra is not None:
-            cov += (np.bincount(lab, weights=w * extra, minlength=n_blobs) * inv)[:, None, None] * np.eye(3)
-        return mu, cov
-
-    mean, cov = moments(P, s**2 / 12.0)
-    colour, colour_cov = moments(C, None)
+    lab, w = np.ascontiguousarray(lab, dtype=np.int64), np.ascontiguousarray(w, dtype=float)
+    mean, cov = weighted_moments(lab, np.ascontiguousarray(P, dtype=float), w, np.ascontiguousarray(s**2 / 12.0),
+                                 n_blobs)
+    colour, colour_cov = weighted_moments(lab, np.ascontiguousarray(C, dtype=float), w, np.zeros(len(w)), n_blobs)
     cov += min_sigma_m**2 * np.eye(3)
     colour_cov += min_colour_sigma**2 * np.eye(3)
     det = np.full(n_blobs, np.nan)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "warm_up"]
+__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "neighbour_vote", "weighted_moments", "warm_up"]
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -255,6 +255,85 @@ def assign(centres, colours, mean, precision, colour_mean, colour_precision, ext
     return labels, colour, dist, s_vox[:n_s], s_blob[:n_s], s_col[:n_s], s_w[:n_s]
 
 
+@njit(cache=True, nogil=True, boundscheck=False)
+def neighbour_vote(cells, cls, todo, background, edge, foreground, unknown):
+    """The majority class of the 26 neighbours of each cell ``cells[todo]`` among ``cells`` (m, 3)
+    int64 with classes ``cls`` (m,) int8 (``tracker.blobs.colour_hull._neighbour_vote``, its docstring);
+    a dense grid of the cells' bounding box holds the classes.  Returns (t,) int8."""
+    lo0, lo1, lo2 = cells[:, 0].min() - 1, cells[:, 1].min() - 1, cells[:, 2].min() - 1
+    d0 = cells[:, 0].max() - lo0 + 2
+    d1 = cells[:, 1].max() - lo1 + 2
+    d2 = cells[:, 2].max() - lo2 + 2
+    grid = np.full((d0, d1, d2), -1, np.int8)
+    for i in range(cells.shape[0]):
+        grid[cells[i, 0] - lo0, cells[i, 1] - lo1, cells[i, 2] - lo2] = cls[i]
+    out = np.empty(todo.shape[0], np.int8)
+    for k in range(todo.shape[0]):
+        c = todo[k]
+        x, y, z = cells[c, 0] - lo0, cells[c, 1] - lo1, cells[c, 2] - lo2
+        n_bg = n_edge = n_fg = 0
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                for e in range(-1, 2):
+                    if a == 0 and b == 0 and e == 0:
+                        continue
+                    v = grid[x + a, y + b, z + e]
+                    if v == background:
+                        n_bg += 1
+                    elif v == edge:
+                        n_edge += 1
+                    elif v == foreground:
+                        n_fg += 1
+        best = max(n_bg, n_edge, n_fg)
+        if best == 0:
+            out[k] = unknown
+        elif n_edge == best:
+            out[k] = edge
+        elif n_fg == best:
+            out[k] = foreground
+        else:
+            out[k] = background
+    return out
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def weighted_moments(label, X, w, extra, n_blobs):
+    """Per blob the weighted mean (b, 3) and covariance (b, 3, 3) of points X (m, 3) with labels
+    (m,) and weights w (m,), plus ``extra`` (m,) weighted into the diagonal (``tracker.blobs.em.maximisation``:
+    a cube's own spread); NaN for a blob without weight.  Two passes: the covariance about the mean."""
+    W = np.zeros(n_blobs)
+    mu = np.zeros((n_blobs, 3))
+    cov = np.zeros((n_blobs, 3, 3))
+    ext = np.zeros(n_blobs)
+    for i in range(label.shape[0]):
+        j = label[i]
+        W[j] += w[i]
+        for a in range(3):
+            mu[j, a] += w[i] * X[i, a]
+    for j in range(n_blobs):
+        for a in range(3):
+            mu[j, a] = mu[j, a] / W[j] if W[j] > 0 else np.nan
+    for i in range(label.shape[0]):
+        j = label[i]
+        d0, d1, d2 = X[i, 0] - mu[j, 0], X[i, 1] - mu[j, 1], X[i, 2] - mu[j, 2]
+        wi = w[i]
+        cov[j, 0, 0] += wi * d0 * d0
+        cov[j, 1, 1] += wi * d1 * d1
+        cov[j, 2, 2] += wi * d2 * d2
+        cov[j, 0, 1] += wi * d0 * d1
+        cov[j, 0, 2] += wi * d0 * d2
+        cov[j, 1, 2] += wi * d1 * d2
+        ext[j] += wi * extra[i]
+    for j in range(n_blobs):
+        inv = 1.0 / W[j] if W[j] > 0 else np.nan
+        for a in range(3):
+            for b in range(a, 3):
+                cov[j, a, b] *= inv
+                cov[j, b, a] = cov[j, a, b]
+            cov[j, a, a] += ext[j] * inv
+    return mu, cov
+
+
 def warm_up() -> None:
     """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
     read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
@@ -271,6 +350,8 @@ def warm_up() -> None:
     view_classes(d, np.ones(m, bool), 16.0, 64.0, 6.0, 0, 1, 2, 3)
     sample_colours(d, np.zeros((m, 4, 3), np.float32), np.arange(m), 16.0)
     cones_contain(np.ones((1, 5)), np.eye(3)[None], np.zeros((1, 3)), np.zeros((m, 3)), np.zeros(2))
+    neighbour_vote(np.zeros((m, 3), np.int64), np.zeros(m, np.int8), np.arange(1), 0, 1, 2, 3)
+    weighted_moments(np.zeros(m, np.int64), np.zeros((m, 3)), np.ones(m), np.zeros(m), 2)
     eye = np.eye(3)[None]
     assign(np.zeros((m, 3)), np.zeros((m, 2, 3), np.float32), np.zeros((1, 3)), eye, np.zeros((1, 3)), eye,
            np.zeros(1), np.ones(1, bool), 1.0, 25.0, 3, np.zeros((m, 3), np.float32))
