@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "neighbour_vote", "weighted_moments", "warm_up"]
+__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "neighbour_vote", "weighted_moments", "lattice_member", "warm_up"]
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -334,6 +334,27 @@ def weighted_moments(label, X, w, extra, n_blobs):
     return mu, cov
 
 
+@njit(cache=True, nogil=True, boundscheck=False)
+def lattice_member(cells, query):
+    """Whether each lattice cell ``query`` (m, 3) int64 is one of ``cells`` (k, 3) int64, through a
+    dense grid of the cells' bounding box (``tracker.blobs.tracking.hull_support``); (m,) bool."""
+    out = np.zeros(query.shape[0], np.bool_)
+    if cells.shape[0] == 0:
+        return out
+    lo0, lo1, lo2 = cells[:, 0].min(), cells[:, 1].min(), cells[:, 2].min()
+    d0 = cells[:, 0].max() - lo0 + 1
+    d1 = cells[:, 1].max() - lo1 + 1
+    d2 = cells[:, 2].max() - lo2 + 1
+    grid = np.zeros((d0, d1, d2), np.bool_)
+    for i in range(cells.shape[0]):
+        grid[cells[i, 0] - lo0, cells[i, 1] - lo1, cells[i, 2] - lo2] = True
+    for i in range(query.shape[0]):
+        x, y, z = query[i, 0] - lo0, query[i, 1] - lo1, query[i, 2] - lo2
+        if 0 <= x < d0 and 0 <= y < d1 and 0 <= z < d2:
+            out[i] = grid[x, y, z]
+    return out
+
+
 def warm_up() -> None:
     """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
     read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
@@ -351,6 +372,7 @@ def warm_up() -> None:
     sample_colours(d, np.zeros((m, 4, 3), np.float32), np.arange(m), 16.0)
     cones_contain(np.ones((1, 5)), np.eye(3)[None], np.zeros((1, 3)), np.zeros((m, 3)), np.zeros(2))
     neighbour_vote(np.zeros((m, 3), np.int64), np.zeros(m, np.int8), np.arange(1), 0, 1, 2, 3)
+    lattice_member(np.zeros((m, 3), np.int64), np.zeros((m, 3), np.int64))
     weighted_moments(np.zeros(m, np.int64), np.zeros((m, 3)), np.ones(m), np.zeros(m), 2)
     eye = np.eye(3)[None]
     assign(np.zeros((m, 3)), np.zeros((m, 2, 3), np.float32), np.zeros((1, 3)), eye, np.zeros((1, 3)), eye,

@@ -43,7 +43,7 @@ from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.props import carve
 from tracker.blobs.start import StartPending
 from tracker.blobs.static_voxels import StaticVoxels
-from tracker.blobs.kernels import cones_contain
+from tracker.blobs.kernels import cones_contain, lattice_member
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
@@ -146,7 +146,7 @@ def _interior_samples(model: BodyModel, *, n_theta: int = 8, n_z: int = 5,
 def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0.0) -> np.ndarray:
     """Whether each point (m, 3) lies in a cube of the coloured hull, or within ``tolerance_m`` of one
     along an axis; (m,) bool.  The hull's cubes lie on the world lattice of their size
-    (``coloured_hull``), so each size is one sorted lookup."""
+    (``coloured_hull``), so each size is one lookup in a grid."""
     P = np.asarray(points, dtype=float).reshape(-1, 3)
     if tolerance_m > 0:
         offsets = np.vstack([np.zeros(3), tolerance_m * np.eye(3), -tolerance_m * np.eye(3)])
@@ -154,13 +154,7 @@ def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0
     inside = np.zeros(len(P), bool)
     for size in np.unique(hull.sizes):
         cells = np.floor(hull.centres[hull.sizes == size] / size).astype(np.int64)
-        q = np.floor(P / size).astype(np.int64)
-        lo = np.minimum(cells.min(0), q.min(0))
-        dims = np.maximum(cells.max(0), q.max(0)) - lo + 1
-        keys = np.sort(np.ravel_multi_index((cells - lo).T, dims))
-        qk = np.ravel_multi_index((q - lo).T, dims)
-        pos = np.clip(np.searchsorted(keys, qk), 0, len(keys) - 1)
-        inside |= keys[pos] == qk
+        inside |= lattice_member(cells, np.floor(P / size).astype(np.int64))
     n = len(np.asarray(points).reshape(-1, 3))
     return inside.reshape(-1, n).any(0)
 
