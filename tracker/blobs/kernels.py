@@ -1,10 +1,11 @@
 """Compiled (numba) loops of the blob tracker's per-frame work.
 
-Each function is the loop form of a numpy computation documented in the module that calls it (that
-docstring is the reference; the tests compare both): the floor test's votes
+Each function is the loop form of a computation documented in the module that calls it (that
+docstring is the reference; the tests compare the loops with numpy forms of it): the floor test's votes
 (``tracker.blobs.floor_samples``, after ``segmentation.floor.floor_votes``), the coloured hull's
-per-view cube classes and colours (``tracker.blobs.colour_hull``), the EM's expectation
-(``tracker.blobs.em``) and the body's point containment (``tracker.blobs.tracking.body_contains``).
+per-view cube pixels, classes and colours and its neighbour vote (``tracker.blobs.colour_hull``), the
+EM's expectation and moments (``tracker.blobs.em``), the body's point containment and the hull's
+lattice membership (``tracker.blobs.tracking.body_contains``, ``hull_support``).
 They take plain arrays only.  Compiled on first use and cached on disk (``cache=True``);
 :func:`warm_up` compiles them before a live worker's first frame.
 """
