@@ -6,16 +6,59 @@ looks at a few pixels per voxel projection, so its cost should not grow with the
 (module docstring of ``segmentation.background``; without its camouflage window) at given pixels only, and returns
 their colours too (the coloured hull keeps a mean colour per view).  It reads the model's
 precomputed per-pixel terms (precision, ``K^-1 mu``, ``mu^T K^-1 mu``), so ``update`` is honoured.
+The per-sample arithmetic is one compiled loop (numba, cached on disk; :func:`warm_up` compiles it).
 """
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from segmentation.background import BGR2YUV, BackgroundModel
 from segmentation.checks import check_image_bgr
 
-__all__ = ["background_samples"]
+__all__ = ["background_samples", "model_terms", "warm_up"]
+
+
+@nb.njit(cache=True, nogil=True, boundscheck=False)
+def _sample(image, pdiag, pcross, a, big_a, inv_a, yuv, flat, lo, hi, full, terms):
+    """The loop of :func:`background_samples` over flat pixel indices ``flat`` (m,) of an image
+    (h w, 3) uint8 and the model's terms (h w, 3) / (h w,) float32; ``yuv`` (3, 3) BGR2YUV.
+    Returns distance, bgr, plain, ratio (the last two empty unless ``terms``)."""
+    m = flat.shape[0]
+    d = np.empty(m, np.float32)
+    bgr = np.empty((m, 3), np.float32)
+    plain = np.empty(m if terms else 0, np.float32)
+    ratio = np.empty(m if terms else 0, np.float32)
+    for i in range(m):
+        f = flat[i]
+        c0, c1, c2 = np.float32(image[f, 0]), np.float32(image[f, 1]), np.float32(image[f, 2])
+        bgr[i, 0], bgr[i, 1], bgr[i, 2] = c0, c1, c2
+        y = yuv[0, 0] * c0 + yuv[0, 1] * c1 + yuv[0, 2] * c2
+        u = yuv[1, 0] * c0 + yuv[1, 1] * c1 + yuv[1, 2] * c2
+        v = yuv[2, 0] * c0 + yuv[2, 1] * c1 + yuv[2, 2] * c2
+        big_c = y * y * pdiag[f, 0] + u * u * pdiag[f, 1] + v * v * pdiag[f, 2]
+        if full:
+            big_c += y * u * pcross[f, 0] + u * v * pcross[f, 1] + v * y * pcross[f, 2]
+        big_b = y * a[f, 0] + u * a[f, 1] + v * a[f, 2]
+        ba = big_b * inv_a[f]
+        s = min(max(ba, lo), hi)
+        di = max(big_c + s * (s * big_a[f] - 2.0 * big_b), 0.0)
+        s1 = min(s, 1.0)
+        d[i] = di / (s1 * s1)
+        if terms:
+            ratio[i] = ba
+            plain[i] = max(big_c - 2.0 * big_b + big_a[f], 0.0)
+    return d, bgr, plain, ratio
+
+
+def model_terms(model: BackgroundModel) -> tuple:
+    """The model's per-pixel terms as flat float32 arrays over pixels ``row * w + col``:
+    ``(pdiag (h w, 3), pcross (h w, 3), a (h w, 3), big_a (h w,), inv_a (h w,))``: the precision's
+    diagonal and doubled off-diagonal (Y,U), (U,V), (V,Y) terms, ``K^-1 mu``, ``mu^T K^-1 mu`` and its
+    inverse (``segmentation.background``; ``pcross`` is zero for a diagonal model)."""
+    return (model._pdiag.reshape(-1, 3), model._pcross.reshape(-1, 3), model._a.reshape(-1, 3),
+            model._big_a.reshape(-1), model._inv_a.reshape(-1))
 
 
 def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.ndarray,
@@ -46,22 +89,20 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
     """
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
     w = model.size[0]
-    flat = np.asarray(rows, dtype=np.intp) * w + np.asarray(cols, dtype=np.intp)
-    bgr = image_bgr.reshape(-1, 3)[flat].astype(np.float32)
-    p = bgr @ BGR2YUV.T  # centred YUV, (m, 3)
-    pdiag = model._pdiag.reshape(-1, 3)[flat]
-    big_c = np.einsum("mi,mi->m", p * p, pdiag)
-    if model.covariance == "full":
-        q = p[:, [1, 2, 0]]  # pairs (Y,U), (U,V), (V,Y)
-        big_c += np.einsum("mi,mi->m", p * q, model._pcross.reshape(-1, 3)[flat])
-    big_b = np.einsum("mi,mi->m", p, model._a.reshape(-1, 3)[flat])
-    big_a = model._big_a.reshape(-1)[flat]
+    flat = (np.asarray(rows, dtype=np.intp) * w + np.asarray(cols, dtype=np.intp)).ravel()
     lo, hi = model.shadow_range
-    s = np.clip(big_b * model._inv_a.reshape(-1)[flat], lo, hi)
-    d = np.maximum(big_c + s * (s * big_a - 2.0 * big_b), 0.0)
-    s1 = np.minimum(s, 1.0)
-    if not terms:
-        return (d / (s1 * s1)).astype(np.float32), bgr
-    ratio = big_b * model._inv_a.reshape(-1)[flat]
-    plain = np.maximum(big_c - 2.0 * big_b + big_a, 0.0)
-    return (d / (s1 * s1)).astype(np.float32), bgr, plain.astype(np.float32), ratio.astype(np.float32)
+    d, bgr, plain, ratio = _sample(np.ascontiguousarray(image_bgr).reshape(-1, 3), *model_terms(model), BGR2YUV,
+                                   flat, float(lo), float(hi), model.covariance == "full", bool(terms))
+    return (d, bgr, plain, ratio) if terms else (d, bgr)
+
+
+def warm_up() -> None:
+    """Compile :func:`background_samples`' loop (or load it from numba's on-disk cache), for writable
+    and read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
+    plane = np.zeros((1, 3), np.float32)
+    one = np.ones(1, np.float32)
+    for writable in (True, False):
+        image = np.zeros((1, 3), np.uint8)
+        image.setflags(write=writable)
+        for terms in (False, True):
+            _sample(image, plane, plane, plane, one, one, BGR2YUV, np.zeros(1, np.intp), 0.5, 1.1, True, terms)

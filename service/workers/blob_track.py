@@ -17,6 +17,7 @@ contour tracker's first frame sets with a person (``tracker.blobs.start.ContourS
 search, fit and front/back guard), and again after ``reinit_after`` frames in a row that
 were not ok.  After every fitted set the coloured hull is published on ``contourcap/<studio>/hull``
 (:class:`~service.wire.hull.HullMessage`, newest wins: a slow viewer never holds the tracker).
+:meth:`BlobFitter.warm_up` compiles the numba kernels before the first set.
 """
 
 from __future__ import annotations
@@ -93,6 +94,20 @@ class BlobFitter:
         props = session_props(session)
         bgs = background_models(session, list(replayed))[0] if replayed else {}
         return cls(body, list(session.calibration), backgrounds=bgs, props=props, **options)
+
+    def warm_up(self) -> float:
+        """Compile the numba kernels the fit runs (the blob tracker's, the sampled background test's and
+        the contour tracker's, which the first pose uses) or load them from the on-disk cache; seconds
+        taken.  The track worker calls it before the first frame set, so no frame waits for a compiler."""
+        from segmentation.samples import warm_up as warm_samples
+        from tracker.blobs.kernels import warm_up as warm_blobs
+        from tracker.fitting.warmup import warm_up as warm_contours
+
+        t0 = time.perf_counter()
+        warm_samples()
+        warm_blobs()
+        warm_contours()
+        return time.perf_counter() - t0
 
     def _learn(self, images: Mapping[str, np.ndarray]) -> str | None:
         """Feed cameras still learning their background; a reason while any of those in ``images`` is."""

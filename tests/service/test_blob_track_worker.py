@@ -72,6 +72,16 @@ def test_blob_fitter_learns_its_backgrounds_first(hop):
     assert "bad frame" in fit(9, 0, bad)["reason"]
 
 
+def test_blob_fitter_warm_up_compiles_the_kernels_for_read_only_frames(hop):
+    # a frame decoded from the wire may be read-only, a numba signature of its own: warm_up compiles it too
+    from tracker.blobs.kernels import floor_vote
+
+    fit = BlobFitter.from_session(load_session(hop))
+    assert fit.warm_up() > 0
+    images = [sig[8] for sig in floor_vote.signatures]  # the image argument
+    assert any(t.mutable for t in images) and any(not t.mutable for t in images)
+
+
 @pytest.mark.slow
 def test_lossless_blob_worker_equals_offline_and_publishes_hulls(hop, studio):
     """Camera worker -> blob track worker (no segment worker) in lossless mode gives exactly the offline

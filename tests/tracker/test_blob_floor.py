@@ -150,3 +150,25 @@ def test_damped_least_squares_with_the_root_lowers_the_trunk_into_a_crouch():
         err[root] = np.linalg.norm(forward(model, out).to_world(lay.part, lay.point) - goals, axis=1).mean()
     assert err[True] < 0.01
     assert err[False] > 0.1
+
+
+def test_compiled_floor_votes_match_segmentation_floor_votes():
+    # SampleFloorTest.votes (tracker/blobs/kernels.py) against the numpy segmentation.floor.floor_votes, on
+    # floor points behind a shadow-like sample of the first camera, with lens distortion
+    from dataclasses import replace
+
+    from segmentation.floor import floor_votes
+
+    cams, models, images, _ = _frame(1, dark_floor=True)
+    cams = [replace(c, distortion=np.array([-0.1, 0.02, 0.001, -0.002, 0.0])) if i % 2 else c
+            for i, c in enumerate(cams)]
+    rng = np.random.default_rng(7)
+    pts = np.column_stack([rng.uniform(-3, 3, 4000), rng.uniform(-3, 3, 4000), np.zeros(4000)])
+    ratio = rng.uniform(0.4, 1.0, 4000).astype(np.float32)
+    test = SampleFloorTest(cams, models)
+    by_name = {c.name: c for c in cams}
+    for name in by_name:
+        want = floor_votes(by_name, models, name, images, pts, ratio, test.low)
+        got = test.votes(name, images, pts, ratio)
+        assert 0 < want.sum() < len(want)  # both verdicts occur
+        assert np.mean(got != want) < 1e-3  # float32 rounding may flip a tie

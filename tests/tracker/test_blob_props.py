@@ -55,7 +55,7 @@ def test_dls_with_the_prop_limit_keeps_the_arm_out_of_a_box_on_its_goal(model):
         plain = damped_least_squares(model, start, hand, pts, goals, free=free, iterations=20)
         assert in_props(forward(model, plain).to_world(hand[:1], pts[:1]), [box]).all(), "no limit: the goal reached"
         limited = damped_least_squares(model, start, hand, pts, goals, free=free, iterations=20,
-                                       penalty=lambda p, pose, jac: penalty.residuals(model, p, jacobian=jac, pose=pose))
+                                       penalty=penalty)
         assert model.within_limits(limited)
         assert not in_props(forward(model, limited).to_world(hand[:1], pts[:1]), [box]).any()
         # what is left of the intrusion is small: the goals' pull against the limit's weight

@@ -10,7 +10,7 @@ import pytest
 from tracker.blobs import BlobTracker, ColourHull
 from tracker.blobs.tracking import body_contains, hull_support
 from tracker.body.kinematics import forward
-from tracker.body.model import load_model
+from tracker.body.model import JOINT_ROTATION, load_model
 
 VOXEL_M = 0.03
 GOOD = {"active_fraction": 1.0, "goal_rms_m": 0.02}
@@ -104,3 +104,22 @@ def test_a_hull_the_body_explains_only_half_of_is_not_ok(model):
     q = tracker.explains(hull, p)
     assert q["support_min"] >= 0.9 and 0.4 < q["unexplained"] < 0.6, q
     assert any("of the hull outside the body" in w for w in tracker.judge({**GOOD, **q}))
+
+
+def test_body_contains_is_the_grown_cone_test_at_a_random_pose(model):
+    # the compiled containment (tracker/blobs/kernels.py) against the cone inequality written out per part, at a
+    # seeded random pose, for one margin and for several at once
+    rng = np.random.default_rng(11)
+    p = model.clamp(_standing(model) + rng.normal(0.0, 0.3, model.n_params) * (model.param_kind == JOINT_ROTATION))
+    pose = forward(model, p)
+    pts = rng.uniform([-1.0, -1.0, 0.0], [1.0, 1.0, 1.9], (3000, 3))
+    margins = [0.0, 0.03, 0.1]
+    want = np.zeros((len(margins), len(pts)), bool)
+    for part, (a, b, k, z1, z2) in enumerate(model.cones):
+        x, y, z = ((pts - pose.translation[part]) @ pose.rotation[part]).T
+        r = np.maximum(1.0 + k * z, 0.0)
+        for i, g in enumerate(margins):
+            want[i] |= ((x / np.maximum(a * r + g, 1e-9)) ** 2 + (y / np.maximum(b * r + g, 1e-9)) ** 2 <= 1.0) & (z >= z1 - g) & (z <= z2 + g)
+    assert 0 < want[0].sum() < want[1].sum() < want[2].sum() < len(pts)
+    np.testing.assert_array_equal(body_contains(model, pose, pts, margin_m=margins), want)
+    np.testing.assert_array_equal(body_contains(model, pose, pts, margin_m=0.03), want[1])

@@ -105,6 +105,52 @@ def _background_image(model: BackgroundModel) -> np.ndarray:
     return np.clip(np.rint(bgr), 0, 255).astype(np.uint8).reshape(model.mean_yuv.shape)
 
 
+def test_view_classes_and_sample_colours_follow_the_sample_counts(rng):
+    # the compiled per-view class and colour of tracker/blobs/kernels.py against the rules of colour_hull's docstring
+    from tracker.blobs.colour_hull import BACKGROUND, EDGE, FOREGROUND, UNKNOWN
+    from tracker.blobs.kernels import sample_colours, view_classes
+
+    low, high, camo = 16.0, 64.0, 6.0
+    d = rng.choice([1.0, 3.0, 8.0, 30.0, 100.0], (2000, 4)).astype(np.float32)
+    inside = rng.random(2000) > 0.1
+    n_bg, n_fg = (d < low).sum(1), (d > high).sum(1)
+    want = np.full(2000, UNKNOWN)
+    want[(n_bg > 0) & (n_fg > 0)] = EDGE
+    want[n_fg == 4] = FOREGROUND
+    want[((n_bg == 4) & (d.mean(1) < camo)) | ~inside] = BACKGROUND
+    got = view_classes(d, inside, low, high, camo, BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
+    assert set(np.unique(want)) == {BACKGROUND, EDGE, FOREGROUND, UNKNOWN}
+    np.testing.assert_array_equal(got, want)
+    bgr = rng.uniform(0, 255, (2000, 4, 3)).astype(np.float32)
+    rows = rng.choice(2000, 500, replace=False)
+    on = d[rows] > low
+    on[on.sum(1) == 0] = True
+    mean = (on[..., None] * bgr[rows]).sum(1) / on.sum(1)[:, None]
+    np.testing.assert_allclose(sample_colours(d, bgr, rows, low), mean, rtol=1e-5)
+
+
+def test_neighbour_vote_is_the_majority_of_the_26_neighbours(rng):
+    # the compiled vote against a count over a dict of the cells, on a random sparse set of cells
+    from tracker.blobs.colour_hull import BACKGROUND, EDGE, FOREGROUND, UNKNOWN
+    from tracker.blobs.kernels import neighbour_vote
+
+    cells = np.unique(rng.integers(-4, 5, (400, 3)), axis=0)
+    cls = rng.integers(0, 4, len(cells)).astype(np.int8)
+    todo = np.flatnonzero(cls == UNKNOWN)
+    where = {tuple(c): k for c, k in zip(cells.tolist(), cls)}
+    want = []
+    for c in cells[todo].tolist():
+        near = [where.get((c[0] + a, c[1] + b, c[2] + e), -1) for a in (-1, 0, 1) for b in (-1, 0, 1)
+                for e in (-1, 0, 1) if (a, b, e) != (0, 0, 0)]
+        votes = [near.count(k) for k in (BACKGROUND, EDGE, FOREGROUND)]
+        best = max(votes)
+        want.append(UNKNOWN if best == 0 else EDGE if votes[1] == best else FOREGROUND if votes[2] == best
+                    else BACKGROUND)
+    got = neighbour_vote(cells, cls, todo, BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
+    assert len(set(want)) >= 3
+    np.testing.assert_array_equal(got, want)
+
+
 def test_coloured_hull_rejects_bad_input(rng):
     cams = _ring(2)
     models, images = _cube_scene(rng, cams, (0, 0, 0))
@@ -142,6 +188,49 @@ def test_em_recovers_two_touching_blobs_of_different_colours(soft):
                        colour_weight=0.0, gate=50.0)
     st0 = maximisation(asg0, centres, sizes, 2)
     assert np.linalg.norm(st0.mean - means, axis=1).max() > 0.005
+
+
+@pytest.mark.parametrize("log_det", [False, True])
+def test_expectation_is_eq2_with_the_soft_shares_at_random_blobs(log_det):
+    # the compiled expectation (tracker/blobs/kernels.py) against eq. 2 written out with dense arrays
+    rng = np.random.default_rng(3)
+    n, v, b = 400, 3, 6
+    centres = rng.uniform(-0.3, 0.3, (n, 3))
+    colours = rng.uniform(0, 255, (n, v, 3)).astype(np.float32)
+    mean, cmean = rng.uniform(-0.3, 0.3, (b, 3)), rng.uniform(0, 255, (b, 3))
+    A, B = rng.normal(0, 0.05, (b, 3, 3)), rng.normal(0, 20.0, (b, 3, 3))
+    cov = A @ A.transpose(0, 2, 1) + 0.01 * np.eye(3)
+    ccov = B @ B.transpose(0, 2, 1) + 50.0 * np.eye(3)
+    use = np.arange(b) != 2
+    dp = centres[:, None] - mean[None]
+    dpos = np.einsum("nbi,bij,nbj->nb", dp, np.linalg.inv(cov), dp)
+    dc = colours[:, :, None].astype(float) - cmean[None, None]
+    dcol = np.einsum("nvbi,bij,nvbj->nvb", dc, np.linalg.inv(ccov), dc)
+    total = dpos + 0.5 * dcol.min(1) + (np.linalg.slogdet(cov)[1] + np.linalg.slogdet(ccov)[1] if log_det else 0)
+    total[:, ~use] = np.inf
+    gate = 9.0
+    asg = expectation(centres, colours, mean, cov, cmean, ccov, colour_weight=0.5, gate=gate, use=use,
+                      log_det=log_det, soft=3)
+    best = total.argmin(1)
+    want = np.where(dpos[np.arange(n), best] > gate, -1, best)
+    assert 0 < np.count_nonzero(want == -1) < n
+    np.testing.assert_array_equal(asg.labels, want)
+    np.testing.assert_allclose(asg.distance[want >= 0], total[want >= 0, best[want >= 0]], rtol=1e-9)
+    ok = want >= 0
+    view = dcol.argmin(1)[np.arange(n), best]
+    np.testing.assert_array_equal(asg.colour[ok], colours[np.arange(n), view][ok])
+    vox, blob, col, wgt = asg.shares
+    near = np.argsort(total, 1)[:, :3]
+    w = np.exp(-0.5 * (np.take_along_axis(total, near, 1) - total.min(1, keepdims=True)))
+    w[np.take_along_axis(dpos, near, 1) > gate] = 0.0
+    w /= np.maximum(w.sum(1, keepdims=True), 1e-300)
+    dense = np.zeros((n, b))
+    np.put_along_axis(dense, near, w, 1)
+    dense[dense <= 1e-3] = 0.0
+    got = np.zeros((n, b))
+    got[vox, blob] = wgt
+    np.testing.assert_allclose(got, dense, atol=1e-12)
+    np.testing.assert_array_equal(col, colours[vox, dcol.argmin(1)[vox, blob]])
 
 
 def test_maximisation_weights_by_volume_and_floors_covariances():

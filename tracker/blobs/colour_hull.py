@@ -43,6 +43,7 @@ fits a blob best (``tracker.blobs.em``).  The result is a ``tracker.search.hull.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -50,6 +51,7 @@ import numpy as np
 from capture.camera import Camera
 from segmentation.background import BackgroundModel
 from segmentation.samples import background_samples
+from tracker.blobs.kernels import neighbour_vote, pattern_pixels, sample_colours, view_classes
 from tracker.search.hull import VoxelHull, project_with_depth
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
@@ -61,9 +63,7 @@ BACKGROUND, EDGE, FOREGROUND, UNKNOWN = 0, 1, 2, 3
 
 # the 8 children's lower-corner offsets in units of the child size, (8, 3)
 _CHILDREN = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
-# the 26 neighbours of a cell, (26, 3)
-_NEIGHBOURS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
-                        if (a, b, c) != (0, 0, 0)], dtype=np.int64)
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,8 +138,9 @@ def zone_of_interest(model: BodyModel, params: np.ndarray, *, margin_m: float = 
     return np.stack([lo, hi])
 
 
+@lru_cache(maxsize=16)
 def _pattern(k: int) -> np.ndarray:
-    """A ``k × k`` grid of offsets in the unit square centred on 0, shape (k², 2)."""
+    """A ``k × k`` grid of offsets in the unit square centred on 0, shape (k², 2) (cached: not to be written)."""
     g = (np.arange(k) + 0.5) / k - 0.5
     u, v = np.meshgrid(g, g)
     return np.column_stack([u.ravel(), v.ravel()])
@@ -154,39 +155,19 @@ def _classify_view(cam: Camera, image: np.ndarray, background: BackgroundModel, 
     front = z > 0.05
     f = float(cam.matrix[0, 0])
     side = np.where(front, f * size / np.where(front, z, 1.0), 0.0)
-    pat = _pattern(k)
     uv = np.nan_to_num(uv, nan=-1e6, posinf=-1e6, neginf=-1e6)
     inside = front & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= cam.width - 1) & (uv[:, 1] <= cam.height - 1)
-    cols = np.clip(np.rint(uv[:, None, 0] + side[:, None] * pat[None, :, 0]), 0, cam.width - 1).astype(np.intp)
-    rows = np.clip(np.rint(uv[:, None, 1] + side[:, None] * pat[None, :, 1]), 0, cam.height - 1).astype(np.intp)
+    cols, rows = pattern_pixels(uv, side, _pattern(k), cam.width, cam.height)
     if floor is None:
-        d, bgr = background_samples(background, image, cols.ravel(), rows.ravel())
+        d, bgr = background_samples(background, image, cols, rows)
     else:
-        d, bgr, plain, ratio = background_samples(background, image, cols.ravel(), rows.ravel(), terms=True)
-        d = floor(cam.name, cols.ravel(), rows.ravel(), d, plain, ratio, np.repeat(np.arange(m), k * k))
+        d, bgr, plain, ratio = background_samples(background, image, cols, rows, terms=True)
+        d = floor(cam.name, cols, rows, d, plain, ratio, np.repeat(np.arange(m), k * k))
     n = k * k
     d = d.reshape(m, n)
-    n_bg = np.count_nonzero(d < options.low, axis=1)
-    n_fg = np.count_nonzero(d > options.high, axis=1)
-    cls = np.full(m, UNKNOWN, np.int8)
-    cls[(n_bg > 0) & (n_fg > 0)] = EDGE
-    cls[n_fg == n] = FOREGROUND
-    bg = n_bg == n
-    if options.camouflage > 0:
-        bg &= d.mean(1) < options.camouflage
-    cls[bg | ~inside] = BACKGROUND
+    cls = view_classes(d, inside, float(options.low), float(options.high), float(options.camouflage),
+                       BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
     return cls, d, bgr.reshape(m, n, 3)
-
-
-def _colours(d: np.ndarray, bgr: np.ndarray, low: float) -> np.ndarray:
-    """Mean colour (m, 3) of the samples above ``low`` (all samples where none is) of distances
-    (m, n) and colours (m, n, 3)."""
-    on = d > low
-    cnt = on.sum(1)
-    none = cnt == 0
-    on[none] = True
-    cnt[none] = d.shape[1]
-    return np.einsum("mn,mnc->mc", on.astype(np.float32), bgr) / cnt[:, None]
 
 
 def _neighbour_vote(cells: np.ndarray, cls: np.ndarray, todo: np.ndarray) -> np.ndarray:
@@ -195,20 +176,8 @@ def _neighbour_vote(cells: np.ndarray, cls: np.ndarray, todo: np.ndarray) -> np.
     absent and unknown cells do not vote, and a cell without voters stays UNKNOWN.  Shape (t,) int8."""
     if todo.size == 0:
         return np.zeros(0, np.int8)
-    lo = cells.min(0) - 1
-    dims = cells.max(0) - lo + 2
-    keys = np.ravel_multi_index((cells - lo).T, dims)
-    order = np.argsort(keys)
-    skeys = keys[order]
-    nb = (cells[todo][:, None, :] + _NEIGHBOURS[None]) - lo  # (t, 26, 3), all inside dims
-    nk = np.ravel_multi_index(nb.reshape(-1, 3).T, dims)
-    pos = np.clip(np.searchsorted(skeys, nk), 0, len(skeys) - 1)
-    found = skeys[pos] == nk
-    ncls = np.where(found, cls[order][pos], -1).reshape(-1, 26)
-    votes = np.stack([np.count_nonzero(ncls == c, axis=1) for c in (BACKGROUND, EDGE, FOREGROUND)], 1)
-    best = votes.max(1)
-    out = np.where(votes[:, 1] == best, EDGE, np.where(votes[:, 2] == best, FOREGROUND, BACKGROUND))
-    return np.where(best > 0, out, UNKNOWN).astype(np.int8)
+    return neighbour_vote(np.ascontiguousarray(cells, dtype=np.int64), np.ascontiguousarray(cls, dtype=np.int8),
+                          np.asarray(todo, dtype=np.intp), BACKGROUND, EDGE, FOREGROUND, UNKNOWN)
 
 
 def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backgrounds: Sequence[BackgroundModel],
@@ -285,7 +254,7 @@ def coloured_hull(cameras: Sequence[Camera], images: Sequence[np.ndarray], backg
             col = np.empty((sel.size, n_views, 3), np.float32)
             for vi, (idx, d, bgr) in enumerate(seen):
                 row = np.searchsorted(idx, sel)
-                col[:, vi] = _colours(d[row], bgr[row], options.low)
+                col[:, vi] = sample_colours(d, bgr, row, float(options.low))
             kept_c.append(centres[sel]), kept_s.append(np.full(sel.size, size))
             kept_f.append(np.ones(sel.size, bool) if not finest else cls[sel] == FOREGROUND)
             kept_col.append(col)

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tracker.blobs.kernels import assign, weighted_moments
+
 __all__ = ["Assignment", "BlobStats", "expectation", "maximisation"]
 
 
@@ -63,22 +65,6 @@ class BlobStats:
     count: np.ndarray
 
 
-def _quadratic_features(X: np.ndarray) -> np.ndarray:
-    """``[x_i x_j (i <= j), x_i, 1]`` of points (m, 3): shape (m, 10)."""
-    x0, x1, x2 = X[:, 0], X[:, 1], X[:, 2]
-    return np.column_stack([x0 * x0, x1 * x1, x2 * x2, x0 * x1, x0 * x2, x1 * x2, x0, x1, x2, np.ones(len(X))])
-
-
-def _quadratic_coefficients(mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """Coefficients (10, b) with ``features(X) @ coef = (X − mean_j)ᵀ cov_j⁻¹ (X − mean_j)`` for
-    Gaussians ``mean`` (b, 3), ``cov`` (b, 3, 3): one matrix product gives every squared
-    Mahalanobis distance (the expanded quadratic form)."""
-    P = np.linalg.inv(cov)  # (b, 3, 3)
-    Pm = np.einsum("bij,bj->bi", P, mean)
-    return np.stack([P[:, 0, 0], P[:, 1, 1], P[:, 2, 2], 2 * P[:, 0, 1], 2 * P[:, 0, 2], 2 * P[:, 1, 2],
-                     -2 * Pm[:, 0], -2 * Pm[:, 1], -2 * Pm[:, 2], np.einsum("bi,bi->b", Pm, mean)])
-
-
 def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov: np.ndarray,
                 colour_mean: np.ndarray, colour_cov: np.ndarray, *, colour_weight: float = 1.0,
                 gate: float = 25.0, use: np.ndarray | None = None, log_det: bool = False,
@@ -101,49 +87,18 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
     n, b = len(centres), len(mean)
     if n == 0 or b == 0:
         return Assignment(np.full(n, -1), np.zeros((n, 3), np.float32), np.full(n, np.inf))
-    # centred on the blobs' mean position / colour: the expanded form stays well conditioned
-    c0 = mean.mean(0)
-    dpos = np.maximum(_quadratic_features(centres - c0) @ _quadratic_coefficients(mean - c0, cov), 0.0)
-    if use is not None:
-        dpos[:, ~np.asarray(use, bool)] = np.inf
-    total = dpos
-    best_view = None
-    if colour_weight > 0:
-        v = colours.shape[1]
-        k0 = colour_mean.mean(0)
-        F = _quadratic_features(colours.reshape(-1, 3).astype(float) - k0)
-        dcol = (F @ _quadratic_coefficients(colour_mean - k0, colour_cov)).reshape(n, v, b)
-        best_view = dcol.argmin(1)  # (n, b)
-        total = dpos + colour_weight * np.maximum(np.take_along_axis(dcol, best_view[:, None, :], 1)[:, 0], 0.0)
+    extra = np.zeros(b)
     if log_det:
-        total = total + np.linalg.slogdet(cov)[1] + (np.linalg.slogdet(colour_cov)[1] if colour_weight > 0 else 0.0)
-    labels = total.argmin(1)
-    rows = np.arange(n)
-    dist = total[rows, labels]
-    out = dpos[rows, labels] > gate
-    labels = np.where(out, -1, labels)
-    dist = np.where(out, np.inf, dist)
-    if best_view is None:
-        colour = np.median(colours, axis=1).astype(np.float32)
-    else:
-        colour = colours[rows, best_view[rows, labels]].astype(np.float32)
-    shares = None
-    if soft > 1:
-        k = min(int(soft), b)
-        near = np.argpartition(total, k - 1, axis=1)[:, :k]  # (n, k)
-        t = np.take_along_axis(total, near, 1)
-        wgt = np.exp(-0.5 * (t - t.min(1, keepdims=True)))
-        wgt[np.take_along_axis(dpos, near, 1) > gate] = 0.0
-        wgt /= np.maximum(wgt.sum(1, keepdims=True), 1e-300)
-        vox = np.repeat(rows, k)
-        blob = near.ravel()
-        keep = wgt.ravel() > 1e-3
-        if best_view is None:
-            col = np.repeat(colour, k, axis=0)
-        else:
-            col = colours[vox, best_view[vox, blob]].astype(np.float32)
-        shares = (vox[keep], blob[keep], col[keep], wgt.ravel()[keep])
-    return Assignment(labels, colour, dist, shares)
+        extra = np.linalg.slogdet(cov)[1] + (np.linalg.slogdet(colour_cov)[1] if colour_weight > 0 else 0.0)
+    colours = np.ascontiguousarray(colours, dtype=np.float32)
+    fallback = (np.zeros((n, 3), np.float32) if colour_weight > 0 else
+                np.ascontiguousarray(np.median(colours, axis=1), dtype=np.float32))
+    used = np.ones(b, bool) if use is None else np.asarray(use, bool)
+    labels, colour, dist, vox, blob, col, wgt = assign(
+        np.ascontiguousarray(centres, dtype=float), colours, np.ascontiguousarray(mean, dtype=float),
+        np.linalg.inv(cov), np.ascontiguousarray(colour_mean, dtype=float), np.linalg.inv(colour_cov), extra, used,
+        float(colour_weight), float(gate), int(soft), fallback)
+    return Assignment(labels, colour, dist, (vox, blob, col, wgt) if soft > 1 else None)
 
 
 def maximisation(assignment: Assignment, centres: np.ndarray, sizes: np.ndarray, n_blobs: int, *,
@@ -163,22 +118,10 @@ def maximisation(assignment: Assignment, centres: np.ndarray, sizes: np.ndarray,
         w = s**3
         count = np.bincount(lab, minlength=n_blobs)
     W = np.bincount(lab, weights=w, minlength=n_blobs)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inv = np.where(W > 0, 1.0 / W, np.nan)
-
-    def moments(X: np.ndarray, extra: np.ndarray | None):
-        mu = np.stack([np.bincount(lab, weights=w * X[:, i], minlength=n_blobs) for i in range(3)], 1) * inv[:, None]
-        d = X - mu[lab]
-        cov = np.empty((n_blobs, 3, 3))
-        for i in range(3):
-            for j in range(i, 3):
-                cov[:, i, j] = cov[:, j, i] = np.bincount(lab, weights=w * d[:, i] * d[:, j], minlength=n_blobs) * inv
-        if extra is not None:
-            cov += (np.bincount(lab, weights=w * extra, minlength=n_blobs) * inv)[:, None, None] * np.eye(3)
-        return mu, cov
-
-    mean, cov = moments(P, s**2 / 12.0)
-    colour, colour_cov = moments(C, None)
+    lab, w = np.ascontiguousarray(lab, dtype=np.int64), np.ascontiguousarray(w, dtype=float)
+    mean, cov = weighted_moments(lab, np.ascontiguousarray(P, dtype=float), w, np.ascontiguousarray(s**2 / 12.0),
+                                 n_blobs)
+    colour, colour_cov = weighted_moments(lab, np.ascontiguousarray(C, dtype=float), w, np.zeros(len(w)), n_blobs)
     cov += min_sigma_m**2 * np.eye(3)
     colour_cov += min_colour_sigma**2 * np.eye(3)
     det = np.full(n_blobs, np.nan)

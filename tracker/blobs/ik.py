@@ -132,10 +132,10 @@ def damped_least_squares(model: BodyModel, params, part, point, goals, weights=N
     """Damped Gauss–Newton on the free joint angles (module docstring); returns params within limits.
 
     ``root``: the root's translation and rotation are free too (every goal then pulls the whole body,
-    e.g. the legs' goals lower the trunk into a crouch).  ``penalty``: optional extra residuals, a
-    callable ``(params, pose, jacobian) -> (r (k,), J (k, n_params) or None)`` minimised with the goals (``r`` in the
-    goals' units, metres × √weight; e.g. ``PropPenalty.residuals``), then a step that raises the cost
-    is halved (at most 5 times, else the pose stays)."""
+    e.g. the legs' goals lower the trunk into a crouch).  ``penalty``: optional extra residuals, an
+    object whose ``residuals(model, params, jacobian=, pose=)`` gives ``(r (k,), J (k, n_params) or None)``
+    (``tracker.fitting.props.PropPenalty``), minimised with the goals (``r`` in the goals' units,
+    metres × √weight); a step that raises the cost is then halved (at most 5 times, else the pose stays)."""
     params, part, point, goals, w = _check(model, params, part, point, goals, weights)
     kinds = (JOINT_ROTATION, ROOT_TRANSLATION, ROOT_ROTATION) if root else (JOINT_ROTATION,)
     movable = np.isin(model.param_kind, kinds)
@@ -153,7 +153,7 @@ def damped_least_squares(model: BodyModel, params, part, point, goals, weights=N
         b = Jw.T @ r
         rp = None
         if penalty is not None:
-            rp, Jp = penalty(out, pose, True)
+            rp, Jp = penalty.residuals(model, out, jacobian=True, pose=pose)
             Jp = Jp[:, idx]
             A += Jp.T @ Jp
             b -= Jp.T @ rp
@@ -180,7 +180,7 @@ def _cost(model: BodyModel, params, part, point, goals, sw, penalty) -> float:
     """The damped least squares' cost at ``params``: weighted squared goal distances plus the penalty's."""
     pose = forward(model, params)
     r = (goals - pose.to_world(part, point)) * sw
-    rp, _ = penalty(params, pose, False)
+    rp, _ = penalty.residuals(model, params, pose=pose)
     return float(np.sum(r * r) + rp @ rp)
 
 

@@ -43,6 +43,7 @@ from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.props import carve
 from tracker.blobs.start import StartPending
 from tracker.blobs.static_voxels import StaticVoxels
+from tracker.blobs.kernels import cones_contain, lattice_member
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
@@ -145,7 +146,7 @@ def _interior_samples(model: BodyModel, *, n_theta: int = 8, n_z: int = 5,
 def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0.0) -> np.ndarray:
     """Whether each point (m, 3) lies in a cube of the coloured hull, or within ``tolerance_m`` of one
     along an axis; (m,) bool.  The hull's cubes lie on the world lattice of their size
-    (``coloured_hull``), so each size is one sorted lookup."""
+    (``coloured_hull``), so each size is one lookup in a grid."""
     P = np.asarray(points, dtype=float).reshape(-1, 3)
     if tolerance_m > 0:
         offsets = np.vstack([np.zeros(3), tolerance_m * np.eye(3), -tolerance_m * np.eye(3)])
@@ -153,29 +154,19 @@ def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0
     inside = np.zeros(len(P), bool)
     for size in np.unique(hull.sizes):
         cells = np.floor(hull.centres[hull.sizes == size] / size).astype(np.int64)
-        q = np.floor(P / size).astype(np.int64)
-        lo = np.minimum(cells.min(0), q.min(0))
-        dims = np.maximum(cells.max(0), q.max(0)) - lo + 1
-        keys = np.sort(np.ravel_multi_index((cells - lo).T, dims))
-        qk = np.ravel_multi_index((q - lo).T, dims)
-        pos = np.clip(np.searchsorted(keys, qk), 0, len(keys) - 1)
-        inside |= keys[pos] == qk
+        inside |= lattice_member(cells, np.floor(P / size).astype(np.int64))
     n = len(np.asarray(points).reshape(-1, 3))
     return inside.reshape(-1, n).any(0)
 
 
-def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
+def body_contains(model: BodyModel, pose, points: np.ndarray, *, margin_m=0.0) -> np.ndarray:
     """Whether each point (m, 3) lies in some part's cone (radii and ends grown by ``margin_m``) at
-    ``pose``; (m,) bool."""
-    P = np.asarray(points, dtype=float).reshape(-1, 3)
-    a, b, k, z1, z2 = (model.cones[:, i][:, None] for i in range(5))
-    local = np.einsum("pji,pmj->pmi", pose.rotation, P[None] - pose.translation[:, None, :])  # R^T (x - t)
-    z = local[..., 2]
-    r = np.maximum(1.0 + k * z, 0.0)
-    ra, rb = np.maximum(a * r + margin_m, 1e-9), np.maximum(b * r + margin_m, 1e-9)
-    inside = (((local[..., 0] / ra) ** 2 + (local[..., 1] / rb) ** 2 <= 1.0)
-              & (z >= z1 - margin_m) & (z <= z2 + margin_m))
-    return inside.any(0)
+    ``pose``; (m,) bool, or (k, m) for a sequence of k margins (one pass over the points)."""
+    P = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
+    margins = np.atleast_1d(np.asarray(margin_m, dtype=float))
+    inside = cones_contain(np.ascontiguousarray(model.cones, dtype=float), np.ascontiguousarray(pose.rotation),
+                           np.ascontiguousarray(pose.translation), P, margins)
+    return inside[0] if np.ndim(margin_m) == 0 else inside
 
 
 def initialise_from_images(model: BodyModel, cameras: Sequence[Camera], images: Mapping[str, np.ndarray],
@@ -304,12 +295,8 @@ class BlobTracker:
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
                                           iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root,
-                                          penalty=self._penalty if self._prop_penalty is not None else None)
+                                          penalty=self._prop_penalty)
         return params
-
-    def _penalty(self, params: np.ndarray, pose, jacobian: bool) -> tuple:
-        """The props' residuals (k,) and, with ``jacobian``, their Jacobian (k, n_params) at ``params``."""
-        return self._prop_penalty.residuals(self.model, params, jacobian=jacobian, pose=pose)
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
         """Per part (``model.part_names`` but the clavicles, in order) the fraction of its interior
@@ -326,15 +313,18 @@ class BlobTracker:
             return np.zeros(hull.n_voxels, bool)
         return self._static.static(hull.centres)
 
-    def explains(self, hull: ColourHull, pose, scene: np.ndarray | None = None) -> dict:
+    def explains(self, hull: ColourHull, pose, scene: np.ndarray | None = None, inside: np.ndarray | None = None
+                 ) -> dict:
         """How a pose (``Pose`` or params) and a hull explain each other: ``unexplained`` (fraction of
         the hull's volume, but the ``scene`` voxels (n,) bool, outside every part grown by a finest
-        voxel), ``support_min`` (the smallest :meth:`part_support`) and ``support_min_part`` (its
-        part's name)."""
+        voxel; ``inside`` (n,) bool: that :func:`body_contains` when the caller has it), ``support_min``
+        (the smallest :meth:`part_support`) and ``support_min_part`` (its part's name)."""
         if not hasattr(pose, "to_world"):
             pose = forward(self.model, np.asarray(pose, dtype=float))
         vol = hull.volumes if scene is None else np.where(scene, 0.0, hull.volumes)
-        outside = ~body_contains(self.model, pose, hull.centres, margin_m=hull.min_voxel_m)
+        if inside is None:
+            inside = body_contains(self.model, pose, hull.centres, margin_m=hull.min_voxel_m)
+        outside = ~inside
         support = self.part_support(hull, pose)
         worst = int(np.argmin(support))
         return {"unexplained": float(vol[outside].sum() / vol.sum()) if vol.sum() > 0 else 1.0,
@@ -371,10 +361,12 @@ class BlobTracker:
         at = blobs.attachment(m, pose)
         act = weights > 0
         rms = float(np.sqrt(np.mean(np.sum((at[act] - goals[act]) ** 2, 1)))) if act.any() else float("nan")
+        margins = [hull.min_voxel_m] + ([self._static.clearance_m] if self._static is not None else [])
+        inside = body_contains(m, pose, hull.centres, margin_m=margins)  # the gate's and the static memory's
         if self._static is not None:
-            self._static.update(hull.centres, ~body_contains(m, pose, hull.centres, margin_m=self._static.clearance_m))
+            self._static.update(hull.centres, ~inside[1])
         return params, {"active_fraction": float(act.mean()), "goal_rms_m": rms, "static_fraction": float(scene.mean()),
-                        **self.explains(hull, pose, scene)}
+                        **self.explains(hull, pose, scene, inside[0])}
 
     def judge(self, quality: dict) -> list:
         """Why a fit with these quality figures (``fit``'s) is not ok; empty when it is (``BlobOptions``)."""
