@@ -79,7 +79,7 @@ def test_quantisation_error_within_resolution(res, steps, seed):
     exact = distance_to_mask(sil, max_distance_px=max_d)
     ds, _ = ch.dequantised()
     assert np.abs(ds - exact).max() <= res * 0.5 + 1e-4 * max(1.0, max_d)
-    assert ds.max() <= max_d + 1e-6
+    assert ds.max() <= max_d * (1 + np.finfo(np.float32).eps)  # float32 images: half an ulp over at most
 
 
 def test_sample_gradient_matches_central_differences(rng):
