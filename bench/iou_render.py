@@ -1,13 +1,13 @@
 """Benchmark: the search's silhouette IoU (``ScoreViews.ious``), CPU time per call (JSON).
 
-    python bench/iou_render.py [--cameras 6] [--size 320x240] [--poses 300] [--repeat 5] [--rejoin]
+    python bench/iou_render.py [--cameras 6] [--size 320x240] [--poses 300] [--repeat 5] [--rejoin [HEADINGS]]
 
 Random knossow40 poses (place, heading and joint angles jittered around a standing pose) scored
 against the rendered silhouettes of the standing pose by ``--cameras`` ring cameras; prints the
 best of ``--repeat`` passes' mean thread CPU per call (``ious_cpu_ms``), the sum of all the IoUs
 (``iou_sum``: equal before and after a change that keeps the scores), the same poses scored
 together (``ious_many_cpu_ms`` per pose) and ``machine_ref_ms``.  ``--rejoin``: also the live
-fitter's cheap recovery (``tracker.search.recovery.rejoin``, 12 headings) on 9 frames of the
+fitter's cheap recovery (``tracker.search.recovery.rejoin``, 12 headings or HEADINGS) on 9 frames of the
 bundled hop seen by the ring cameras, seeded with the true poses 6 and 3 frames before:
 ``rejoin_cpu_ms`` (summed CPU) and the IoUs it returns (``rejoin_scores``).
 """
@@ -40,7 +40,8 @@ def main(argv=None) -> int:
     parser.add_argument("--size", default="320x240", help="camera image size WxH (pixels)")
     parser.add_argument("--poses", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--rejoin", action="store_true", help="also time the cheap recovery on hop frames")
+    parser.add_argument("--rejoin", type=int, nargs="?", const=12, default=None, metavar="HEADINGS",
+                        help="also time the cheap recovery on hop frames, with this many headings per seed (12)")
     opts = parser.parse_args(argv)
     w, h = (int(v) for v in opts.size.lower().split("x"))
     ref = machine_ref_ms()
@@ -69,14 +70,14 @@ def main(argv=None) -> int:
            "ious_cpu_ms": round(min(passes), 3), "ious_cpu_ms_passes": [round(v, 3) for v in passes],
            "ious_many_cpu_ms": round(1e3 * (time.thread_time() - t) / len(poses), 3),
            "iou_sum": round(total, 9), "machine_ref_ms": round(ref, 2)}
-    if opts.rejoin:
-        out.update(time_rejoin(cams))
+    if opts.rejoin is not None:
+        out.update(time_rejoin(cams, opts.rejoin))
     print(json.dumps(out))
     return 0
 
 
-def time_rejoin(cams) -> dict:
-    """CPU of ``rejoin`` on 9 hop frames (see the module docstring)."""
+def time_rejoin(cams, n_headings: int = 12) -> dict:
+    """CPU of ``rejoin`` on 9 hop frames with ``n_headings`` per seed (see the module docstring)."""
     from tracker.search.initialise import SearchOptions
     from tracker.search.recovery import rejoin
     from tracker.synthetic.bvh import load_bvh
@@ -89,7 +90,7 @@ def time_rejoin(cams) -> dict:
         sils, chamfer = rendered_views(mot.model, mot.params[k + 6], cams)
         t = time.thread_time()
         res = rejoin(mot.model, cams, sils, chamfer, [mot.params[k], mot.params[k + 3]],
-                     options=SearchOptions.for_recovery(), n_headings=12)
+                     options=SearchOptions.for_recovery(), n_headings=n_headings)
         cpu += time.thread_time() - t
         scores.append(None if res is None else round(float(res.score), 9))
     return {"rejoin_cpu_ms": round(1e3 * cpu, 1), "rejoin_scores": scores}

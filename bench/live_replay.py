@@ -8,7 +8,7 @@ default=15,rejoin=3``, or ``--sets-per-cpu-s 60``: a search's CPU seconds × tha
 rate times how much slower a search runs beside the stream than alone).  Prints ok sets, mean
 joint error over ok sets and over all sets with a pose, searches by kind, and the bad sets' clip
 frames.  ``--catch-up N`` sets how many sets a search's pose is brought forward through
-(``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
+(``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id, ``--rejoin-headings`` the cheap rejoin's headings per seed.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
 runs on one tree.
 
     python bench/live_replay.py [--json] [--sets 180] [--gaps 1 2 3 2,1,3] [--search-sets default=15,rejoin=3]
@@ -64,6 +64,8 @@ def main() -> None:
     ap.add_argument("--old-recovery", action="store_true")
     ap.add_argument("--catch-up", type=int, default=None, help="LiveTrackerFitter catch_up_sets (default: its own)")
     ap.add_argument("--start", type=int, default=0, help="first frame id of the schedules")
+    ap.add_argument("--rejoin-headings", type=int, default=None,
+                    help="LiveTrackerFitter rejoin_headings (default: its own)")
     args = ap.parse_args()
     ref = machine_ref_ms()
     root = args.session or demo_session(DemoOptions(cache_dir=args.cache_dir), progress=lambda m: None)
@@ -75,6 +77,8 @@ def main() -> None:
         extra = dict(rejoin_spacing=-1) if args.old_recovery else {}
         if args.catch_up is not None:
             extra["catch_up_sets"] = args.catch_up
+        if args.rejoin_headings is not None:
+            extra["rejoin_headings"] = args.rejoin_headings
         fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, **extra)
         c0 = time.process_time()
         rep = replay_live(clip, every_nth(args.sets, gap, start=args.start), fitter=fitter, use_rois=not args.no_rois)
@@ -95,7 +99,8 @@ def main() -> None:
                   f"all {100 * (e_all or np.nan):.2f} cm, searches {run['searches']}, rejoined {run['rejoined']}, "
                   f"{run['cpu_ms_per_set']:.1f} ms CPU per set; bad clip frames {run['bad_clip_frames']}", flush=True)
     out = {"machine_ref_ms": ref, "search_sets": args.search_sets, "sets_per_cpu_s": args.sets_per_cpu_s,
-           "old_recovery": args.old_recovery, "catch_up": args.catch_up, "start": args.start, "rois": not args.no_rois, "runs": runs}
+           "old_recovery": args.old_recovery, "catch_up": args.catch_up, "start": args.start,
+           "rejoin_headings": args.rejoin_headings, "rois": not args.no_rois, "runs": runs}
     if args.json:
         print(json.dumps(out, indent=1))
     else:

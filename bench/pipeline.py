@@ -13,7 +13,9 @@ measures the transport and segmentation without the tracker.  ``cpu_ms_per_pose`
 whole pipeline (workers and this process) per pose, ``fit_ms_p50``: the median fit time (pose
 records' ``fit_ms``) and ``fit_cpu_ms_p50`` its CPU time (``fit_cpu_ms``: ``fit_ms`` less the time the
 track worker waited for a core) — figures that a machine shared with other work changes less than the
-wall-clock ones.  Live, the replay cameras hold the clip decoded in memory as the demo's do (when
+wall-clock ones.  Live, ``cpu_by_component_replay`` is ``cpu_by_component`` over the replay window only
+(session time 0 to its end: the start-up's decoding and compiling left out) and
+``cpu_ms_per_set_by_component`` that CPU per published pose, milliseconds.  Live, the replay cameras hold the clip decoded in memory as the demo's do (when
 it takes at most 1 GB decoded; ``--preload``: whatever its size; ``--decode-live``: never), so
 ``cpu_by_component.camera`` is the cost of publishing frames, not of decoding the session's videos.
 """
@@ -69,11 +71,14 @@ def _cpu_s(pid: int | str) -> float:
 
 class CpuSampler:
     """CPU seconds per worker role of this process's children, sampled every ``period_s`` (a worker
-    that exits keeps its last sample; its final ~``period_s`` of CPU is not counted)."""
+    that exits keeps its last sample; its final ~``period_s`` of CPU is not counted), and each
+    sample's role totals with its wall-clock time (``series``: ``(time_ns, {role: cpu_s})``, this
+    process as ``"hub"``)."""
 
     def __init__(self, period_s: float = 0.25) -> None:
         self.period_s, self.parent = period_s, os.getpid()
         self.last: dict[int, tuple[str, float]] = {}
+        self.series: list[tuple[int, dict[str, float]]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -98,6 +103,24 @@ class CpuSampler:
                     self.last[int(proc.name)] = (role, _cpu_s(proc.name))
             except (OSError, ValueError, IndexError):
                 continue  # exited meanwhile
+        self.series.append((time.time_ns(), self._by_role(_cpu_s(os.getpid()))))
+
+    def _by_role(self, hub_s: float) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for role, cpu in self.last.values():
+            out[role] = out.get(role, 0.0) + cpu
+        out["hub"] = hub_s
+        return out
+
+    def between(self, start_ns: int, end_ns: int) -> tuple[dict[str, float], float] | None:
+        """CPU seconds per role from the last sample at or before ``start_ns`` to the last at or before
+        ``end_ns``, and the wall seconds between those samples (None: no such pair)."""
+        first = [s for s in self.series if s[0] <= start_ns]
+        last = [s for s in self.series if s[0] <= end_ns]
+        if not first or not last or last[-1][0] <= first[-1][0]:
+            return None
+        (t0, a), (t1, b) = first[-1], last[-1]
+        return {k: b[k] - a.get(k, 0.0) for k in sorted(b)}, (t1 - t0) / 1e9
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
@@ -119,10 +142,7 @@ class CpuSampler:
         return sum(cpu for _, cpu in self.last.values()) + self.self_s
 
     def percent(self) -> dict[str, float]:
-        out: dict[str, float] = {}
-        for role, cpu in self.last.values():
-            out[role] = out.get(role, 0.0) + cpu
-        out["hub"] = self.self_s
+        out = self._by_role(self.self_s)
         return {k: round(100.0 * v / self.wall, 1) for k, v in sorted(out.items())}
 
 
@@ -155,6 +175,12 @@ def main(argv=None) -> int:
     # live, also poses over the whole replay window
     result["poses_per_s"] = round(summary.frames / opts.duration_s, 2) if opts.live else None
     result["cpu_by_component"] = cpu.percent()
+    window = cpu.between(*summary.replay_ns) if summary.replay_ns is not None else None
+    if window is not None:  # live: the replay window alone (no start-up decoding or compiling)
+        by_role, wall = window
+        result["cpu_by_component_replay"] = {k: round(100.0 * v / wall, 1) for k, v in by_role.items()}
+        result["cpu_ms_per_set_by_component"] = ({k: round(1e3 * v / summary.frames, 2) for k, v in by_role.items()}
+                                                 if summary.frames else None)
     # CPU per pose of the whole pipeline: comparable across runs on a loaded machine, where the wall-clock
     # figures follow the share of the cores the pipeline gets
     result["cpu_ms_per_pose"] = round(1e3 * cpu.total_s() / summary.frames, 1) if summary.frames else None

@@ -12,10 +12,10 @@
    decoded frames (``live_preload_mb``), when it fits.
 3. This process is the hub and the client: it records every pose (``poses.jsonl``), bridges poses,
    images and silhouettes to rerun (``demo.rrd``) and exports ``poses.bvh``.  Lossless, it taps
-   every camera's frames; live, only the first ``live_image_cameras`` cameras' (a tap decodes every
-   frame of its cameras in this process, which competes with the pipeline: docs/tuning.md), every
-   ``image_every``-th frame logged.  Silhouettes (small chamfer images) and poses
-   of every camera, always.
+   every camera's frames and silhouettes; live, only the first ``live_image_cameras`` cameras' (a tap
+   decodes every frame of its cameras in this process, which competes with the pipeline:
+   docs/tuning.md; a silhouette tap makes the segment worker send each chamfer twice), every
+   ``image_every``-th frame logged.  Poses always.
 4. The summary: frames, ``fps_out`` (between the first and the last pose: a burst after a slow start
    reads as real time), ``poses_per_s`` (live: poses over the replay window), latency p50/p99, median
    rms_px, mean joint error against the session's ``ground_truth.jsonl`` (joints both records name,
@@ -66,7 +66,7 @@ class DemoOptions:
     live_start_delay_s, live_duration_s : float
         Live: seconds until session time 0 is due (the workers start meanwhile); seconds of replay.
     live_image_cameras : int
-        Live: cameras whose frames are tapped for rerun.
+        Live: cameras whose frames and silhouettes are tapped for rerun.
     live_preload_mb : float
         Live: the replay cameras decode the clip into memory first when it takes at most this many
         MB decoded (0: never; they then decode the session's videos while streaming).
@@ -99,7 +99,9 @@ class DemoSummary:
     """The demo's result (the module docstring lists what each figure measures).
 
     Times in seconds unless the name says ``_ms``; ``fps_*`` and ``poses_per_s`` per second of wall
-    time; ``mean_joint_error_m`` in metres; paths as strings; None where a figure does not apply.
+    time; ``mean_joint_error_m`` in metres; paths as strings; None where a figure does not apply;
+    ``replay_ns``: live, the wall-clock nanoseconds (``time.time_ns``) of session time 0 and of the
+    replay's end.
     """
 
     frames: int
@@ -122,6 +124,7 @@ class DemoSummary:
     poses: str
     bvh: str | None
     rrd: str
+    replay_ns: tuple[int, int] | None = None
 
     def as_dict(self) -> dict:
         """The fields as a JSON-ready dict."""
@@ -265,8 +268,10 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
     imaged = list(session.camera_names)[:max(0, opts.live_image_cameras)] if live else ["*"]
     taps = [(Inbox(hub, keys.frame(c), FrameMessage.from_bytes, depth=2 * opts.cameras), bridge.on_frame)
             for c in imaged]
-    taps.append((Inbox(hub, keys.chamfer("*"), ChamferMessage.from_bytes, depth=2 * opts.cameras),
-                 bridge.on_chamfer))
+    # and the silhouettes of those cameras only: a subscriber here makes each segment worker send its chamfers
+    # twice, and this process decode them
+    taps += [(Inbox(hub, keys.chamfer(c), ChamferMessage.from_bytes, depth=2 * opts.cameras), bridge.on_chamfer)
+             for c in imaged]
     if live and opts.fit_plugin is None:
         # numba's disk cache filled (or loaded) here, before session time 0 is set: on a fresh checkout the
         # track worker's own warm-up would compile for longer than the start delay and miss the replay's start
@@ -365,4 +370,5 @@ def run_demo(opts: DemoOptions, *, progress: Callable[[str], None] = print) -> D
         mean_joint_error_m=joint_error(poses, session_root / "ground_truth.jsonl"), dropped_sets=dropped,
         demand_timeouts=live_count("demand_timeouts"), missing_cameras=live_count("missing_cameras"),
         cpu_percent=100.0 * cpu / wall if wall > 0 else 0.0, wall_s=wall, session=str(session_root),
-        poses=str(poses_path), bvh=bvh, rrd=str(rrd))
+        poses=str(poses_path), bvh=bvh, rrd=str(rrd),
+        replay_ns=(epoch, epoch + int(window_s * 1e9)) if live else None)

@@ -5,6 +5,7 @@ All of them are UTF-8 JSON objects so that any zenoh client in any language can 
 record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``model``, ``params``,
 ``joints`` {name: [x, y, z] metres, world frame}, ``rms_px``, ``iterations``, ``cameras``,
 ``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``fit_cpu_ms``, ``effort``,
+``rejoin_ms``: the part of ``fit_ms`` the live fitter's cheap rejoin took in the set's own time,
 ``missing_cameras``: the names of the cameras a live set went on without; ``subject``: the name of the
 subject body the pose is of).  Status, credit, have and demand records carry
 ``"v": 1``.
@@ -76,7 +77,7 @@ class PoseRecord:
                 raise MessageError(f"joints: expected an object of at most {_MAX_JOINTS} joints")
             obj["joints"] = {check_name(k, "joint name"): _finite_list(v, f"joints.{k}", length=3)
                              for k, v in joints.items()}
-        for key in ("rms_px", "latency_ms", "fit_ms", "fit_cpu_ms"):
+        for key in ("rms_px", "latency_ms", "fit_ms", "fit_cpu_ms", "rejoin_ms"):
             if obj.get(key) is not None:
                 obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):

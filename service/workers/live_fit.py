@@ -27,7 +27,7 @@
 - **The subject's body.**  An ``auto_subject`` (``service.workers.auto_subject``) is offered the good
   sets; its adopted body is taken at a set's start, no search running, and named by the records' ``subject``.
 - ``fit_ms``: the time this set's fit took, milliseconds (``latency_ms`` is set by the worker:
-  capture to publish).
+  capture to publish); ``rejoin_ms``: of it, the cheap rejoin run in the set's time (only on those sets).
 """
 
 from __future__ import annotations
@@ -464,8 +464,10 @@ class LiveTrackerFitter(TrackerFitter):
                         if due:
                             self._sets_since_rejoin = 0
                         if due and not self.rejoin_beside:
+                            t_rejoin = self.clock()
                             record = self._rejoin_now(frame_id, timestamp_ns, images, silhouettes) or record
                             record["effort"] = level.as_record()
+                            record["rejoin_ms"] = 1e3 * (self.clock() - t_rejoin)
                         seeds = [tr.last_good, tr.params]
                         if not record.get("ok") and tr.monitor.bad_frames >= tr.monitor.patience:
                             self._start_search(frame_id, seeds, images, silhouettes)  # rejoin, then the full search

@@ -55,7 +55,7 @@ def test_decoders_raise_only_message_error(cls, data):
 
 @pytest.mark.parametrize("cls,keys", [
     (PoseRecord, ("frame", "timestamp_ns", "ok", "model", "params", "joints", "rms_px", "iterations", "cameras",
-                  "latency_ms", "fit_ms", "fit_cpu_ms", "reason")),
+                  "latency_ms", "fit_ms", "fit_cpu_ms", "rejoin_ms", "reason")),
     (StatusMessage, ("v", "component", "state", "timestamp_ns", "stats")),
     (HaveMessage, ("v", "camera", "frames")),
     (DemandMessage, ("v", "consumer", "frame_id")),

@@ -95,6 +95,10 @@ def test_a_lost_track_rejoins_within_a_few_sets_while_the_full_search_is_slow(ho
     assert ok.sum() >= 0.75 * len(ok)
     assert np.nanmean(clip_joint_errors(hop_clip, rep.records)[ok]) < 0.06
     assert fitter.search_kinds.get("rejoin now", 0) >= 1
+    # the sets that ran it say how long it took them
+    rejoins = [r for r in rep.records if "rejoin_ms" in r]
+    assert len(rejoins) == fitter.search_kinds["rejoin now"]
+    assert all(0 < r["rejoin_ms"] <= r["fit_ms"] for r in rejoins)
     old, _ = run(rejoin_spacing=-1)
     assert sum(_bad_runs(old.records)) > sum(runs)
     beside, fitter = run(rejoin_beside=True)  # the cheap recovery in the background instead: no set waits for it
