@@ -36,7 +36,7 @@ from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
 
-__all__ = ["Tracker", "TrackerOptions", "fit_frame", "frame_cost", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
+__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
 
 MAX_EXTRAPOLATION = 3.0
 """The constant-velocity prediction extrapolates at most this many times the last step."""
@@ -58,7 +58,7 @@ class TrackerOptions:
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px
         The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
     palm_length
-        The hands' length in the fit, the searches and the gate (``palm_model``; None: the model's).
+        The hands' length of the body the tracker fits (``palm_model``; None: the model's).
     constant_velocity
         Start each fit from the constant-velocity extrapolation.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
@@ -95,9 +95,9 @@ class TrackerOptions:
     prior_m: float = 200.0
     #: prior weight on the rotations towards the last fitted pose, px² per rad²
     prior_rad: float = 30.0
-    #: length of the hands' cones in the frame fit, the searches and the IoU gate, fraction of height
-    #: (None: the model's own); e.g. 0.06, the palm: the part of a hand that is in the silhouette
-    #: whatever the fingers do (the front/back hypotheses are fitted and scored with the whole hand)
+    #: length of the hands' cones of the body the ``Tracker`` fits, searches and gates with, fraction
+    #: of height (None: the model's own); e.g. 0.06, the palm: the part of a hand that is in the
+    #: silhouette whatever the fingers do
     palm_length: float | None = None
     #: weight of the silhouette -> model term (0: off)
     reverse_weight: float = 1.0
@@ -179,8 +179,8 @@ def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
 
 def palm_model(model: BodyModel, length: float | None) -> BodyModel:
     """``model`` with every ``*_hand`` part's cone cut to ``length`` × height (metres along the
-    hand from the wrist; a shorter hand is kept as it is); None: ``model`` itself.  The kinematics
-    and joint centres are the model's."""
+    hand from the wrist; a shorter hand is kept as it is); None: ``model`` itself.  The kinematics,
+    parameters and joint centres are the model's."""
     if length is None:
         return model
     if not (np.isfinite(length) and length > 0):
@@ -190,15 +190,6 @@ def palm_model(model: BodyModel, length: float | None) -> BodyModel:
     cones[hands, 4] = np.minimum(cones[hands, 4], np.maximum(cones[hands, 3] + 1e-6, length * model.height_m))
     cones.setflags(write=False)
     return replace(model, cones=cones)
-
-
-def frame_cost(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, *, sliding: bool = True,
-               options: TrackerOptions = TrackerOptions()) -> ChamferCost:
-    """The chamfer cost ``fit_frame`` minimises (``TrackerOptions``' sampling, truncation and reverse term)."""
-    return ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
-                       visibility=options.visibility, truncate_px=options.truncate_px,
-                       reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
-                       reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
 
 
 def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
@@ -228,7 +219,10 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
     result : SolverResult
     cost : ChamferCost
     """
-    cost = frame_cost(model, cameras, chamfer, sliding=sliding, options=options)
+    cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
+                       visibility=options.visibility, truncate_px=options.truncate_px,
+                       reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
+                       reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
     prior = start if prediction is None else prediction
     kw = dict(lower=model.lower, upper=model.upper, prior=model.clamp(prior),
               prior_weight=prior_weights(model, options), loss=options.loss, f_scale=options.f_scale,
@@ -306,8 +300,7 @@ class Tracker:
                  front_back: FrontBackOptions | None = FrontBackOptions()) -> None:
         if solver not in ("lm", "lsq"):
             raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
-        self.model = model
-        self.fit_model = palm_model(model, options.palm_length)  # the frame fit's, searches' and gate's body
+        self.model = palm_model(model, options.palm_length)
         self.cameras = {c.name: c for c in cameras}
         if len(self.cameras) != len(cameras):
             raise ValueError("cameras: names must be unique")
@@ -341,7 +334,7 @@ class Tracker:
             self.params = model.clamp(p)
         self.last_result: SolverResult | None = None
         self.n_initialisations = 0
-        self.guard = None if front_back is None else FrontBackGuard(model, front_back)
+        self.guard = None if front_back is None else FrontBackGuard(self.model, front_back)
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
@@ -350,10 +343,9 @@ class Tracker:
         (a calibrated subject); the pose, its velocity and the front/back guard's state are kept."""
         if model.param_names != self.model.param_names:
             raise ValueError(f"resize: model {model.name!r} has other parameters than {self.model.name!r}")
-        self.model = model
-        self.fit_model = palm_model(model, self.options.palm_length)
+        self.model = palm_model(model, self.options.palm_length)
         if self.guard is not None:
-            self.guard.resize(model)
+            self.guard.resize(self.model)
 
     def predict(self, frame_id: int | None = None) -> np.ndarray | None:
         """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
@@ -382,14 +374,14 @@ class Tracker:
         sils = {c.name: silhouettes[c.name] for c in cams}
         chs = {c.name: chamfer[c.name] for c in cams}
         if hint is None:
-            res = initialise(self.fit_model, cams, sils, chs, options=self.options.initialise_search)
+            res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
         else:
-            res = recover(self.fit_model, cams, sils, chs, hint, options=self.options.recover_search)
+            res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
         return self.model.clamp(np.asarray(res.params, dtype=float))
 
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
-        res, cost = fit_frame(self.fit_model, cams, chs, start, prediction=prior, sliding=self.sliding,
+        res, cost = fit_frame(self.model, cams, chs, start, prediction=prior, sliding=self.sliding,
                               solver=self.solver, options=self.options, penalty=self.penalty)
         terms = cost.evaluate(np.asarray(res.params))
         return res, terms, terms.rms_px(), terms.inside_fraction()
@@ -456,8 +448,7 @@ class Tracker:
 
     def _front_back(self, cams, chs, res, terms, views):
         """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
-        mirror of the fit ``res`` scores better, else None.  ``views``: a callable returning the
-        whole model's ScoreViews."""
+        mirror of the fit ``res`` scores better, else None."""
         o = self.options
         self.n_front_back_checks += 1
         p = np.asarray(res.params)
@@ -466,35 +457,21 @@ class Tracker:
                                   options=replace(o, max_iterations=o.front_back_iterations), penalty=self.penalty)
         pm = np.asarray(res_m.params)
         v = views()
-        if self.fit_model is self.model:
-            iou = self._last_iou if self._last_iou is not None else float(v.score(p))
-            kept = hypothesis_cost(self.model, p, terms.rms_px(), iou)
-        else:  # both hypotheses fitted alike: the whole model, as many steps
-            res_k, cost_k = fit_frame(self.model, cams, chs, p, sliding=self.sliding, solver=self.solver,
-                                      options=replace(o, max_iterations=o.front_back_iterations), penalty=self.penalty)
-            pk = np.asarray(res_k.params)
-            kept = hypothesis_cost(self.model, pk, cost_k.evaluate(pk).rms_px(), float(v.score(pk)))
+        iou = self._last_iou if self._last_iou is not None else float(v.score(p))
+        kept = hypothesis_cost(self.model, p, terms.rms_px(), iou)
         turned = hypothesis_cost(self.model, pm, cost_m.evaluate(pm).rms_px(), float(v.score(pm)))
         if not turned < kept - o.front_back_margin:
             return None
         # turned: converge fully from there (the mirror of a contorted fit is itself off)
-        res_t, cost_t = fit_frame(self.fit_model, cams, chs, pm, sliding=self.sliding, solver=self.solver,
+        res_t, cost_t = fit_frame(self.model, cams, chs, pm, sliding=self.sliding, solver=self.solver,
                                   options=replace(o, max_iterations=4 * o.front_back_iterations, ftol=2e-3, rtol=0.0),
                                   penalty=self.penalty)
         return res_t, cost_t.evaluate(np.asarray(res_t.params))
 
-    def _whole_terms(self, cams, chs, params, terms):
-        """``terms`` (the frame fit's, at ``params``) evaluated with the whole model: what the front/back
-        hypotheses, fitted with it, are compared against."""
-        if self.fit_model is self.model:
-            return terms
-        return frame_cost(self.model, cams, chs, sliding=self.sliding, options=self.options).evaluate(params)
-
-    def _guard(self, record, cams, chs, images, res, terms, bad, views, whole_views):
+    def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
         bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
-        ("" or why the frame is not ok although the fit is good).  ``views`` / ``whole_views``:
-        callables returning the gate's and the whole model's ScoreViews (or None)."""
+        ("" or why the frame is not ok although the fit is good)."""
         def fit(start, prediction, iterations=None):
             opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
                                                                       ftol=min(self.options.ftol, 2e-3))
@@ -502,11 +479,10 @@ class Tracker:
                                 solver=self.solver, options=opts, penalty=self.penalty)
             return r, cost.evaluate(np.asarray(r.params))
 
-        iou = (lambda p: float(whole_views().score(p))) if whole_views is not None else None
+        iou = (lambda p: float(views().score(p))) if views is not None else None
         out = self.guard.update(t_s=1e-9 * record["timestamp_ns"], cams=cams, chs=[chs[c.name] for c in cams],
                                 images=[images[c.name] for c in cams] if images and all(c.name in images for c in cams)
-                                else None, res=res, terms=self._whole_terms(cams, chs, np.asarray(res.params), terms),
-                                ok=not bad, fit=fit, iou=iou)
+                                else None, res=res, terms=terms, ok=not bad, fit=fit, iou=iou)
         record["front_back"] = self.guard.state
         record["front_back_cues"] = {k: round(float(v), 3) for k, v in out.cues.items()}
         swapped = out.swap is not None
@@ -570,17 +546,10 @@ class Tracker:
         res, terms, rms, inside = self._fit(cams, chs, start)
         built: list = []
 
-        def score_views() -> ScoreViews:  # the gate's: the fit's body
+        def score_views() -> ScoreViews:
             if not built:
-                built.append(ScoreViews(self.fit_model, cams, [silhouettes[n] for n in names], scale=0.5))
+                built.append(ScoreViews(self.model, cams, [silhouettes[n] for n in names], scale=0.5))
             return built[0]
-
-        def whole_views() -> ScoreViews:  # the hypotheses': the whole hands tell front from back
-            if self.fit_model is self.model:
-                return score_views()
-            if len(built) < 2:
-                built.append(score_views().with_model(self.model))
-            return built[1]
 
         views = score_views if can_search else None
         self._last_iou = None
@@ -607,7 +576,7 @@ class Tracker:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
                 self._since_front_back = 0
-                turned = self._front_back(cams, chs, res, terms, whole_views)
+                turned = self._front_back(cams, chs, res, terms, views)
                 if turned is not None:
                     res, terms = turned
                     rms, inside = terms.rms_px(), terms.inside_fraction()
@@ -620,7 +589,7 @@ class Tracker:
         unsure = ""
         if self.guard is not None:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
-                                                                        views, whole_views if can_search else None)
+                                                                        views)
             restarted = restarted or swapped
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
