@@ -36,7 +36,7 @@ from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
 
-__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights", "MAX_EXTRAPOLATION"]
+__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
 
 MAX_EXTRAPOLATION = 3.0
 """The constant-velocity prediction extrapolates at most this many times the last step."""
@@ -57,6 +57,8 @@ class TrackerOptions:
         Robust loss and its scale, distance truncation, priors towards the last fitted pose.
     reverse_weight, reverse_samples, reverse_min_px, reverse_cover_px
         The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
+    palm_length
+        The hands' length of the body the tracker fits (``palm_model``; None: the model's).
     constant_velocity
         Start each fit from the constant-velocity extrapolation.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
@@ -93,6 +95,10 @@ class TrackerOptions:
     prior_m: float = 200.0
     #: prior weight on the rotations towards the last fitted pose, px² per rad²
     prior_rad: float = 30.0
+    #: length of the hands' cones of the body the ``Tracker`` fits, searches and gates with, fraction
+    #: of height (None: the model's own); e.g. 0.06, the palm: the part of a hand that is in the
+    #: silhouette whatever the fingers do
+    palm_length: float | None = None
     #: weight of the silhouette -> model term (0: off)
     reverse_weight: float = 1.0
     #: observed boundary samples per camera of that term
@@ -169,6 +175,21 @@ def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
         px² per m² or per rad².
     """
     return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
+
+
+def palm_model(model: BodyModel, length: float | None) -> BodyModel:
+    """``model`` with every ``*_hand`` part's cone cut to ``length`` × height (metres along the
+    hand from the wrist; a shorter hand is kept as it is); None: ``model`` itself.  The kinematics,
+    parameters and joint centres are the model's."""
+    if length is None:
+        return model
+    if not (np.isfinite(length) and length > 0):
+        raise ValueError(f"palm_length: expected a positive fraction of height, got {length}")
+    cones = np.array(model.cones)
+    hands = [i for i, n in enumerate(model.part_names) if n.endswith("_hand")]
+    cones[hands, 4] = np.minimum(cones[hands, 4], np.maximum(cones[hands, 3] + 1e-6, length * model.height_m))
+    cones.setflags(write=False)
+    return replace(model, cones=cones)
 
 
 def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
@@ -279,7 +300,7 @@ class Tracker:
                  front_back: FrontBackOptions | None = FrontBackOptions()) -> None:
         if solver not in ("lm", "lsq"):
             raise ValueError(f"solver: expected 'lm' or 'lsq', got {solver!r}")
-        self.model = model
+        self.model = palm_model(model, options.palm_length)
         self.cameras = {c.name: c for c in cameras}
         if len(self.cameras) != len(cameras):
             raise ValueError("cameras: names must be unique")
@@ -313,7 +334,7 @@ class Tracker:
             self.params = model.clamp(p)
         self.last_result: SolverResult | None = None
         self.n_initialisations = 0
-        self.guard = None if front_back is None else FrontBackGuard(model, front_back)
+        self.guard = None if front_back is None else FrontBackGuard(self.model, front_back)
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
@@ -322,9 +343,9 @@ class Tracker:
         (a calibrated subject); the pose, its velocity and the front/back guard's state are kept."""
         if model.param_names != self.model.param_names:
             raise ValueError(f"resize: model {model.name!r} has other parameters than {self.model.name!r}")
-        self.model = model
+        self.model = palm_model(model, self.options.palm_length)
         if self.guard is not None:
-            self.guard.resize(model)
+            self.guard.resize(self.model)
 
     def predict(self, frame_id: int | None = None) -> np.ndarray | None:
         """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
