@@ -94,9 +94,14 @@ def expectation(centres: np.ndarray, colours: np.ndarray, mean: np.ndarray, cov:
     fallback = (np.zeros((n, 3), np.float32) if colour_weight > 0 else
                 np.ascontiguousarray(np.median(colours, axis=1), dtype=np.float32))
     used = np.ones(b, bool) if use is None else np.asarray(use, bool)
+    if colours.shape[0] != n or used.shape != (b,):
+        raise ValueError(f"expectation: colours for {colours.shape[0]} voxels and use for {used.shape} blobs, "
+                         f"expected {n} and ({b},)")
+    # without the colour term its covariance is not read (a singular one is no error)
+    colour_inv = np.linalg.inv(colour_cov) if colour_weight > 0 else np.zeros((b, 3, 3))
     labels, colour, dist, vox, blob, col, wgt = assign(
         np.ascontiguousarray(centres, dtype=float), colours, np.ascontiguousarray(mean, dtype=float),
-        np.linalg.inv(cov), np.ascontiguousarray(colour_mean, dtype=float), np.linalg.inv(colour_cov), extra, used,
+        np.linalg.inv(cov), np.ascontiguousarray(colour_mean, dtype=float), colour_inv, extra, used,
         float(colour_weight), float(gate), int(soft), fallback)
     return Assignment(labels, colour, dist, (vox, blob, col, wgt) if soft > 1 else None)
 

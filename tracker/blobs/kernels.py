@@ -356,22 +356,29 @@ def lattice_member(cells, query):
     return out
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
 def warm_up() -> None:
     """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
     read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
     m = 2
     plane, one = np.zeros((1, 3), np.float32), np.ones(1, np.float32)
+    # a Camera's matrix, rotation, translation and distortion and a model's cones are read-only arrays
+    R, t, K, dist, cones = (_read_only(a) for a in (np.eye(3), np.array([0.0, 0.0, 2.0]), np.eye(3), np.zeros(5),
+                                                     np.ones((1, 5))))
     for writable in (True, False):
         image = np.zeros((1, 3), np.uint8)
         image.setflags(write=writable)
-        floor_vote(np.zeros((m, 3)), np.ones(m, np.float32), np.eye(3), np.array([0.0, 0.0, 2.0]), np.eye(3),
-                   np.zeros(5), 1, 1, image, plane, plane, plane, one, np.eye(3, dtype=np.float32), 16.0,
-                   np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool))
+        floor_vote(np.zeros((m, 3)), np.ones(m, np.float32), R, t, K, dist, 1, 1, image, plane, plane, plane, one,
+                   np.eye(3, dtype=np.float32), 16.0, np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool))
     cols, rows = pattern_pixels(np.zeros((m, 2)), np.ones(m), np.zeros((4, 2)), 4, 3)
     d = np.zeros((m, 4), np.float32)
     view_classes(d, np.ones(m, bool), 16.0, 64.0, 6.0, 0, 1, 2, 3)
     sample_colours(d, np.zeros((m, 4, 3), np.float32), np.arange(m), 16.0)
-    cones_contain(np.ones((1, 5)), np.eye(3)[None], np.zeros((1, 3)), np.zeros((m, 3)), np.zeros(2))
+    cones_contain(cones, np.eye(3)[None], np.zeros((1, 3)), np.zeros((m, 3)), np.zeros(2))
     neighbour_vote(np.zeros((m, 3), np.int64), np.zeros(m, np.int8), np.arange(1), 0, 1, 2, 3)
     lattice_member(np.zeros((m, 3), np.int64), np.zeros((m, 3), np.int64))
     weighted_moments(np.zeros(m, np.int64), np.zeros((m, 3)), np.ones(m), np.zeros(m), 2)
