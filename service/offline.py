@@ -27,7 +27,7 @@ from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
 
-__all__ = ["background_models", "floor_test", "session_model", "session_props", "settled_records", "track_session",
+__all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records", "track_session",
            "summarise", "TrackSummary"]
 
 
@@ -48,6 +48,23 @@ def session_props(session: Session) -> list:
     from tracker.fitting.props import PropBox
 
     return [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+
+
+def warm_up_kernels(method: str = "contours") -> float:
+    """Compile (first run) or load from numba's on-disk cache the kernels a ``method`` fit runs: the
+    contour tracker's, and for ``"blobs"`` also the blob tracker's and the sampled background test's
+    (its first pose is the contour tracker's); seconds taken."""
+    from tracker.fitting.warmup import warm_up as warm_contours
+
+    t0 = time.perf_counter()
+    if method == "blobs":
+        from segmentation.samples import warm_up as warm_samples
+        from tracker.blobs.kernels import warm_up as warm_blobs
+
+        warm_samples()
+        warm_blobs()
+    warm_contours()
+    return time.perf_counter() - t0
 
 
 def floor_test(cameras, backgrounds: dict[str, BackgroundModel],

@@ -17,7 +17,7 @@ from service.atomic import JsonlWriter
 from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from tracker.fitting.props import parse_prop
-from service.offline import background_models, session_model, session_props, summarise, track_session
+from service.offline import background_models, session_model, session_props, summarise, track_session, warm_up_kernels
 from segmentation.pipeline import SegmentationParams
 from tracker.fitting.scene import SceneOptions
 from tracker.body.model import available_models
@@ -126,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
     if warning:
         print(f"contourcap track: warning: {warning}", file=sys.stderr)
     total = count_frames(session, names[0], frames) if names else None
+    print("tracker kernels: compiling (the first run only) or loading ...", end="", file=sys.stderr, flush=True)
+    print(f" {warm_up_kernels(args.method):.1f} s", file=sys.stderr)
     records = []
     t0 = time.perf_counter()
     out = JsonlWriter(args.out)

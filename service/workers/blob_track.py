@@ -96,18 +96,12 @@ class BlobFitter:
         return cls(body, list(session.calibration), backgrounds=bgs, props=props, **options)
 
     def warm_up(self) -> float:
-        """Compile the numba kernels the fit runs (the blob tracker's, the sampled background test's and
-        the contour tracker's, which the first pose uses) or load them from the on-disk cache; seconds
-        taken.  The track worker calls it before the first frame set, so no frame waits for a compiler."""
-        from segmentation.samples import warm_up as warm_samples
-        from tracker.blobs.kernels import warm_up as warm_blobs
-        from tracker.fitting.warmup import warm_up as warm_contours
+        """Compile the numba kernels the fit runs (``service.offline.warm_up_kernels("blobs")``) or load
+        them from the on-disk cache; seconds taken.  The track worker calls it before the first frame
+        set, so no frame waits for a compiler."""
+        from service.offline import warm_up_kernels
 
-        t0 = time.perf_counter()
-        warm_samples()
-        warm_blobs()
-        warm_contours()
-        return time.perf_counter() - t0
+        return warm_up_kernels("blobs")
 
     def _learn(self, images: Mapping[str, np.ndarray]) -> str | None:
         """Feed cameras still learning their background; a reason while any of those in ``images`` is."""
