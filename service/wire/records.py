@@ -7,7 +7,8 @@ record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``m
 ``latency_ms``; ``reason`` when ``ok`` is false; optional ``fit_ms``, ``fit_cpu_ms``, ``effort``,
 ``rejoin_ms``: the part of ``fit_ms`` the live fitter's cheap rejoin took in the set's own time,
 ``missing_cameras``: the names of the cameras a live set went on without; ``subject``: the name of the
-subject body the pose is of).  Status, credit, have and demand records carry
+subject body the pose is of; ``failed``: the quality-gate limits a not-ok fit failed, names such as
+``"rms"``, ``"inside"``, ``"iou"``, ``"front_back"``).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -29,6 +30,7 @@ RECORD_VERSION = 1
 _MAX_PARAMS = 1024
 _MAX_JOINTS = 128
 _MAX_CAMERAS = 64
+_MAX_FAILED = 16
 
 
 def _finite_list(value: Any, key: str, *, length: int | None = None, max_len: int = _MAX_PARAMS) -> list[float]:
@@ -85,6 +87,11 @@ class PoseRecord:
                 meta_int(obj, key)
         if "subject" in obj and (not isinstance(obj["subject"], str) or not 0 < len(obj["subject"]) <= 200):
             raise MessageError("subject: expected the subject's name, a string of 1 to 200 characters")
+        if "failed" in obj:
+            failed = obj["failed"]
+            if not isinstance(failed, list) or len(failed) > _MAX_FAILED:
+                raise MessageError(f"failed: expected a list of at most {_MAX_FAILED} limit names")
+            obj["failed"] = [check_name(c, "failed") for c in failed]
         if "missing_cameras" in obj:
             missing = obj["missing_cameras"]
             if not isinstance(missing, list) or len(missing) > _MAX_CAMERAS:

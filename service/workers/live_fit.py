@@ -456,7 +456,7 @@ class LiveTrackerFitter(TrackerFitter):
                     if self.auto_subject is not None:
                         self.auto_subject.observe(frame_id, record, silhouettes)
                 if not record.get("ok"):
-                    poor = str(record.get("reason", "")).startswith("poor fit")
+                    poor = bool(set(record.get("failed") or ()) - {"front_back"})  # a gate limit, not the guard
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
                     else:

@@ -88,6 +88,9 @@ def test_pose_is_plain_design_json(rng):
     ({"frame": 1, "timestamp_ns": 0, "ok": True, "missing_cameras": "cam0"}, "missing_cameras"),
     ({"frame": 1, "timestamp_ns": 0, "ok": True, "missing_cameras": ["c"] * 65}, "missing_cameras"),
     ({"frame": 1, "timestamp_ns": 0, "ok": True, "rejoin_ms": "12"}, "rejoin_ms"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": False, "reason": "x", "failed": "iou"}, "failed"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": False, "reason": "x", "failed": ["iou"] * 17}, "failed"),
+    ({"frame": 1, "timestamp_ns": 0, "ok": False, "reason": "x", "failed": ["\x1b[2J"]}, "failed"),
 ])
 def test_pose_validation_names_key(bad, word):
     with pytest.raises(MessageError, match=word):

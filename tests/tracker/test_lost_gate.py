@@ -9,6 +9,7 @@ import pytest
 from tests.tracker.test_tracking import HOP, render_chamfer
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.fitting.tracking import Tracker, TrackerOptions
+from service.wire.records import PoseRecord
 from tracker.search.candidates import turn_about_vertical
 from tracker.synthetic.bvh import load_bvh
 from tracker.synthetic.retarget import retarget_bvh
@@ -31,7 +32,8 @@ def test_a_body_below_min_iou_is_not_ok_but_not_lost(scene):
     tracker = Tracker(model, cameras, initial_params=p0, patience=2, options=soft)
     recs = [tracker.step(k, k, ch, sil) for k in range(6)]
     assert not any(r["ok"] for r in recs)
-    assert all("silhouette IoU" in r["reason"] for r in recs)
+    assert all("silhouette IoU" in r["reason"] and r["failed"] == ["iou"] for r in recs)
+    assert all(PoseRecord.from_dict(r).get("failed") == ["iou"] for r in recs)  # a valid pose record field
     assert tracker.n_initialisations == 0
     assert 0.8 < tracker.lost_iou_limit() < 0.99
     assert tracker.last_good is not None  # the frames were kept for tracking

@@ -45,10 +45,13 @@ def test_usable_records():
     p = [0.0] * 3
     assert usable_record({"ok": True, "params": p}, 0.7)
     assert not usable_record({"ok": True}, 0.7)  # no pose
-    assert usable_record({"ok": False, "params": p, "iou": 0.75, "reason": "poor fit: silhouette IoU 0.75 < 0.8"}, 0.7)
-    assert not usable_record({"ok": False, "params": p, "iou": 0.6, "reason": "poor fit: silhouette IoU 0.6 < 0.8"}, 0.7)
-    assert not usable_record({"ok": False, "params": p, "reason": "poor fit: rms 9.1 px > 4"}, 0.7)
-    assert usable_record({"ok": False, "params": p, "reason": "front/back ambiguous (evidence -1.0 of ±2)"}, 0.7)
+    assert usable_record({"ok": False, "params": p, "iou": 0.75, "failed": ["iou"]}, 0.7)
+    assert not usable_record({"ok": False, "params": p, "iou": 0.6, "failed": ["iou"]}, 0.7)
+    assert not usable_record({"ok": False, "params": p, "failed": ["iou"]}, 0.7)  # no IoU to judge
+    assert not usable_record({"ok": False, "params": p, "failed": ["rms"]}, 0.7)
+    assert not usable_record({"ok": False, "params": p, "iou": 0.9, "failed": ["inside", "iou"]}, 0.7)
+    assert usable_record({"ok": False, "params": p, "failed": ["front_back"]}, 0.7)
+    assert usable_record({"ok": False, "params": p, "iou": 0.75, "failed": ["iou", "front_back"]}, 0.7)
     assert not usable_record({"ok": False, "params": p, "reason": "searching: initialisation running"}, 0.7)
 
 

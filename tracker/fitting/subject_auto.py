@@ -96,15 +96,16 @@ class AutoSubjectOptions:
 
 def usable_record(record: Mapping, min_iou: float) -> bool:
     """Whether a pose record's fit may be sampled (``AutoSubjectOptions.min_iou``): it has a pose and
-    is ok, or failed only the IoU limit or an open front/back question with an IoU >= ``min_iou``."""
+    is ok, or failed (its ``failed`` limits) only the IoU limit or an open front/back question, with
+    an IoU >= ``min_iou``."""
     if record.get("params") is None:
         return False
     if record.get("ok"):
         return True
-    reason, iou = str(record.get("reason", "")), record.get("iou")
-    iou_ok = iou is None or float(iou) >= float(min_iou)
-    only_iou = reason.startswith("poor fit: silhouette IoU") and iou is not None
-    return iou_ok and (only_iou or reason.startswith("front/back"))
+    failed, iou = set(record.get("failed") or ()), record.get("iou")
+    if not failed or not failed <= {"iou", "front_back"} or ("iou" in failed and iou is None):
+        return False
+    return iou is None or float(iou) >= float(min_iou)
 
 
 @dataclass(frozen=True)

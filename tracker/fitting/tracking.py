@@ -36,7 +36,7 @@ from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
 
-__all__ = ["Tracker", "TrackerOptions", "fit_frame", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
+__all__ = ["Tracker", "TrackerOptions", "Verdict", "fit_frame", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
 
 MAX_EXTRAPOLATION = 3.0
 """The constant-velocity prediction extrapolates at most this many times the last step."""
@@ -262,6 +262,28 @@ def _silhouette_empty(chamfer, silhouette) -> bool:
     return q.size == 0 or int(q.min()) > 0
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """The quality gate's verdict on a fit: false when it passed.
+
+    Attributes
+    ----------
+    text : str
+        Why it failed, for the pose record's ``reason`` ("" when it passed).
+    failed : tuple of str
+        The limits it failed, from ``"rms"``, ``"inside"``, ``"iou"`` (the pose record's ``failed``).
+    """
+
+    text: str = ""
+    failed: tuple = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.failed)
+
+    def __str__(self) -> str:
+        return self.text
+
+
 class Tracker:
     """Frame-to-frame tracker of one person.
 
@@ -316,7 +338,6 @@ class Tracker:
                                    min_inside_fraction=options.min_inside_fraction, patience=patience)
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
-        self._iou_only = False  # the last ``_bad`` failed the IoU limit alone
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
@@ -403,10 +424,10 @@ class Tracker:
             return min(o.min_iou, o.lost_iou_floor)
         return min(o.min_iou, max(o.lost_iou_floor, float(np.median(self._good_iou)) - o.lost_iou_margin))
 
-    def _soft(self, bad: str) -> bool:
+    def _soft(self, bad: Verdict) -> bool:
         """The frame failed only the IoU limit and stays above ``lost_iou_limit``, and the last search
         is recent (``soft_search_gap``): not ok, not lost."""
-        return (bool(bad) and self._iou_only and self._last_iou is not None and self._last_iou >= self.lost_iou_limit()
+        return (bad.failed == ("iou",) and self._last_iou is not None and self._last_iou >= self.lost_iou_limit()
                 and self._since_search < self.options.soft_search_gap)
 
     def _suspect(self, terms) -> bool:
@@ -424,27 +445,28 @@ class Tracker:
                 and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
         return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
 
-    def _bad(self, terms, views) -> str:
-        """Why the fit at ``terms`` is poor ("" when it is good); ``views``: a callable returning
+    def _bad(self, terms, views) -> "Verdict":
+        """Why the fit at ``terms`` is poor (false when it is good); ``views``: a callable returning
         ScoreViews (built on first use), or None (no IoU check)."""
         o = self.options
         rms, inside = terms.rms_px(), terms.inside_fraction()
         lim = self.rms_limit()
-        why = []
+        why, failed = [], []
         if not (np.isfinite(rms) and rms <= lim):
             why.append(f"rms {rms:.2f} px > {lim:.3g}")
+            failed.append("rms")
         if not (np.isfinite(inside) and inside >= o.min_inside_fraction):
             why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
-        self._iou_only = False
+            failed.append("inside")
         if views is not None and (why or self._iou_due(terms)):
             iou = float(views().score(np.asarray(terms.pose.params)))
             self._last_iou = iou
             if not iou >= o.min_iou:
-                self._iou_only = not why
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
-            if not why or (self._iou_only and iou >= self.lost_iou_limit()):
+                failed.append("iou")
+            if not why or (failed == ["iou"] and iou >= self.lost_iou_limit()):
                 self._good_iou = (self._good_iou + [iou])[-o.iou_window:]
-        return "; ".join(why)
+        return Verdict("; ".join(why), tuple(failed))
 
     def _front_back(self, cams, chs, res, terms, views):
         """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
@@ -605,6 +627,7 @@ class Tracker:
         self._last_bad = bool(bad)
         if bad or unsure:
             record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else []))
+            record["failed"] = list(bad.failed) + (["front_back"] if unsure else [])
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
