@@ -14,8 +14,8 @@ from tracker.synthetic.synth import bundled_motion
 from tracker.synthetic.evaluation import (FALSE_ALARM_M, FALSE_OK_M, mirrored_frames, frame_errors, reflect_front_back,
                                           score_clip, summarise_clips, swap_left_right)
 from tracker.synthetic.motions import MOTIONS, make_motion
-from tracker.synthetic.people import (JOINT_NAMES, SEGMENTS, Studio, body_primitives, make_subject, subject_height,
-                                      subject_motion)
+from tracker.synthetic.people import (HAND_LENGTH_H, JOINT_NAMES, SEGMENTS, Studio, body_primitives, make_subject,
+                                      subject_height, subject_motion)
 
 
 @pytest.fixture(scope="module")
@@ -83,6 +83,35 @@ def test_proportions_vary_between_seeds(skeleton):
     assert 1.4 < min(heights) and max(heights) < 2.0 and np.ptp(heights) > 0.05
     radii = np.array([[s.radius["thigh"], s.radius["upper_arm"]] for s in subjects])
     assert np.all(np.ptp(radii / radii.mean(axis=0), axis=0) > 0.15)
+
+
+def test_hands_are_a_persons_size_along_the_bvh_fingers(skeleton):
+    # wrist to fingertips: 0.09-0.125 of the standing height (HAND_LENGTH_H x the hand scale's U(0.85, 1.15)),
+    # not the CMU skeleton's finger end site (about half a hand); the hand points along wrist -> finger end
+    assert 0.10 <= HAND_LENGTH_H <= 0.12
+    lengths = []
+    for seed in range(6):
+        subject, sm, prim, studio = _scene(skeleton, seed, motion="arms", frames=20)
+        height = subject_height(skeleton, subject)
+        assert sm.height_m == pytest.approx(height)
+        for k, (wrist, fingers) in enumerate((("left_wrist", "LFingers_End"), ("right_wrist", "RFingers_End"))):
+            e = prim.head + 1 + k
+            w = sm.joints[:, JOINT_NAMES.index(wrist)]
+            tip = prim.ell_c[:, e] + prim.ell_r[e, 2] * prim.ell_axes[:, e, 2]
+            length = np.linalg.norm(tip - w, axis=1)
+            assert np.all((length > 0.09 * height) & (length < 0.125 * height)), (seed, wrist, length / height)
+            cmu = np.linalg.norm(sm.joint(fingers) - w, axis=1)
+            assert np.all(length > 1.5 * cmu), (seed, wrist)
+            direction = (sm.joint(fingers) - w) / cmu[:, None]
+            np.testing.assert_allclose((tip - w) / length[:, None], direction, atol=1e-9)
+            lengths.append(length[0] / height / subject.scale["hand"])
+            # the rendered silhouette holds the hand beyond the CMU finger end site (~0.45 of it) in every camera
+            for f in (0, 13):
+                near_tip = w[f] + 0.75 * (tip[f] - w[f])
+                for cam, mask in zip(studio.cameras, studio.render(prim, f)[1]):
+                    u, v = np.rint(cam.project(near_tip[None])[0]).astype(int)
+                    assert mask[v, u], (seed, wrist, f, cam.name)
+    np.testing.assert_allclose(lengths, HAND_LENGTH_H, rtol=1e-9)
 
 
 def test_t_pose_start_is_a_t_pose_at_the_drawn_heading(skeleton):

@@ -13,8 +13,11 @@ positions (``tracker.synthetic.bvh``), and uses neither the cone model nor its r
   heel to toe, pointing forward) and ellipsoids (a flattened chest and a flattened pelvis/abdomen,
   the head with hair over its top and back, flat hands), all placed from joint positions and
   orientations of the scaled skeleton (``subject_motion``) in the world frame: metres, Z up,
-  floor z = 0 (a BVH's Y-up frame rotated by ``BVH_TO_WORLD``).  The feet are put on the floor
-  every frame (the lowest sole point at z = 0) unless ``ground="clip"``.
+  floor z = 0 (a BVH's Y-up frame rotated by ``BVH_TO_WORLD``).  A hand points from the wrist along
+  the BVH's wrist -> ``*Fingers_End`` direction; its length (wrist to fingertips) is anthropometric,
+  ``HAND_LENGTH_H`` (Drillis & Contini's table as Winter gives it) × the subject's standing height ×
+  its ``hand`` scale, because CMU skeletons' finger end sites stop at about half a hand.  The feet
+  are put on the floor every frame (the lowest sole point at z = 0) unless ``ground="clip"``.
 - **Ground truth** (``SubjectMotion.joints``): the contourcap joint centres (``JOINT_NAMES``) from
   the scaled skeleton's joints: pelvis = midpoint of the hip joints, spine = ``Chest``, neck =
   ``Neck``, head = midpoint of ``Head`` and its end site, shoulder, elbow, wrist, hip, knee, ankle
@@ -41,7 +44,7 @@ from tracker.synthetic.motions import BVH_TO_WORLD, motion_to_bvh, standing_trac
 
 __all__ = ["JOINT_NAMES", "SEGMENTS", "Subject", "make_subject", "subject_skeleton", "SubjectMotion",
            "subject_motion", "Primitives", "body_primitives", "subject_height", "Studio", "joint_truth",
-           "MATERIALS", "box_hits"]
+           "MATERIALS", "box_hits", "HAND_LENGTH_H"]
 
 #: contourcap joint names (DESIGN.md pose record), the order of ``SubjectMotion.joints``
 JOINT_NAMES = (
@@ -67,6 +70,9 @@ SEGMENTS = {
     "forearm": ("LeftWrist", "RightWrist"),
     "hand": ("LFingers", "LFingers_End", "RFingers", "RFingers_End", "LThumb_End", "RThumb_End"),
 }  # fmt: skip
+
+#: wrist to middle fingertip as a fraction of standing height (Drillis & Contini; Winter's anthropometric table)
+HAND_LENGTH_H = 0.108
 
 #: nominal radii at scale 1, metres (each × U(0.75, 1.25) per subject)
 _RADII = {"upper_arm": 0.046, "forearm": 0.037, "thigh": 0.074, "shank": 0.050, "neck": 0.050, "foot": 0.040,
@@ -150,6 +156,8 @@ class SubjectMotion:
     joints : ndarray, shape (n_frames, 16, 3)
         Ground-truth joint centres in ``JOINT_NAMES`` order.
     fps : float
+    height_m : float
+        The subject's standing height on this skeleton (``subject_height``), metres.
     """
 
     positions: np.ndarray
@@ -157,6 +165,7 @@ class SubjectMotion:
     names: tuple
     joints: np.ndarray
     fps: float
+    height_m: float
 
     def joint(self, name: str) -> np.ndarray:
         """BVH joint ``name``'s positions, shape (n_frames, 3)."""
@@ -186,6 +195,15 @@ def subject_motion(motion: Bvh, subject: Subject, *, ground: str = "frame") -> S
     """
     if ground not in ("frame", "clip"):
         raise ValueError(f"ground must be 'frame' or 'clip', got {ground!r}")
+    P, R = _placed(motion, subject, ground)
+    Ps, Rs = _placed(motion_to_bvh(standing_track(1), motion), subject, "frame")
+    c, axes, rad = _head_ellipsoid(Ps, Rs, tuple(motion.names))
+    height = float(c[0, 2] + np.sqrt(np.sum((axes[0, :, 2] * np.asarray(rad)) ** 2)))
+    return SubjectMotion(P, R, tuple(motion.names), joint_truth(P, motion.names), motion.fps, height)
+
+
+def _placed(motion: Bvh, subject: Subject, ground: str) -> tuple[np.ndarray, np.ndarray]:
+    """World joint positions (n, n_joints, 3) and rotations (n, n_joints, 3, 3) of ``subject_motion``."""
     skel = subject_skeleton(motion, subject)
     P, R = bvh_forward(skel)
     W = BVH_TO_WORLD
@@ -198,7 +216,16 @@ def subject_motion(motion: Bvh, subject: Subject, *, ground: str = "frame") -> S
     sole = _sole_height(P, R, tuple(motion.names), subject)
     dz = -sole if ground == "frame" else np.full(sole.shape, -sole.min())
     P[..., 2] += dz[:, None]
-    return SubjectMotion(P, R, tuple(motion.names), joint_truth(P, motion.names), motion.fps)
+    return P, R
+
+
+def _head_ellipsoid(P: np.ndarray, R: np.ndarray, names: tuple) -> tuple:
+    """Head ellipsoid along ``Head`` -> ``Head_End``: centres (n, 3), axes (n, 3, 3), semi-axes (3,)."""
+    head, end = P[:, names.index("Head")], P[:, names.index("Head_End")]
+    hvec = end - head
+    hlen = np.linalg.norm(hvec, axis=1).mean()
+    axes = _frame_axes(hvec, R[:, names.index("Head"), :, 1])  # world +Y of the head frame = BVH +X = left
+    return head + 0.55 * hvec + 0.1 * hlen * axes[:, 0], axes, (1.05 * hlen, 0.88 * hlen, 1.25 * hlen)
 
 
 def _foot_ends(P, names, side: str, subject: Subject):
@@ -311,19 +338,16 @@ def body_primitives(sm: SubjectMotion, subject: Subject) -> Primitives:
     ells.append((pel_c, pel_axes, (0.95 * r["torso_depth"], max(0.9 * r["torso_width"], half_hip + 0.6 * r["thigh"]),
                                    pel_h), 3))  # fmt: skip
     # head: along Head -> Head_End, facing the Head joint's forward (BVH +Z -> world +X)
-    hvec = J("Head_End") - J("Head")
-    hlen = np.linalg.norm(hvec, axis=1).mean()
-    Rh = sm.rotations[:, sm.names.index("Head")]
-    head_axes = _frame_axes(hvec, Rh[:, :, 1])  # world +Y of the head frame = BVH +X = left
-    head_c = J("Head") + 0.55 * hvec + 0.1 * hlen * head_axes[:, 0]
-    ells.append((head_c, head_axes, (1.05 * hlen, 0.88 * hlen, 1.25 * hlen), 0))
+    ells.append((*_head_ellipsoid(sm.positions, sm.rotations, sm.names), 0))
     head = len(ells) - 1
+    # hands: from 1 cm behind the wrist to the fingertips, HAND_LENGTH_H of the height along wrist -> finger end
+    hand_len = HAND_LENGTH_H * sm.height_m * S["hand"]
     for L, F in (("Left", "LFingers"), ("Right", "RFingers")):
         a, b = J(f"{L}Wrist"), J(f"{F}_End")
         Rw = sm.rotations[:, sm.names.index(f"{L}Wrist")]
         ax = _frame_axes(b - a, Rw[:, :, 1])  # rows: (across the palm, lateral, along the hand)
-        half = 0.5 * np.linalg.norm(b - a, axis=1).mean() + 0.01
-        ells.append((0.5 * (a + b), ax, (0.45 * r["hand"], r["hand"], half), 0))
+        half = 0.5 * (hand_len + 0.01)
+        ells.append((a + (half - 0.01) * ax[:, 2], ax, (0.45 * r["hand"], r["hand"], half), 0))
     return Primitives(
         cap_a=np.stack([c[0] for c in caps], axis=1), cap_b=np.stack([c[1] for c in caps], axis=1),
         cap_r=np.array([c[2] for c in caps], float), cap_mat=np.array([c[3] for c in caps], int),
@@ -335,10 +359,7 @@ def body_primitives(sm: SubjectMotion, subject: Subject) -> Primitives:
 
 def subject_height(skeleton: Bvh, subject: Subject) -> float:
     """Standing height (m): the top of the head above the floor, feet flat, arms down."""
-    sm = subject_motion(motion_to_bvh(standing_track(1), skeleton), subject)
-    prim = body_primitives(sm, subject)
-    ax, rad = prim.ell_axes[0, prim.head], prim.ell_r[prim.head]
-    return float(prim.ell_c[0, prim.head, 2] + np.sqrt(np.sum((ax[:, 2] * rad) ** 2)))
+    return subject_motion(motion_to_bvh(standing_track(1), skeleton), subject).height_m
 
 
 # --------------------------------------------------------------------------- ray casting
