@@ -71,8 +71,8 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
         The camera's background model (same size as the image).
     image_bgr : ndarray, shape (h, w, 3), uint8
     cols, rows : ndarray of int, shape (m,)
-        Pixel coordinates, already inside the image (``0 <= cols < w``, ``0 <= rows < h``); the
-        caller clips them (this runs per voxel level, so it does not check every value).
+        Pixel coordinates inside the image (``0 <= cols < w``, ``0 <= rows < h``; the caller clips
+        them, a pixel outside is a ValueError).
     terms : bool
         Also return the plain distance (no shadow relaxation) and the brightness ratio, as
         :meth:`BackgroundModel.distance_terms` does (for the floor test of shadow-like samples).
@@ -88,8 +88,14 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
         ratio ``B / A`` before clipping.
     """
     check_image_bgr(image_bgr, "image_bgr", size=model.size)
-    w = model.size[0]
-    flat = (np.asarray(rows, dtype=np.intp) * w + np.asarray(cols, dtype=np.intp)).ravel()
+    w, h = model.size
+    rows, cols = np.asarray(rows, dtype=np.intp).ravel(), np.asarray(cols, dtype=np.intp).ravel()
+    if rows.shape != cols.shape:
+        raise ValueError(f"background_samples: rows {rows.shape} and cols {cols.shape} differ in length")
+    for name, v, n in (("cols", cols, w), ("rows", rows, h)):
+        if v.size and (v.min() < 0 or v.max() >= n):
+            raise ValueError(f"background_samples: {name} outside 0..{n - 1}: {v.min()}..{v.max()}")
+    flat = rows * w + cols
     lo, hi = model.shadow_range
     d, bgr, plain, ratio = _sample(np.ascontiguousarray(image_bgr).reshape(-1, 3), *model_terms(model), BGR2YUV,
                                    flat, float(lo), float(hi), model.covariance == "full", bool(terms))

@@ -37,12 +37,24 @@ def test_background_samples_match_the_image_distance(rng, covariance):
     full = model.distance(image)
     np.testing.assert_allclose(d, full[rows, cols], rtol=1e-4, atol=1e-3)
     np.testing.assert_array_equal(bgr, image[rows, cols].astype(np.float32))
+    # the floor test's terms: the plain distance and the brightness ratio, as the image-wide method gives them
+    d2, bgr2, plain, ratio = background_samples(model, image, cols, rows, terms=True)
+    full_d, full_plain, full_ratio = model.distance_terms(image)
+    np.testing.assert_allclose(d2, full_d[rows, cols], rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(plain, full_plain[rows, cols], rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(ratio, full_ratio[rows, cols], rtol=1e-4, atol=1e-5)
+    np.testing.assert_array_equal(bgr2, bgr)
 
 
-def test_background_samples_reject_a_wrong_image_size(rng):
+def test_background_samples_reject_a_wrong_image_size_and_pixels_outside(rng):
     model = BackgroundModel.from_frames([rng.integers(0, 256, (8, 8, 3), dtype=np.uint8) for _ in range(3)])
     with pytest.raises(ValueError, match="image size"):
         background_samples(model, np.zeros((9, 8, 3), np.uint8), np.zeros(1, int), np.zeros(1, int))
+    image = np.zeros((8, 8, 3), np.uint8)
+    for cols, rows, word in (([8], [0], "cols"), ([0], [-1], "rows"), ([0, 1], [0], "rows")):
+        with pytest.raises(ValueError, match=word):
+            background_samples(model, image, np.array(cols), np.array(rows))
+    assert background_samples(model, image, np.zeros(0, int), np.zeros(0, int))[0].shape == (0,)
 
 
 # ----------------------------------------------------------------------------- coloured hull
@@ -231,6 +243,22 @@ def test_expectation_is_eq2_with_the_soft_shares_at_random_blobs(log_det):
     got[vox, blob] = wgt
     np.testing.assert_allclose(got, dense, atol=1e-12)
     np.testing.assert_array_equal(col, colours[vox, dcol.argmin(1)[vox, blob]])
+
+
+def test_weighted_moments_are_numpy_weighted_means_and_covariances(rng):
+    from tracker.blobs.kernels import weighted_moments
+
+    n_blobs, m = 4, 300
+    label = rng.integers(0, n_blobs - 1, m)  # the last blob gets no point
+    X, w, extra = rng.normal(size=(m, 3)), rng.uniform(0.1, 2.0, m), rng.uniform(0, 0.01, m)
+    mu, cov = weighted_moments(label, X, w, extra, n_blobs)
+    for j in range(n_blobs - 1):
+        sel = label == j
+        mean = np.average(X[sel], axis=0, weights=w[sel])
+        expected = np.cov(X[sel].T, aweights=w[sel], bias=True) + np.eye(3) * np.average(extra[sel], weights=w[sel])
+        np.testing.assert_allclose(mu[j], mean, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(cov[j], expected, rtol=1e-10, atol=1e-12)
+    assert np.all(np.isnan(mu[-1])) and np.all(np.isnan(cov[-1]))
 
 
 def test_maximisation_weights_by_volume_and_floors_covariances():
