@@ -32,8 +32,9 @@ import cv2
 import numpy as np
 
 from capture.camera import Camera
-from segmentation.background import BackgroundModel
+from segmentation.background import BGR2YUV, BackgroundModel
 from segmentation.checks import check_image_bgr
+from segmentation.samples import floor_vote, model_terms
 
 __all__ = ["FloorShadows", "floor_points", "floor_votes"]
 
@@ -179,38 +180,26 @@ def floor_votes(cameras: Mapping[str, Camera], models: Mapping[str, BackgroundMo
     -------
     ndarray of bool, shape (m,)
         Body: more cameras see the floor point unchanged than darkened alike, or none sees it.
+
+    Notes
+    -----
+    A camera votes on a point in front of it whose undistorted projection lies within its image
+    grown by a quarter on every side (far outside it the distortion polynomial can fold points back
+    in) and whose distorted projection, rounded, is a pixel of the image; the two distances are
+    ``BackgroundModel.distance_at``'s.  One compiled loop per voting camera
+    (``segmentation.samples.floor_vote``).
     """
-    body_votes = np.zeros(len(points), np.int32)
-    shadow_votes = np.zeros(len(points), np.int32)
-    seen = np.zeros(len(points), bool)
+    m = len(points)
+    body, shadow, seen = np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    ratio = np.ascontiguousarray(ratio, dtype=np.float32)
     for other, cam in cameras.items():  # a loop over cameras, not pixels
         if other == name or other not in images:
             continue
         image = images[other]
         check_image_bgr(image, f"images[{other!r}]", size=cam.size)
-        w, h = cam.size
-        uv = np.rint(cam.project(points))
-        ok = _in_view(cam, points) & np.all(np.isfinite(uv), axis=1)
-        ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-        idx = np.flatnonzero(ok)
-        if idx.size == 0:
-            continue
-        seen[idx] = True
-        unchanged, darkened = models[other].distance_at(
-            image, uv[idx, 1].astype(np.intp), uv[idx, 0].astype(np.intp), ratio[idx])
-        body_votes[idx] += (unchanged <= low) & (unchanged < darkened)
-        shadow_votes[idx] += (darkened <= low) & (darkened <= unchanged)
-    return (body_votes > shadow_votes) | ~seen
-
-
-def _in_view(camera: Camera, points: np.ndarray) -> np.ndarray:
-    """Points (n, 3) in front of ``camera`` whose undistorted projection lies within the image grown
-    by a quarter on every side (far outside it the distortion polynomial can fold points back in)."""
-    Xc = camera.to_camera(points)
-    z = Xc[:, 2]
-    front = z > 1e-6
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = (Xc[:, :2] / z[:, None]) @ camera.matrix[:2, :2].T + camera.matrix[:2, 2]
-    w, h = camera.size
-    inside = (uv[:, 0] > -0.25 * w) & (uv[:, 0] < 1.25 * w) & (uv[:, 1] > -0.25 * h) & (uv[:, 1] < 1.25 * h)
-    return front & inside
+        pdiag, pcross, a, big_a, _ = model_terms(models[other])
+        floor_vote(points, ratio, cam.rotation, cam.translation, cam.matrix, np.asarray(cam.distortion, float),
+                   cam.size[0], cam.size[1], np.ascontiguousarray(image).reshape(-1, 3), pdiag, pcross, a, big_a,
+                   BGR2YUV, float(low), body, shadow, seen)
+    return (body > shadow) | ~seen

@@ -6,7 +6,8 @@ looks at a few pixels per voxel projection, so its cost should not grow with the
 (module docstring of ``segmentation.background``; without its camouflage window) at given pixels only, and returns
 their colours too (the coloured hull keeps a mean colour per view).  It reads the model's
 precomputed per-pixel terms (precision, ``K^-1 mu``, ``mu^T K^-1 mu``), so ``update`` is honoured.
-The per-sample arithmetic is one compiled loop (numba, cached on disk; :func:`warm_up` compiles it).
+The per-sample arithmetic is one compiled loop (numba, cached on disk; :func:`warm_up` compiles it), and
+so is the floor test's vote at projected floor points (:func:`floor_vote`, ``segmentation.floor``).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from segmentation.background import BGR2YUV, BackgroundModel
 from segmentation.checks import check_image_bgr
 
-__all__ = ["background_samples", "model_terms", "warm_up"]
+__all__ = ["background_samples", "floor_vote", "model_terms", "warm_up"]
 
 
 @nb.njit(cache=True, nogil=True, boundscheck=False)
@@ -50,6 +51,52 @@ def _sample(image, pdiag, pcross, a, big_a, inv_a, yuv, flat, lo, hi, full, term
             ratio[i] = ba
             plain[i] = max(big_c - 2.0 * big_b + big_a[f], 0.0)
     return d, bgr, plain, ratio
+
+
+@nb.njit(cache=True, nogil=True, boundscheck=False)
+def floor_vote(points, ratio, R, t, K, dist, w, h, image, pdiag, pcross, a, big_a, yuv, low, body, shadow, seen):
+    """One camera's votes on floor points (the loop of ``segmentation.floor.floor_votes`` for one
+    voting camera), added in place to ``body``, ``shadow`` (m,) int32 and ``seen`` (m,) bool.
+
+    points (m, 3) world; ratio (m,) the darkening; R (3, 3), t (3,) world2cam, K (3, 3), dist (5,)
+    k1 k2 p1 p2 k3; image (h w, 3) uint8 and the model's flat terms (``segmentation.samples.model_terms``)."""
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    for i in range(points.shape[0]):
+        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
+        xc = R[0, 0] * X + R[0, 1] * Y + R[0, 2] * Z + t[0]
+        yc = R[1, 0] * X + R[1, 1] * Y + R[1, 2] * Z + t[1]
+        zc = R[2, 0] * X + R[2, 1] * Y + R[2, 2] * Z + t[2]
+        if not zc > 1e-6:
+            continue
+        x, y = xc / zc, yc / zc
+        u0 = K[0, 0] * x + K[0, 1] * y + K[0, 2]  # undistorted: in the image grown by a quarter
+        v0 = K[1, 0] * x + K[1, 1] * y + K[1, 2]
+        if not (-0.25 * w < u0 < 1.25 * w and -0.25 * h < v0 < 1.25 * h):
+            continue
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        u = np.rint(K[0, 0] * xd + K[0, 1] * yd + K[0, 2])
+        v = np.rint(K[1, 1] * yd + K[1, 2])
+        if not (0.0 <= u < w and 0.0 <= v < h):
+            continue
+        seen[i] = True
+        f = int(v) * w + int(u)
+        c0, c1, c2 = np.float32(image[f, 0]), np.float32(image[f, 1]), np.float32(image[f, 2])
+        py = yuv[0, 0] * c0 + yuv[0, 1] * c1 + yuv[0, 2] * c2
+        pu = yuv[1, 0] * c0 + yuv[1, 1] * c1 + yuv[1, 2] * c2
+        pv = yuv[2, 0] * c0 + yuv[2, 1] * c1 + yuv[2, 2] * c2
+        big_c = (py * py * pdiag[f, 0] + pu * pu * pdiag[f, 1] + pv * pv * pdiag[f, 2]
+                 + py * pu * pcross[f, 0] + pu * pv * pcross[f, 1] + pv * py * pcross[f, 2])
+        big_b = py * a[f, 0] + pu * a[f, 1] + pv * a[f, 2]
+        s = ratio[i]
+        unchanged = max(big_c - 2.0 * big_b + big_a[f], 0.0)
+        darkened = max(big_c - 2.0 * s * big_b + s * s * big_a[f], 0.0)
+        if unchanged <= low and unchanged < darkened:
+            body[i] += 1
+        if darkened <= low and darkened <= unchanged:
+            shadow[i] += 1
 
 
 def model_terms(model: BackgroundModel) -> tuple:
@@ -103,12 +150,18 @@ def background_samples(model: BackgroundModel, image_bgr: np.ndarray, cols: np.n
 
 
 def warm_up() -> None:
-    """Compile :func:`background_samples`' loop (or load it from numba's on-disk cache), for writable
-    and read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
+    """Compile this module's loops (or load them from numba's on-disk cache), for writable and
+    read-only images (a frame decoded from the wire may be read-only: another numba signature) and
+    the read-only matrices a ``Camera`` holds."""
     plane = np.zeros((1, 3), np.float32)
     one = np.ones(1, np.float32)
+    cam = [np.eye(3), np.array([0.0, 0.0, 2.0]), np.eye(3), np.zeros(5)]
+    for a in cam:
+        a.setflags(write=False)
     for writable in (True, False):
         image = np.zeros((1, 3), np.uint8)
         image.setflags(write=writable)
         for terms in (False, True):
             _sample(image, plane, plane, plane, one, one, BGR2YUV, np.zeros(1, np.intp), 0.5, 1.1, True, terms)
+        floor_vote(np.zeros((2, 3)), np.ones(2, np.float32), *cam, 1, 1, image, plane, plane, plane, one, BGR2YUV,
+                   16.0, np.zeros(2, np.int32), np.zeros(2, np.int32), np.zeros(2, bool))

@@ -52,16 +52,16 @@ def session_props(session: Session) -> list:
 
 def warm_up_kernels(method: str = "contours") -> float:
     """Compile (first run) or load from numba's on-disk cache the kernels a ``method`` fit runs: the
-    contour tracker's, and for ``"blobs"`` also the blob tracker's and the sampled background test's
-    (its first pose is the contour tracker's); seconds taken."""
+    contour tracker's and the sampled background and floor tests' (``segmentation.samples``), and for
+    ``"blobs"`` also the blob tracker's (its first pose is the contour tracker's); seconds taken."""
+    from segmentation.samples import warm_up as warm_samples
     from tracker.fitting.warmup import warm_up as warm_contours
 
     t0 = time.perf_counter()
+    warm_samples()
     if method == "blobs":
-        from segmentation.samples import warm_up as warm_samples
         from tracker.blobs.kernels import warm_up as warm_blobs
 
-        warm_samples()
         warm_blobs()
     warm_contours()
     return time.perf_counter() - t0

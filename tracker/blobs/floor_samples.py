@@ -24,11 +24,7 @@ import numpy as np
 
 from capture.camera import Camera
 from segmentation.background import BackgroundModel
-from segmentation.background import BGR2YUV
-from segmentation.checks import check_image_bgr
-from segmentation.floor import floor_points
-from segmentation.samples import model_terms
-from tracker.blobs.kernels import floor_vote
+from segmentation.floor import floor_points, floor_votes
 
 __all__ = ["SampleFloorTest"]
 
@@ -112,21 +108,8 @@ class SampleFloorTest:
 
     def votes(self, name: str, images: Mapping[str, np.ndarray], points: np.ndarray, ratio: np.ndarray) -> np.ndarray:
         """The other cameras' verdict on floor points (m, 3) seen darkened by ``ratio`` (m,) in camera
-        ``name``: ``segmentation.floor.floor_votes`` (its docstring), one compiled loop per camera; (m,) bool."""
-        m = len(points)
-        body, shadow, seen = np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool)
-        points = np.ascontiguousarray(points, dtype=np.float64)
-        ratio = np.ascontiguousarray(ratio, dtype=np.float32)
-        for other, cam in self.cameras.items():  # a loop over cameras, not pixels
-            if other == name or other not in images:
-                continue
-            image = images[other]
-            check_image_bgr(image, f"images[{other!r}]", size=cam.size)
-            pdiag, pcross, a, big_a, _ = model_terms(self.backgrounds[other])
-            floor_vote(points, ratio, cam.rotation, cam.translation, cam.matrix, np.asarray(cam.distortion, float),
-                       cam.size[0], cam.size[1], np.ascontiguousarray(image).reshape(-1, 3), pdiag, pcross, a, big_a,
-                       BGR2YUV, float(self.low), body, shadow, seen)
-        return (body > shadow) | ~seen
+        ``name``: ``segmentation.floor.floor_votes``; (m,) bool."""
+        return floor_votes(self.cameras, self.backgrounds, name, images, points, ratio, self.low)
 
     def for_frame(self, images: Mapping[str, np.ndarray]) -> Callable:
         """``resolve`` bound to one frame set: ``(name, cols, rows, distance, plain, ratio) -> distance``

@@ -1,8 +1,7 @@
 """Compiled (numba) loops of the blob tracker's per-frame work.
 
 Each function is the loop form of a computation documented in the module that calls it (that
-docstring is the reference; the tests compare the loops with numpy forms of it): the floor test's votes
-(``tracker.blobs.floor_samples``, after ``segmentation.floor.floor_votes``), the coloured hull's
+docstring is the reference; the tests compare the loops with numpy forms of it): the coloured hull's
 per-view cube pixels, classes and colours and its neighbour vote (``tracker.blobs.colour_hull``), the
 EM's expectation and moments (``tracker.blobs.em``), the body's point containment and the hull's
 lattice membership (``tracker.blobs.tracking.body_contains``, ``hull_support``).
@@ -15,53 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["floor_vote", "pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "neighbour_vote", "weighted_moments", "lattice_member", "warm_up"]
-
-
-@njit(cache=True, nogil=True, boundscheck=False)
-def floor_vote(points, ratio, R, t, K, dist, w, h, image, pdiag, pcross, a, big_a, yuv, low, body, shadow, seen):
-    """One camera's votes on floor points: ``segmentation.floor.floor_votes``' loop body for one
-    other camera, added in place to ``body``, ``shadow`` (m,) int32 and ``seen`` (m,) bool.
-
-    points (m, 3) world; ratio (m,) the darkening; R (3, 3), t (3,) world2cam, K (3, 3), dist (5,)
-    k1 k2 p1 p2 k3; image (h w, 3) uint8 and the model's flat terms (``segmentation.samples.model_terms``)."""
-    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    for i in range(points.shape[0]):
-        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
-        xc = R[0, 0] * X + R[0, 1] * Y + R[0, 2] * Z + t[0]
-        yc = R[1, 0] * X + R[1, 1] * Y + R[1, 2] * Z + t[1]
-        zc = R[2, 0] * X + R[2, 1] * Y + R[2, 2] * Z + t[2]
-        if not zc > 1e-6:
-            continue
-        x, y = xc / zc, yc / zc
-        u0 = K[0, 0] * x + K[0, 1] * y + K[0, 2]  # undistorted: in the image grown by a quarter
-        v0 = K[1, 0] * x + K[1, 1] * y + K[1, 2]
-        if not (-0.25 * w < u0 < 1.25 * w and -0.25 * h < v0 < 1.25 * h):
-            continue
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        u = np.rint(K[0, 0] * xd + K[0, 1] * yd + K[0, 2])
-        v = np.rint(K[1, 1] * yd + K[1, 2])
-        if not (0.0 <= u < w and 0.0 <= v < h):
-            continue
-        seen[i] = True
-        f = int(v) * w + int(u)
-        c0, c1, c2 = np.float32(image[f, 0]), np.float32(image[f, 1]), np.float32(image[f, 2])
-        py = yuv[0, 0] * c0 + yuv[0, 1] * c1 + yuv[0, 2] * c2
-        pu = yuv[1, 0] * c0 + yuv[1, 1] * c1 + yuv[1, 2] * c2
-        pv = yuv[2, 0] * c0 + yuv[2, 1] * c1 + yuv[2, 2] * c2
-        big_c = (py * py * pdiag[f, 0] + pu * pu * pdiag[f, 1] + pv * pv * pdiag[f, 2]
-                 + py * pu * pcross[f, 0] + pu * pv * pcross[f, 1] + pv * py * pcross[f, 2])
-        big_b = py * a[f, 0] + pu * a[f, 1] + pv * a[f, 2]
-        s = ratio[i]
-        unchanged = max(big_c - 2.0 * big_b + big_a[f], 0.0)
-        darkened = max(big_c - 2.0 * s * big_b + s * s * big_a[f], 0.0)
-        if unchanged <= low and unchanged < darkened:
-            body[i] += 1
-        if darkened <= low and darkened <= unchanged:
-            shadow[i] += 1
+__all__ = ["pattern_pixels", "view_classes", "sample_colours", "cones_contain", "assign", "neighbour_vote", "weighted_moments", "lattice_member", "warm_up"]
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -362,18 +315,10 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 
 def warm_up() -> None:
-    """Compile every kernel of this module (or load it from numba's on-disk cache), for writable and
-    read-only images (a frame decoded from the wire may be read-only: another numba signature)."""
+    """Compile every kernel of this module (or load it from numba's on-disk cache), for the array
+    kinds the fit passes (a model's cones are read-only: another numba signature)."""
     m = 2
-    plane, one = np.zeros((1, 3), np.float32), np.ones(1, np.float32)
-    # a Camera's matrix, rotation, translation and distortion and a model's cones are read-only arrays
-    R, t, K, dist, cones = (_read_only(a) for a in (np.eye(3), np.array([0.0, 0.0, 2.0]), np.eye(3), np.zeros(5),
-                                                     np.ones((1, 5))))
-    for writable in (True, False):
-        image = np.zeros((1, 3), np.uint8)
-        image.setflags(write=writable)
-        floor_vote(np.zeros((m, 3)), np.ones(m, np.float32), R, t, K, dist, 1, 1, image, plane, plane, plane, one,
-                   np.eye(3, dtype=np.float32), 16.0, np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, bool))
+    cones = _read_only(np.ones((1, 5)))
     cols, rows = pattern_pixels(np.zeros((m, 2)), np.ones(m), np.zeros((4, 2)), 4, 3)
     d = np.zeros((m, 4), np.float32)
     view_classes(d, np.ones(m, bool), 16.0, 64.0, 6.0, 0, 1, 2, 3)
