@@ -4,7 +4,7 @@ For each frame of a session that has a pose record: the model named in the recor
 session's ``[subject]``, as the tracker sizes it) is posed with the record's ``params`` and its
 extremal contours are drawn per camera, coloured by side (``tracker.imaging.overlay``); the record's joints
 as a skeleton (names on demand); the frame's status (ok, or the reason it is not; rms; IoU when the
-record or its reason gives one).  Cameras are tiled into one image per frame, written as a video;
+record has one).  Cameras are tiled into one image per frame, written as a video;
 a contact sheet shows a few evenly spaced frames, each camera cropped to the person.
 """
 
@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -72,7 +71,6 @@ def load_records(path: Path) -> list[dict]:
     return records
 
 
-_IOU = re.compile(r"IoU ([0-9.]+)")
 
 
 def status_lines(record: dict | None, frame_id: int) -> list[str]:
@@ -84,10 +82,7 @@ def status_lines(record: dict | None, frame_id: int) -> list[str]:
     if isinstance(record.get("rms_px"), (int, float)):
         figures.append(f"rms {record['rms_px']:.2f} px")
     iou = record.get("iou")
-    if not isinstance(iou, (int, float)):
-        m = _IOU.search(str(record.get("reason", "")))
-        iou = float(m.group(1)) if m else None
-    if iou is not None:
+    if isinstance(iou, (int, float)) and not isinstance(iou, bool):
         figures.append(f"IoU {iou:.2f}")
     if isinstance(record.get("iterations"), int):
         figures.append(f"{record['iterations']} it")

@@ -8,7 +8,8 @@ record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``m
 ``rejoin_ms``: the part of ``fit_ms`` the live fitter's cheap rejoin took in the set's own time,
 ``missing_cameras``: the names of the cameras a live set went on without; ``subject``: the name of the
 subject body the pose is of; ``failed``: the quality-gate limits a not-ok fit failed, names such as
-``"rms"``, ``"inside"``, ``"iou"``, ``"front_back"``).  Status, credit, have and demand records carry
+``"rms"``, ``"inside"``, ``"iou"``, ``"front_back"``; the gate's figures ``iou`` (silhouette IoU, when the
+set's was rendered), ``inside_fraction`` and ``coverage``, numbers).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.
 """
@@ -79,7 +80,7 @@ class PoseRecord:
                 raise MessageError(f"joints: expected an object of at most {_MAX_JOINTS} joints")
             obj["joints"] = {check_name(k, "joint name"): _finite_list(v, f"joints.{k}", length=3)
                              for k, v in joints.items()}
-        for key in ("rms_px", "latency_ms", "fit_ms", "fit_cpu_ms", "rejoin_ms"):
+        for key in ("rms_px", "latency_ms", "fit_ms", "fit_cpu_ms", "rejoin_ms", "iou", "inside_fraction", "coverage"):
             if obj.get(key) is not None:
                 obj[key] = meta_float(obj, key)
         for key in ("iterations", "cameras"):

@@ -101,7 +101,8 @@ def test_contours_are_drawn_where_the_model_projects_in_their_side_colour(sessio
 def test_a_not_ok_record_shows_its_reason(session_dir, tmp_path):
     session = load_session(session_dir)
     recs = _truth(session_dir)
-    recs[3] = dict(recs[3], ok=False, reason="poor fit: silhouette IoU 0.42 < 0.8", rms_px=4.5)
+    recs[3] = dict(recs[3], ok=False, reason="poor fit: silhouette IoU 0.42 < 0.8", rms_px=4.5, iou=0.42,
+                   failed=["iou"])
     lines = status_lines(recs[3], 3)
     assert "NOT OK: poor fit: silhouette IoU 0.42 < 0.8" in lines[0] and "IoU 0.42" in lines[1]
     assert "rms 4.50 px" in lines[1]
