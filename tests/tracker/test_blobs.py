@@ -429,3 +429,31 @@ def test_damped_least_squares_moves_mask_keeps_arm_goals_off_the_trunk():
         every = damped_least_squares(model, start, lay.part, lay.point, goals, iterations=5, root=True,
                                      moves=np.ones_like(moves))
         assert np.array_equal(every, free)
+
+
+def test_arm_goal_moves_twist_keeps_arm_goals_off_the_spine_twist_only():
+    # "twist" mode: arm goals pull every parameter but the abdomen's and torso's twists; seeded random poses
+    # with only the arm goals weighted: the masked solve keeps both twists, the unmasked one turns them
+    from tracker.blobs import blob_layout, damped_least_squares
+    from tracker.blobs.tracking import arm_goal_moves
+    from tracker.body.kinematics import forward
+    from tracker.body.model import load_model
+
+    model = load_model("knossow40", height_m=1.7)
+    lay = blob_layout(model)
+    moves = arm_goal_moves(model, lay.part, twist=True)
+    arm_blob = np.array(["arm" in n or "hand" in n for n in lay.names])
+    twist = np.array([model.param_index(n) for n in ("abdomen.twist", "torso.twist")])
+    rest = np.setdiff1d(np.arange(model.n_params), twist)
+    assert moves[~arm_blob].all() and moves[:, rest].all()
+    assert not moves[np.ix_(arm_blob, twist)].any()
+    rng = np.random.default_rng(15)
+    for _ in range(5):
+        start, other = _random_pose(model, rng), _random_pose(model, rng, scale=0.8)
+        goals = forward(model, other).to_world(lay.part, lay.point)
+        w = arm_blob.astype(float)
+        masked = damped_least_squares(model, start, lay.part, lay.point, goals, w, iterations=5, moves=moves)
+        free = damped_least_squares(model, start, lay.part, lay.point, goals, w, iterations=5)
+        assert np.array_equal(masked[twist], start[twist])
+        assert np.abs(free[twist] - start[twist]).max() > 1e-3
+        assert np.abs(masked[rest] - start[rest]).max() > 1e-3

@@ -121,11 +121,11 @@ class BlobOptions:
     static_threshold: float = 0.7
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
-    arm_goals_move: str = "all"
+    arm_goals_move: str = "twist"
 
     def __post_init__(self):
-        if self.arm_goals_move not in ("all", "root", "arm"):
-            raise ValueError(f"arm_goals_move: expected 'all', 'root' or 'arm', got {self.arm_goals_move!r}")
+        if self.arm_goals_move not in ("all", "twist", "arm"):
+            raise ValueError(f"arm_goals_move: expected 'all', 'twist' or 'arm', got {self.arm_goals_move!r}")
         if self.ik not in ("ccd", "dls"):
             raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
         if int(self.em_iterations) < 1:
@@ -146,20 +146,28 @@ def _interior_samples(model: BodyModel, *, n_theta: int = 8, n_z: int = 5,
 
 
 _ARM_PARTS = ("clavicle", "upper_arm", "forearm", "hand")
+_SPINE_PARTS = ("abdomen", "torso")
 
 
-def arm_goal_moves(model: BodyModel, part: np.ndarray, *, root: bool = False) -> np.ndarray:
-    """Which parameters a goal on each part (``part`` (m,) part indices) may pull, (m, n_params) bool:
-    a goal on an arm part only its own arm's joints (the arm parts it hangs from; with ``root`` the
-    root's translation and rotation too, never the spine), any other goal every parameter
-    (``damped_least_squares``' ``moves``).  ``BlobOptions.arm_goals_move``: ``"all"`` (no mask),
-    ``"root"`` or ``"arm"`` (this with ``root`` true or false)."""
+def arm_goal_moves(model: BodyModel, part: np.ndarray, *, twist: bool = False) -> np.ndarray:
+    """Which parameters a goal on each part (``part`` (m,) part indices) may pull, (m, n_params) bool.
+
+    Any goal off the arms: every parameter.  A goal on an arm part: only its own arm's joints (the arm
+    parts it hangs from), or with ``twist`` every parameter but the spine's twists (the abdomen's and
+    torso's rotations about their long axis): arm blobs lagging a quick arm motion do not twist the
+    spine directly (other goals still may).  ``BlobOptions.arm_goals_move``: ``"all"`` (no mask), ``"twist"``, ``"arm"``.
+    """
     part = np.asarray(part, dtype=int)
-    arm_part = np.array([any(a in n for a in _ARM_PARTS) for n in model.part_names])
+    names = model.part_names
+    arm_part = np.array([any(a in n for a in _ARM_PARTS) for n in names])
     on_arm = arm_part[part]
     moves = np.ones((len(part), model.n_params), bool)
-    own = arm_part[model.param_part] | (root & (model.param_kind != JOINT_ROTATION))
-    moves[on_arm] = model.affects[part[on_arm]] & own[None, :]
+    if twist:
+        spine = np.isin(np.asarray(names)[model.param_part], _SPINE_PARTS)
+        along = np.abs(np.asarray(model.param_axis, dtype=float)[:, 2]) > 0.99
+        moves[np.ix_(on_arm, spine & along & (model.param_kind == JOINT_ROTATION))] = False
+    else:
+        moves[on_arm] = model.affects[part[on_arm]] & arm_part[model.param_part][None, :]
     return moves
 
 
@@ -282,7 +290,7 @@ class BlobTracker:
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
                                                            for p in model.param_part])
         self._moves = (None if options.arm_goals_move == "all" else
-                       arm_goal_moves(model, self.layout.part, root=options.arm_goals_move == "root"))
+                       arm_goal_moves(model, self.layout.part, twist=options.arm_goals_move == "twist"))
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
         self._support_parts, self._support_part, self._support_local = _interior_samples(model)
         self._static = (StaticVoxels(options.hull.min_voxel_m, rate=options.static_rate,
