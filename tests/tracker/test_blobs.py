@@ -457,3 +457,12 @@ def test_arm_goal_moves_twist_keeps_arm_goals_off_the_spine_twist_only():
         assert np.array_equal(masked[twist], start[twist])
         assert np.abs(free[twist] - start[twist]).max() > 1e-3
         assert np.abs(masked[rest] - start[rest]).max() > 1e-3
+
+
+def test_blob_options_arm_goals_move_is_validated():
+    from tracker.blobs import BlobOptions
+
+    for mode in ("all", "twist", "arm"):
+        assert BlobOptions(arm_goals_move=mode).arm_goals_move == mode
+    with pytest.raises(ValueError, match="arm_goals_move"):
+        BlobOptions(arm_goals_move="spine")
