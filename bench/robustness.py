@@ -468,7 +468,7 @@ def main(argv=None) -> int:
 
 def _tracker_options(pairs, ap, base, flag: str = "--tracker-option"):
     """``base`` (a ``TrackerOptions`` or ``BlobOptions``) with ``NAME=VALUE`` fields replaced (numbers,
-    true/false, none)."""
+    true/false, none; text for a field whose default is text, e.g. ``arm_goals_move=all``)."""
     fields = {f.name: f for f in dataclasses.fields(base)}
     changes = {}
     for pair in pairs:
@@ -476,6 +476,9 @@ def _tracker_options(pairs, ap, base, flag: str = "--tracker-option"):
         if name not in fields or not text:
             ap.error(f"{flag} {pair!r}: expected NAME=VALUE with NAME a {type(base).__name__} field")
         low = text.lower()
+        if isinstance(getattr(base, name), str):
+            changes[name] = text
+            continue
         changes[name] = (None if low == "none" else low == "true" if low in ("true", "false")
                          else int(text) if text.lstrip("-").isdigit() else float(text))
     return dataclasses.replace(base, **changes)

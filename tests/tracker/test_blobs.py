@@ -387,3 +387,82 @@ def test_blob_tracker_reports_unsolvable_frames_without_raising(rng, model):
     assert rec["ok"] is False and "voxels" in rec["reason"] and rec["cameras"] == 3
     with pytest.raises(ValueError, match="backgrounds"):
         BlobTracker(model, cams, {})
+
+
+def _random_pose(model, rng, scale=0.4):
+    from tracker.body.model import JOINT_ROTATION
+
+    p = model.zero()
+    j = model.param_kind == JOINT_ROTATION
+    p[j] += rng.uniform(-scale, scale, j.sum())
+    return model.clamp(p)
+
+
+def test_damped_least_squares_moves_mask_keeps_arm_goals_off_the_trunk():
+    # seeded random poses: every goal but the arms' sits where the start pose puts it and the arm goals
+    # come from another pose; with arm_goal_moves only the arm joints change (the trunk, root and legs
+    # stay to rounding) and the arm goals get nearer, while without the mask the arm goals turn the trunk too
+    from tracker.blobs import blob_layout, damped_least_squares
+    from tracker.blobs.tracking import arm_goal_moves
+    from tracker.body.kinematics import forward
+    from tracker.body.model import load_model
+
+    model = load_model("knossow40", height_m=1.7)
+    lay = blob_layout(model)
+    moves = arm_goal_moves(model, lay.part)
+    arm_blob = np.array(["arm" in n or "hand" in n for n in lay.names])
+    arm_param = np.array([any(a in model.part_names[p] for a in ("clavicle", "upper_arm", "forearm", "hand"))
+                          for p in model.param_part])
+    assert arm_param.any() and (~arm_param).any()
+    assert moves[~arm_blob].all() and not moves[arm_blob][:, ~arm_param].any()
+    rng = np.random.default_rng(14)
+    for _ in range(5):
+        start, other = _random_pose(model, rng), _random_pose(model, rng, scale=0.8)
+        goals = forward(model, start).to_world(lay.part, lay.point)
+        goals[arm_blob] = forward(model, other).to_world(lay.part, lay.point)[arm_blob]
+        err = lambda p: np.linalg.norm(forward(model, p).to_world(lay.part, lay.point) - goals, axis=1)[arm_blob].mean()
+        masked = damped_least_squares(model, start, lay.part, lay.point, goals, iterations=5, root=True, moves=moves)
+        free = damped_least_squares(model, start, lay.part, lay.point, goals, iterations=5, root=True)
+        assert np.allclose(masked[~arm_param], start[~arm_param], atol=1e-9)
+        assert np.abs(free[~arm_param] - start[~arm_param]).max() > 1e-3
+        assert err(masked) < err(start)
+        every = damped_least_squares(model, start, lay.part, lay.point, goals, iterations=5, root=True,
+                                     moves=np.ones_like(moves))
+        assert np.array_equal(every, free)
+
+
+def test_arm_goal_moves_twist_keeps_arm_goals_off_the_spine_twist_only():
+    # "twist" mode: arm goals pull every parameter but the abdomen's and torso's twists; seeded random poses
+    # with only the arm goals weighted: the masked solve keeps both twists, the unmasked one turns them
+    from tracker.blobs import blob_layout, damped_least_squares
+    from tracker.blobs.tracking import arm_goal_moves
+    from tracker.body.kinematics import forward
+    from tracker.body.model import load_model
+
+    model = load_model("knossow40", height_m=1.7)
+    lay = blob_layout(model)
+    moves = arm_goal_moves(model, lay.part, twist=True)
+    arm_blob = np.array(["arm" in n or "hand" in n for n in lay.names])
+    twist = np.array([model.param_index(n) for n in ("abdomen.twist", "torso.twist")])
+    rest = np.setdiff1d(np.arange(model.n_params), twist)
+    assert moves[~arm_blob].all() and moves[:, rest].all()
+    assert not moves[np.ix_(arm_blob, twist)].any()
+    rng = np.random.default_rng(15)
+    for _ in range(5):
+        start, other = _random_pose(model, rng), _random_pose(model, rng, scale=0.8)
+        goals = forward(model, other).to_world(lay.part, lay.point)
+        w = arm_blob.astype(float)
+        masked = damped_least_squares(model, start, lay.part, lay.point, goals, w, iterations=5, moves=moves)
+        free = damped_least_squares(model, start, lay.part, lay.point, goals, w, iterations=5)
+        assert np.array_equal(masked[twist], start[twist])
+        assert np.abs(free[twist] - start[twist]).max() > 1e-3
+        assert np.abs(masked[rest] - start[rest]).max() > 1e-3
+
+
+def test_blob_options_arm_goals_move_is_validated():
+    from tracker.blobs import BlobOptions
+
+    for mode in ("all", "twist", "arm"):
+        assert BlobOptions(arm_goals_move=mode).arm_goals_move == mode
+    with pytest.raises(ValueError, match="arm_goals_move"):
+        BlobOptions(arm_goals_move="spine")

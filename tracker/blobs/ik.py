@@ -128,14 +128,16 @@ def ccd(model: BodyModel, params, part, point, goals, weights=None, *, free=None
 
 def damped_least_squares(model: BodyModel, params, part, point, goals, weights=None, *, free=None,
                          iterations: int = 3, damping: float = 1e-3, root: bool = False,
-                         penalty=None) -> np.ndarray:
+                         penalty=None, moves=None) -> np.ndarray:
     """Damped Gauss–Newton on the free joint angles (module docstring); returns params within limits.
 
     ``root``: the root's translation and rotation are free too (every goal then pulls the whole body,
     e.g. the legs' goals lower the trunk into a crouch).  ``penalty``: optional extra residuals, an
     object whose ``residuals(model, params, jacobian=, pose=)`` gives ``(r (k,), J (k, n_params) or None)``
     (``tracker.fitting.props.PropPenalty``), minimised with the goals (``r`` in the goals' units,
-    metres × √weight); a step that raises the cost is then halved (at most 5 times, else the pose stays)."""
+    metres × √weight); a step that raises the cost is then halved (at most 5 times, else the pose stays).
+    ``moves`` (m, n_params) bool: which parameters goal ``i`` may pull (its other Jacobian columns are
+    zeroed, e.g. arm goals that must not turn the trunk); default every parameter."""
     params, part, point, goals, w = _check(model, params, part, point, goals, weights)
     kinds = (JOINT_ROTATION, ROOT_TRANSLATION, ROOT_ROTATION) if root else (JOINT_ROTATION,)
     movable = np.isin(model.param_kind, kinds)
@@ -143,10 +145,17 @@ def damped_least_squares(model: BodyModel, params, part, point, goals, weights=N
     idx = np.flatnonzero(free)
     out = model.clamp(params)
     sw = np.sqrt(w)[:, None]
+    if moves is not None:
+        moves = np.asarray(moves, bool)
+        if moves.shape != (len(part), model.n_params):
+            raise ValueError(f"moves: expected shape ({len(part)}, {model.n_params}), got {moves.shape}")
+        moves = moves[:, None, idx]
     for _ in range(int(iterations)):
         pose = forward(model, out)
         X = pose.to_world(part, point)
         J = point_jacobian(model, pose, part, X)[:, :, idx]  # (m, 3, f)
+        if moves is not None:
+            J = J * moves
         Jw = (J * sw[:, :, None]).reshape(-1, len(idx))
         r = ((goals - X) * sw).ravel()
         A = Jw.T @ Jw

@@ -55,9 +55,7 @@ _ROOT_BLOBS = ("pelvis", "abdomen", "torso.0")
 
 @dataclass(frozen=True)
 class BlobOptions:
-    """Options of :class:`BlobTracker`.
-
-    hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the predicted body
+    """Options of :class:`BlobTracker`.  hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the predicted body
     surface; em_iterations : expectation–maximisation–IK rounds per frame; colour_weight : factor on the colour term
     of eq. 2; log_det : add the Gaussians' log-determinants to eq. 2 (``tracker.blobs.em.expectation``); soft :
     share each voxel among its ``soft`` nearest blobs instead of the paper's hard assignment (0); gate : largest
@@ -83,7 +81,8 @@ class BlobOptions:
     static_scene : voxels of lattice cubes that stay occupied away from the fitted body are left out of the EM and
     of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
     ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
-    squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight).
+    squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
+    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -122,8 +121,11 @@ class BlobOptions:
     static_threshold: float = 0.7
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
+    arm_goals_move: str = "twist"
 
     def __post_init__(self):
+        if self.arm_goals_move not in ("all", "twist", "arm"):
+            raise ValueError(f"arm_goals_move: expected 'all', 'twist' or 'arm', got {self.arm_goals_move!r}")
         if self.ik not in ("ccd", "dls"):
             raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
         if int(self.em_iterations) < 1:
@@ -141,6 +143,32 @@ def _interior_samples(model: BodyModel, *, n_theta: int = 8, n_z: int = 5,
     local = cone_points(model, n_theta=n_theta, n_z=n_z)[parts].copy()
     local[..., :2] *= radius_fraction
     return parts, np.repeat(parts, local.shape[1]), local.reshape(-1, 3)
+
+
+_ARM_PARTS = ("clavicle", "upper_arm", "forearm", "hand")
+_SPINE_PARTS = ("abdomen", "torso")
+
+
+def arm_goal_moves(model: BodyModel, part: np.ndarray, *, twist: bool = False) -> np.ndarray:
+    """Which parameters a goal on each part (``part`` (m,) part indices) may pull, (m, n_params) bool.
+
+    Any goal off the arms: every parameter.  A goal on an arm part: only its own arm's joints (the arm
+    parts it hangs from), or with ``twist`` every parameter but the spine's twists (the abdomen's and
+    torso's rotations about their long axis): arm blobs lagging a quick arm motion do not twist the
+    spine directly (other goals still may).  ``BlobOptions.arm_goals_move``: ``"all"`` (no mask), ``"twist"``, ``"arm"``.
+    """
+    part = np.asarray(part, dtype=int)
+    names = model.part_names
+    arm_part = np.array([any(a in n for a in _ARM_PARTS) for n in names])
+    on_arm = arm_part[part]
+    moves = np.ones((len(part), model.n_params), bool)
+    if twist:
+        spine = np.isin(np.asarray(names)[model.param_part], _SPINE_PARTS)
+        along = np.abs(np.asarray(model.param_axis, dtype=float)[:, 2]) > 0.99
+        moves[np.ix_(on_arm, spine & along & (model.param_kind == JOINT_ROTATION))] = False
+    else:
+        moves[on_arm] = model.affects[part[on_arm]] & arm_part[model.param_part][None, :]
+    return moves
 
 
 def hull_support(hull: ColourHull, points: np.ndarray, *, tolerance_m: float = 0.0) -> np.ndarray:
@@ -261,6 +289,8 @@ class BlobTracker:
         kind = model.param_kind
         self._free = (kind == JOINT_ROTATION) & ~np.array(["clavicle" in model.part_names[p]
                                                            for p in model.param_part])
+        self._moves = (None if options.arm_goals_move == "all" else
+                       arm_goal_moves(model, self.layout.part, twist=options.arm_goals_move == "twist"))
         self._prior_weight = np.where(self.layout.skin, options.skin_prior_weight, options.colour_prior_weight)
         self._support_parts, self._support_part, self._support_local = _interior_samples(model)
         self._static = (StaticVoxels(options.hull.min_voxel_m, rate=options.static_rate,
@@ -295,7 +325,7 @@ class BlobTracker:
         else:
             params = damped_least_squares(m, params, lay.part, self.blobs.point, goals, weights, free=self._free,
                                           iterations=o.dls_iterations, damping=o.dls_damping, root=o.dls_root,
-                                          penalty=self._prop_penalty)
+                                          penalty=self._prop_penalty, moves=self._moves)
         return params
 
     def part_support(self, hull: ColourHull, pose) -> np.ndarray:
