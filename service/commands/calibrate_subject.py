@@ -25,7 +25,7 @@ from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.subject_auto import AutoSubjectOptions, SampleCalibration, SubjectSample, calibrate_sample
-from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths, prop_limit
+from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
 from tracker.fitting.tracking import Tracker
 
 
@@ -102,8 +102,7 @@ def run_subject(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 1
         more = {} if args.lengths_only else {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER}
-        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils,
-                                       limit=prop_limit(session_props(session)), **more)
+        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils, **more)
         subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,
                           f"contourcap calibrate subject, frames {args.frames}, {len(poses)} frame sets, "
                           f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}", fit.widths, fit.radius_scale)

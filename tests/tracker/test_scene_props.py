@@ -193,31 +193,3 @@ def test_track_cli_takes_props_and_names_a_bad_one(tmp_path, capsys):
                                                                                    "box = [5, 5, 0, 5.5, 5.5, 0.5]"))
     assert main(["track", str(root), "--out", str(out), "--initial-pose", gt, "--prop=-6,-6,0,-5.5,-5.5,0.4"]) == 0
     assert len(out.read_text().splitlines()) == 3
-
-
-def test_prop_limit_is_the_summed_intrusion_and_the_polish_keeps_out():
-    from tracker.fitting.subject_size import prop_limit
-    from tracker.search.scoring import ScoreViews
-    from tracker.search.seated import polish_iou
-
-    model, p, cams, sils, _, jc, box = _seated_scene(4)
-    assert prop_limit([]) is None
-    pen = PropPenalty([box])
-    limit = prop_limit([box], per_metre=5.0)
-    sunk = p.copy()
-    sunk[2] -= 0.08  # the body pushed down into the seat
-    assert pen.intrusion(model, sunk) > pen.intrusion(model, p) >= 0.0
-    assert np.isclose(limit(model, sunk), 5.0 * pen.residuals(model, sunk)[0].sum() / pen.weight)
-    assert limit(model, p + np.eye(model.n_params)[2] * 1.0) == 0.0  # lifted a metre: clear of the box
-    # a seat 4 cm higher than the one in the silhouettes: the IoU alone keeps the body where the
-    # silhouettes put it (sunk in that seat), the ascent of the IoU minus the limit lifts it out
-    high = PropBox.from_values(list(box.lo) + list(box.hi + [0.0, 0.0, 0.04]))
-    limit = prop_limit([high], per_metre=5.0)
-    views = ScoreViews(model, cams, [sils[c.name] for c in cams])
-    steps = {"pelvis.tz": 0.02}
-    free, _ = polish_iou(model, views, p, steps=steps, rounds=6)
-    held, score = polish_iou(model, views, p, steps=steps, rounds=6, limit=limit)
-    inside = PropPenalty([high])
-    assert inside.intrusion(model, free) > 0.0
-    assert held[2] > free[2] and inside.intrusion(model, held) < inside.intrusion(model, free)
-    assert np.isclose(score, views.score(held) - limit(model, held))

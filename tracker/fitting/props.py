@@ -178,10 +178,6 @@ class PropPenalty:
             J[rows] = np.einsum("ni,nip->np", G[rows], PJ)
         return r, J
 
-    def intrusion(self, model: BodyModel, params: np.ndarray) -> float:
-        """Summed depth (metres) by which the parts' axis points come nearer the boxes than their
-        clearance (0 when the body keeps out): ``residuals`` / ``weight``, summed."""
-        return float(np.sum(self.residuals(model, params)[0])) / self.weight
 
 
 def seat_box(cameras: Sequence, silhouettes: Mapping[str, np.ndarray], explained: Mapping[str, np.ndarray],

@@ -23,7 +23,7 @@ the IoU counts a prop the body does not cover, and a limb lengthened onto it wou
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
 __all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
-           "WIDTH_ORDER", "RADIUS_ORDER", "prop_limit"]
+           "WIDTH_ORDER", "RADIUS_ORDER"]
 
 #: Search order, trunk first.
 SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
@@ -103,8 +103,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
                              polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
                              segments: Sequence[str] = SEGMENT_ORDER, widths: Sequence[str] = (),
                              radii: Sequence[str] = (), width_sigma: float = 0.2,
-                             radius_sigma: float = 0.2,
-                             limit: Callable[[BodyModel, np.ndarray], float] | None = None) -> SubjectFit:
+                             radius_sigma: float = 0.2) -> SubjectFit:
     """Fit segment lengths (and optionally widths and radii) to silhouettes, jointly with the frames' poses.
 
     Parameters
@@ -115,19 +114,20 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     silhouettes : sequence of mapping camera name -> ndarray (h, w)
         Per frame set, each camera's body silhouette (non-zero = body).
     rounds, polish_rounds : int
-        Pose-polish / size-search alternations (later ones search half the span); ``polish_iou`` rounds.
+        Pose-polish / size-search alternations (later ones search half the span); ``polish_iou``
+        rounds per frame in each.
     span, step : float
         Scale factors searched: current × (1 ± span) in steps of ``step`` (first round).
     prior_sigma, width_sigma, radius_sigma : float
         Standard deviation of the log scale factor against the anthropometric length, width, radius.
     pose_step : float
         Factor on ``polish_iou``'s first steps (0.03 m root, 0.08 rad root rotation, 0.12 rad joints).
-    root_rounds, scale : int, float
-        Root-translation polish rounds (1 cm steps) per candidate (0: none); scoring views' image scale.
+    root_rounds : int
+        ``polish_iou`` rounds of the root translation (1 cm steps) for every candidate (0: none).
+    scale : float
+        Image scale of the scoring views.
     segments, widths, radii : sequence of str
         Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
-    limit : callable (model, params) -> float, optional
-        Penalty (IoU units, >= 0) off every pose's IoU when polished and scored (``prop_limit``).
 
     Returns
     -------
@@ -167,14 +167,13 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
 
     def total(m: BodyModel, dim) -> float:
         if not root_rounds:
-            return float(sum(v.with_model(m).score(p) - (limit(m, p) if limit else 0.0)
-                             for v, p in zip(views, params)))
+            return float(sum(v.with_model(m).score(p) for v, p in zip(views, params)))
         st = width_steps[dim[1]] if dim[0] == "width" else root
-        return float(sum(polish_iou(m, v.with_model(m), p, steps=st, rounds=root_rounds, limit=limit)[1]
+        return float(sum(polish_iou(m, v.with_model(m), p, steps=st, rounds=root_rounds)[1]
                          for v, p in zip(views, params)))
 
     for r in range(int(rounds)):
-        params = [polish_iou(current, v.with_model(current), p, steps=steps, rounds=polish_rounds, limit=limit)[0]
+        params = [polish_iou(current, v.with_model(current), p, steps=steps, rounds=polish_rounds)[0]
                   for v, p in zip(views, params)]
         half = span / (2 ** r)
         grid = np.arange(-half, half + 1e-9, step / (2 ** r))
@@ -197,16 +196,3 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     iou_after = float(np.mean([v.with_model(current).score(p) for v, p in zip(views, params)]))
     fitted = by_kind(values)
     return SubjectFit(fitted["length"], current, params, iou_before, iou_after, fitted["width"], fitted["radius"])
-
-
-def prop_limit(props: Sequence, *, per_metre: float = 5.0) -> Callable[[BodyModel, np.ndarray], float] | None:
-    """``estimate_segment_lengths``' ``limit`` for the operator's props (``tracker.fitting.props.PropBox``):
-    ``per_metre`` IoU per metre of the body's summed intrusion (``PropPenalty.intrusion``: the parts'
-    axis points nearer a box than their radius, the pelvis allowed to rest on it), the same limit
-    the tracker's fit keeps; None without props."""
-    from tracker.fitting.props import PropPenalty
-
-    if not props:
-        return None
-    penalty = PropPenalty(list(props))
-    return lambda model, params: per_metre * penalty.intrusion(model, params)

@@ -13,7 +13,7 @@ standing model folded over a chair scores below the seated one).
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -46,13 +46,10 @@ POLISH_STEPS = {"pelvis.tx": 0.04, "pelvis.ty": 0.04, "pelvis.tz": 0.04, "pelvis
 
 
 def polish_iou(model: BodyModel, views: ScoreViews, params: np.ndarray, *,
-               steps: Mapping[str, float] = POLISH_STEPS, rounds: int = 6,
-               limit: Callable[[BodyModel, np.ndarray], float] | None = None) -> tuple[np.ndarray, float]:
+               steps: Mapping[str, float] = POLISH_STEPS, rounds: int = 6) -> tuple[np.ndarray, float]:
     """Coordinate ascent of the silhouette IoU (``views.score``) over the parameters of ``steps``:
     each is moved by ± its step and the move kept when the IoU rises; a round without a gain
-    halves the steps.  ``rounds`` rounds (two scores per parameter each).  Returns ``(params, IoU)``;
-    with ``limit`` (``limit(model, params)`` >= 0, IoU units, e.g. a prop's intrusion) the ascent is
-    of the IoU minus the limit, and that is what is returned.
+    halves the steps.  ``rounds`` rounds (two scores per parameter each).  Returns ``(params, IoU)``.
 
     The chamfer refinement lets a body sink into a prop that is part of the silhouette (its
     contour lies inside the silhouette either way); the IoU counts the silhouette the body
@@ -61,8 +58,7 @@ def polish_iou(model: BodyModel, views: ScoreViews, params: np.ndarray, *,
     idx = np.array([model.param_names.index(n) for n in names], dtype=int)
     step = np.array([steps[n] for n in names], dtype=float)
     p = model.clamp(np.asarray(params, dtype=float))
-    score = views.score if limit is None else (lambda q: views.score(q) - limit(model, q))
-    best = score(p)
+    best = views.score(p)
     for _ in range(int(rounds)):
         gained = False
         for k, i in enumerate(idx):  # a few dozen parameters, not pixels
@@ -70,7 +66,7 @@ def polish_iou(model: BodyModel, views: ScoreViews, params: np.ndarray, *,
                 q = p.copy()
                 q[i] += sign * step[k]
                 q = model.clamp(q)
-                s = score(q)
+                s = views.score(q)
                 if s > best + 1e-4:
                     p, best, gained = q, s, True
         if not gained:
