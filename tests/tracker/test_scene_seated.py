@@ -133,3 +133,21 @@ def test_written_seated_session_loads_with_the_chair_props(tmp_path):
     assert np.allclose(session.props, props, atol=1e-4)
     hips = truth[:, [JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip")]].reshape(-1, 3)
     assert np.all(hips[:, 2] > PropBox.from_values(props[0]).hi[2])
+
+
+def test_seat_sink_raises_the_seat_top_into_the_thighs():
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.motions import motion_to_bvh
+    from tracker.synthetic.people import make_subject, subject_motion
+    from tracker.synthetic.seated import chair_boxes, seated_track
+    from tracker.synthetic.synth import bundled_motion
+
+    bvh = motion_to_bvh(seated_track(3, rng=np.random.default_rng(0)), load_bvh(bundled_motion("scaled_131_01")))
+    subject = make_subject(2)
+    sm = subject_motion(bvh, subject)
+    r = subject.radius["thigh"]
+    flat, sunk = chair_boxes(sm, r), chair_boxes(sm, r, sink_m=0.02)
+    hip_z = sm.joints[:, [JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip")], 2].min()
+    assert np.isclose(flat[0][1][2], hip_z - r) and np.isclose(sunk[0][1][2], hip_z - r + 0.02)
+    # every box but the seat's top moves with it: legs up to the slab, the backrest from the seat
+    assert all(np.isclose(b[1][2] - a[1][2], 0.02) for a, b in zip(flat[:5], sunk[:5]))

@@ -54,10 +54,11 @@ def _axis_box(centre: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndar
     return centre - half, centre + half
 
 
-def chair_boxes(sm: SubjectMotion, thigh_radius: float, *, colour=(40, 40, 45)) -> list[tuple]:
+def chair_boxes(sm: SubjectMotion, thigh_radius: float, *, colour=(40, 40, 45), sink_m: float = 0.0) -> list[tuple]:
     """A chair under the seated subject ``sm`` (``seated_track`` with heading 0 or π: the boxes are
     axis-aligned): ``(lo, hi, colour)`` boxes of the seat slab (3 cm), its four legs (3 cm square)
-    and the backrest.  The seat's top is ``thigh_radius`` below the lowest hip joint; it reaches
+    and the backrest.  The seat's top is ``thigh_radius`` − ``sink_m`` below the lowest hip joint
+    (``sink_m`` > 0: the thighs' flesh squashed on the seat, the capsules sunk in it); it reaches
     from 12 cm behind the hips to 12 cm short of the knees, 10 cm beyond the hips at the sides."""
     hips, fwd = _heading_frame(sm)
     if abs(fwd[1]) > 0.2:
@@ -69,7 +70,7 @@ def chair_boxes(sm: SubjectMotion, thigh_radius: float, *, colour=(40, 40, 45)) 
     y0, y1 = float(ys.min()) - 0.10, float(ys.max()) + 0.10
     back_x, front_x = hips[0] - s * 0.12, knee_x - s * 0.12
     x0, x1 = min(back_x, front_x), max(back_x, front_x)
-    top = hz - float(thigh_radius)
+    top = hz - float(thigh_radius) + float(sink_m)
     boxes = [(np.array([x0, y0, top - 0.03]), np.array([x1, y1, top]))]
     for x in (x0, x1 - 0.03):
         for y in (y0, y1 - 0.03):
@@ -119,11 +120,13 @@ def studio_cameras(points: np.ndarray, layout=STUDIO_FRONT_SIDE, *, size=(320, 2
     return cams
 
 
-def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320, 240), n_background: int = 8):
+def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320, 240), n_background: int = 8,
+                         seat_sink_m: float = 0.0):
     """Render ``seated_track`` on ``make_subject(seed)`` sitting on ``chair_boxes``' chair into a session
     directory at ``root`` (JPEG frames ``camK/%06d.jpg``, an empty-room MJPG video per camera without the
     chair, calibration.toml, session.toml with the subject's height and the chair's ``[[prop]]`` boxes).
-    ``layout`` None: a ring of four cameras (``fit_ring_cameras``), else ``studio_cameras``' layout.
+    ``layout`` None: a ring of four cameras (``fit_ring_cameras``), else ``studio_cameras``' layout;
+    ``seat_sink_m``: ``chair_boxes``' ``sink_m``.
     Returns (the subject's joint truth (frames, 16, 3) metres, the ``Subject``, the operator's boxes)."""
     from pathlib import Path
 
@@ -143,7 +146,7 @@ def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320
     subject = make_subject(seed)
     sm = subject_motion(bvh, subject)
     prim = body_primitives(sm, subject)
-    boxes = chair_boxes(sm, subject.radius["thigh"])
+    boxes = chair_boxes(sm, subject.radius["thigh"], sink_m=seat_sink_m)
     pts = np.concatenate([prim.spheres(f)[0].reshape(-1, 3) for f in range(prim.n_frames)])
     cams = (fit_ring_cameras(pts, 4, size=tuple(size)) if layout is None
             else studio_cameras(pts, layout, size=tuple(size)))
