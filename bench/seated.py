@@ -122,7 +122,7 @@ def run_seed(args, seed: int) -> dict:
     out["calibrate_cpu_s"] = round(cpu_run(cal), 1)
     s = read_subject(subj)
     model = s.body()
-    out["calibrated"] = {"segment_lengths_m": s.segment_lengths, "radius_scale": s.radius_scale,
+    out["subject"] = {"segment_lengths_m": s.segment_lengths, "radius_scale": s.radius_scale,
                          "thigh_radius_m": round(mean_cone_radius(model, "left_thigh"), 4),
                          "shank_radius_m": round(mean_cone_radius(model, "left_shank"), 4)}
     out["truth_radius_m"] = {"thigh": round(radius["thigh"], 4), "shank": round(radius["shank"], 4)}
