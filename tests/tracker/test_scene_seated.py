@@ -11,51 +11,28 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
-from capture.calibration import save_calibration
-from capture.session import load_session, write_session_toml
-from segmentation.background import BackgroundModel
+from capture.session import load_session
+from service.backgrounds import background_models
 from service.offline import track_session
 from tracker.fitting.props import PropBox
 from tracker.fitting.scene import SceneOptions
-from tracker.synthetic.bvh import load_bvh
-from tracker.synthetic.motions import motion_to_bvh
-from tracker.synthetic.people import JOINT_NAMES, Studio, body_primitives, make_subject, subject_height, subject_motion
-from tracker.synthetic.scene import fit_ring_cameras
-from tracker.synthetic.seated import chair_boxes, chair_props, seated_track
-from tracker.synthetic.synth import bundled_motion
+from tracker.synthetic.people import JOINT_NAMES
+from tracker.synthetic.seated import write_seated_session
 
 JUDGED = ("left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
           "left_knee", "right_knee", "left_ankle", "right_ankle")
 
 
-def render_seated_session(root: Path, *, seed: int, frames: int, cameras: int = 4, size=(320, 240)):
-    """Render the seated scene into a session at ``root``; returns (truth (n, 16, 3), background
-    models, the chair's operator boxes)."""
-    rng = np.random.default_rng(seed)
-    bvh = motion_to_bvh(seated_track(frames, fps=25.0, rng=rng), load_bvh(bundled_motion("scaled_131_01")))
-    subject = make_subject(seed)
-    sm = subject_motion(bvh, subject)
-    prim = body_primitives(sm, subject)
-    boxes = chair_boxes(sm, subject.radius["thigh"])
-    pts = np.concatenate([prim.spheres(f)[0].reshape(-1, 3) for f in range(prim.n_frames)])
-    cams = fit_ring_cameras(pts, cameras, size=tuple(size))
-    studio = Studio(cams, seed=seed)
-    backgrounds = {c.name: BackgroundModel.from_frames([studio.camera_output(bg, rng)[0] for _ in range(8)], window_px=1)
-                   for c, bg in zip(cams, studio.backgrounds)}  # fmt: skip
-    for c in cams:
-        (root / c.name).mkdir(parents=True, exist_ok=True)
-    for f in range(frames):
-        images, _ = studio.render(prim, f, boxes=boxes)
-        for c, img in zip(cams, images):
-            (root / c.name / f"{f:06d}.jpg").write_bytes(studio.camera_output(img, rng)[1])
-    save_calibration(root / "calibration.toml", cams)
-    write_session_toml(root, name="seated", fps=25.0, cameras=[{"name": c.name, "images": f"{c.name}/%06d.jpg"}
-                                                               for c in cams], height_m=subject_height(bvh, subject))
-    return sm.joints, backgrounds, chair_props(boxes)
+def render_seated_session(root: Path, *, seed: int, frames: int, size=(320, 240)):
+    """Render the seated scene into a session at ``root`` (``write_seated_session``, a ring of four
+    cameras); returns (truth (n, 16, 3), background models, the chair's operator boxes)."""
+    truth, _, props = write_seated_session(root, seed=seed, frames=frames, size=size)
+    session = load_session(root)
+    backgrounds, _ = background_models(session, list(session.camera_names))
+    return truth, backgrounds, props
 
 
 def judged_errors_mm(records: list[dict], truth: np.ndarray) -> dict[str, float]:
@@ -130,3 +107,47 @@ def test_chair_props_keep_the_legs_off_the_chair(seated_scene):
     err = frame_errors_mm(boxed, truth)
     ok = np.array([bool(r.get("ok")) for r in boxed])
     assert not np.any(ok & (err > 80.0))
+
+
+def test_studio_cameras_see_every_point_from_their_azimuths():
+    from tracker.synthetic.seated import STUDIO_FRONT_SIDE, studio_cameras
+
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([-0.4, -0.3, 0.0], [0.5, 0.3, 1.3], size=(200, 3))
+    cams = studio_cameras(pts, size=(160, 120))
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    for cam, (az, dist) in zip(cams, STUDIO_FRONT_SIDE):
+        uv = cam.project(pts)
+        assert np.all((uv > 0) & (uv < [160, 120]))
+        off = cam.center[:2] - centre[:2]
+        assert abs(np.degrees(np.arctan2(off[1], off[0])) - az) < 1e-6 and abs(np.linalg.norm(off) - dist) < 1e-6
+
+
+def test_written_seated_session_loads_with_the_chair_props(tmp_path):
+    from tracker.synthetic.seated import STUDIO_FRONT_SIDE
+
+    truth, subject, props = write_seated_session(tmp_path, seed=1, frames=2, layout=STUDIO_FRONT_SIDE,
+                                                 size=(160, 120), n_background=2)
+    session = load_session(tmp_path)
+    assert len(session.camera_names) == 4 and truth.shape == (2, len(JOINT_NAMES), 3)
+    assert np.allclose(session.props, props, atol=1e-4)
+    hips = truth[:, [JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip")]].reshape(-1, 3)
+    assert np.all(hips[:, 2] > PropBox.from_values(props[0]).hi[2])
+
+
+def test_seat_sink_raises_the_seat_top_into_the_thighs():
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.motions import motion_to_bvh
+    from tracker.synthetic.people import make_subject, subject_motion
+    from tracker.synthetic.seated import chair_boxes, seated_track
+    from tracker.synthetic.synth import bundled_motion
+
+    bvh = motion_to_bvh(seated_track(3, rng=np.random.default_rng(0)), load_bvh(bundled_motion("scaled_131_01")))
+    subject = make_subject(2)
+    sm = subject_motion(bvh, subject)
+    r = subject.radius["thigh"]
+    flat, sunk = chair_boxes(sm, r), chair_boxes(sm, r, sink_m=0.02)
+    hip_z = sm.joints[:, [JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip")], 2].min()
+    assert np.isclose(flat[0][1][2], hip_z - r) and np.isclose(sunk[0][1][2], hip_z - r + 0.02)
+    # every box but the seat's top moves with it: legs up to the slab, the backrest from the seat
+    assert all(np.isclose(b[1][2] - a[1][2], 0.02) for a, b in zip(flat[:5], sunk[:5]))
