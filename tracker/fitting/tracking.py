@@ -71,7 +71,7 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same
         The check for lost or exchanged limbs.
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
@@ -165,9 +165,11 @@ class TrackerOptions:
     #: side from the last time), the legs exchanged, each leg straight, each arm hanging and each arm in
     #: the last good pose are fitted (``limb_iterations`` LM steps); one whose ``hypothesis_cost`` is
     #: ``limb_margin`` lower is taken, one lower by less whose knees/ankles or elbows/wrists end more than
-    #: ``limb_same`` × height away makes the frame not ok ("limbs"), as does coverage still below the
-    #: limit after the check (0 ``limb_every``: off)
+    #: ``limb_same`` × height away makes the frame not ok ("limbs"), and with ``limb_flag_coverage`` so
+    #: does a coverage still below the limit after the check (off: the model's own hop has frames with a
+    #: good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
     limb_every: int = 5
+    limb_flag_coverage: bool = False
     limb_coverage_drop: float = 0.03
     limb_dead_band: float = 0.08
     limb_iterations: int = 6
@@ -696,7 +698,7 @@ class Tracker:
                         self.monitor.reset()
                     restarted = True  # no velocity across the switch
             cov = terms.coverage()
-            if not limbs and np.isfinite(cov) and cov < limit:
+            if self.options.limb_flag_coverage and not limbs and np.isfinite(cov) and cov < limit:
                 limbs = f"limb off its silhouette: coverage {cov:.3f} < {limit:.3f}"
             if not bad and np.isfinite(cov):
                 self._good_cov = (self._good_cov + [float(cov)])[-self.options.rms_window:]
