@@ -151,7 +151,9 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
 
 
 _REASONS = (("silhouette IoU", "iou"), ("rms", "rms"), ("contour on the silhouettes", "inside"),
-            ("initialisation failed", "initialisation"), ("no camera", "no_camera"))
+            ("initialisation failed", "initialisation"), ("no camera", "no_camera"),
+            ("limb off its silhouette", "limb_coverage"), ("limbs: ", "limbs_unsure"),
+            ("front/back", "front_back"))
 
 
 def _reason_keys(reason: str) -> list[str]:
@@ -211,10 +213,35 @@ def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, di
     series = {"mpjpe_mm": [None if not np.isfinite(v) else round(1e3 * v, 1) for v in err["mpjpe"]],
               "mirrored": [bool(v) for v in mirrored_frames(err)], "ok": [bool(v) for v in ok]}
     per_joint = np.linalg.norm(pred - truth, axis=-1)  # (n, 16), NaN without a pose
+    # diagnostics of the limb failures (docs/robustness.md, round 7): every frame's per-joint error and
+    # whether one pair of limbs is exchanged (the frame's limb nearer to the other side's truth)
+    series["joint_mm"] = [None if not np.isfinite(row).all() else [round(1e3 * float(v)) for v in row]
+                          for row in per_joint]
+    series["exchanged"] = [_exchanged(pred[k], truth[k]) for k in range(len(truth))]
     posed = np.isfinite(per_joint).all(axis=1)
     joint_mm = {j: round(1e3 * float(per_joint[posed, i].mean()), 1) if posed.any() else None
                 for i, j in enumerate(JOINT_NAMES)}
     return score, joint_mm, series
+
+
+#: limb chains compared by ``_exchanged`` (their joints, left side; the right side's by name)
+LIMB_CHAINS = {"legs": ("left_knee", "left_ankle"), "arms": ("left_elbow", "left_wrist")}
+
+
+def _exchanged(pred: np.ndarray, truth: np.ndarray) -> list[str]:
+    """The limb pairs (``LIMB_CHAINS``) whose left and right chains are each nearer to the other side's
+    truth than to their own, by at least 50 mm in the sum over both chains; [] without a pose."""
+    if not np.isfinite(pred).all():
+        return []
+    out = []
+    for name, joints in LIMB_CHAINS.items():
+        li = [JOINT_NAMES.index(j) for j in joints]
+        ri = [JOINT_NAMES.index(j.replace("left_", "right_")) for j in joints]
+        own = np.linalg.norm(pred[li] - truth[li], axis=1).sum() + np.linalg.norm(pred[ri] - truth[ri], axis=1).sum()
+        other = np.linalg.norm(pred[li] - truth[ri], axis=1).sum() + np.linalg.norm(pred[ri] - truth[li], axis=1).sum()
+        if other < own - 0.05:
+            out.append(name)
+    return out
 
 
 def calibrate_clip(root: Path, session, backgrounds, records: list, *, frames: int, samples: int) -> tuple:

@@ -32,6 +32,8 @@ from tracker.fitting.hypotheses import FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
 from tracker.search.initialise import SearchOptions, initialise
+from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_separation, arm_candidates,
+                                  chain_joint_distance, exchange_verdict, leg_candidates)
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
@@ -69,6 +71,8 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same
+        The check for lost or exchanged limbs.
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
@@ -154,6 +158,23 @@ class TrackerOptions:
     front_back_every: int = 60
     front_back_iterations: int = 12
     front_back_margin: float = 0.5
+    #: lost or exchanged limbs (``tracker.search.limbs``): when the fit leaves more of the observed
+    #: silhouette boundary unexplained than usual (coverage below the median of the last ``rms_window``
+    #: good frames' minus ``limb_coverage_drop``, at most every ``limb_every`` frames) or when the legs
+    #: have crossed (ankles apart along the heading by more than ``limb_dead_band`` × height, on the other
+    #: side from the last time), the legs exchanged, each leg straight, each arm hanging and each arm in
+    #: the last good pose are fitted (``limb_iterations`` LM steps); one whose ``hypothesis_cost`` is
+    #: ``limb_margin`` lower is taken, one lower by less whose knees/ankles or elbows/wrists end more than
+    #: ``limb_same`` × height away makes the frame not ok ("limbs"), and with ``limb_flag_coverage`` so
+    #: does a coverage still below the limit after the check (off: the model's own hop has frames with a
+    #: good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
+    limb_every: int = 5
+    limb_flag_coverage: bool = False
+    limb_coverage_drop: float = 0.03
+    limb_dead_band: float = 0.08
+    limb_iterations: int = 6
+    limb_margin: float = 0.5
+    limb_same: float = 0.04
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -312,8 +333,8 @@ class Tracker:
     params : (n_params,) the last fitted pose (None before initialisation)
     last_good : (n_params,) the last pose of a good frame
     last_result : SolverResult of the last fit
-    n_initialisations, n_front_back_checks, n_turned : searches from the silhouettes, front/back
-        checks run, and the times the mirror was taken (``TrackerOptions``)
+    n_initialisations, n_front_back_checks, n_turned, n_limb_checks, n_limb_switches : searches from
+        the silhouettes, front/back checks, mirrors taken, limb checks, limb hypotheses taken
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
@@ -342,6 +363,11 @@ class Tracker:
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
         self.n_front_back_checks = 0
+        self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
+        self._since_limbs = options.limb_every
+        self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
+        self.n_limb_checks = 0
+        self.n_limb_switches = 0
         self.n_turned = 0
         self._last_bad = False
         self.params: np.ndarray | None = None
@@ -490,6 +516,56 @@ class Tracker:
                                   penalty=self.penalty)
         return res_t, cost_t.evaluate(np.asarray(res_t.params))
 
+    def coverage_limit(self) -> float:
+        """Coverage below which a limb is taken to be off its silhouette (``TrackerOptions.limb_coverage_drop``
+        below the median of the recent frames that passed the gate; none yet: below 1)."""
+        ref = float(np.median(self._good_cov)) if self._good_cov else 1.0
+        return ref - self.options.limb_coverage_drop
+
+    def _limb_due(self, terms, limit: float, lost: bool) -> bool:
+        """Whether the limb check runs (``TrackerOptions``): the legs crossed, or the coverage is below
+        ``limit``, the last check is ``limb_every`` frames back and the frame is not ``lost``."""
+        o = self.options
+        self._since_limbs += 1
+        self.stride.dead_band_m = o.limb_dead_band * self.model.height_m
+        crossed = o.limb_dead_band > 0 and self.stride.update(
+            ankle_separation(self.model, np.asarray(terms.pose.params), terms.pose))
+        cov = terms.coverage()
+        return crossed or (not lost and np.isfinite(cov) and cov < limit and self._since_limbs >= o.limb_every)
+
+    def _limbs(self, cams, chs, res, terms, views):
+        """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``, the best limb
+        hypothesis's fit when it is clearly better; ``note``: why the frame is not ok ("" if none)."""
+        o = self.options
+        self._since_limbs = 0
+        self.n_limb_checks += 1
+        p = np.asarray(res.params, dtype=float)
+        v = views()
+        kept = hypothesis_cost(self.model, p, terms.rms_px(),
+                               self._last_iou if self._last_iou is not None else float(v.score(p)))
+        opts = replace(o, max_iterations=o.limb_iterations)
+        best = None
+        for name, start in leg_candidates(self.model, p) + arm_candidates(self.model, p, self.last_good):
+            r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=opts,
+                                penalty=self.penalty)
+            q = np.asarray(r.params)
+            t = cost.evaluate(q)
+            c = hypothesis_cost(self.model, q, t.rms_px(), float(v.score(q)))
+            if best is None or c < best[0]:
+                best = (c, name, q, t)
+        c, name, q, t = best
+        chain = ARMS if name.endswith(("hanging", "previous")) else LEGS
+        verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
+                                   margin=o.limb_margin, same_m=o.limb_same * self.model.height_m)
+        if verdict.choice == EXCHANGED:
+            r, cost = fit_frame(self.model, cams, chs, q, sliding=self.sliding, solver=self.solver, options=o,
+                                penalty=self.penalty)
+            self.n_limb_switches += 1
+            return r, cost.evaluate(np.asarray(r.params)), True, ""
+        if verdict.choice == UNSURE:
+            return res, terms, False, f"limbs: {name.replace('_', ' ')} fits as well ({c:.2f} vs {kept:.2f})"
+        return res, terms, False, ""
+
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
         bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
@@ -608,6 +684,26 @@ class Tracker:
                         self.monitor.reset()
                     self.n_turned += 1
                     restarted = True  # no velocity across the turn
+        limbs = ""
+        if self.options.limb_every > 0 and views is not None and not restarted:
+            limit = self.coverage_limit()
+            # a frame that counts towards a lost track is the recovery's unless the legs just crossed
+            if self._limb_due(terms, limit, lost=bool(bad) and not self._soft(bad)):
+                res, terms, switched, limbs = self._limbs(cams, chs, res, terms, views)
+                if switched:
+                    rms, inside = terms.rms_px(), terms.inside_fraction()
+                    self._last_iou = None
+                    bad = self._bad(terms, views)
+                    if not bad or self._soft(bad):
+                        self.monitor.reset()
+                    restarted = True  # no velocity across the switch
+            cov = terms.coverage()
+            if self.options.limb_flag_coverage and not limbs and np.isfinite(cov) and cov < limit:
+                limbs = f"limb off its silhouette: coverage {cov:.3f} < {limit:.3f}"
+            if not bad and np.isfinite(cov):
+                self._good_cov = (self._good_cov + [float(cov)])[-self.options.rms_window:]
+        else:
+            self.stride.reset()
         unsure = ""
         if self.guard is not None:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
@@ -616,7 +712,7 @@ class Tracker:
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not bad and not unsure, params=[float(v) for v in res.params],
+            ok=not bad and not unsure and not limbs, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -625,9 +721,10 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if bad or unsure:
-            record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else []))
-            record["failed"] = list(bad.failed) + (["front_back"] if unsure else [])
+        if bad or unsure or limbs:
+            record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else [])
+                                         + ([limbs] if limbs else []))
+            record["failed"] = list(bad.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
