@@ -121,7 +121,7 @@ class BlobOptions:
     static_threshold: float = 0.7
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
-    arm_goals_move: str = "twist"
+    arm_goals_move: str = "all"
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
