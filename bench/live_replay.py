@@ -8,7 +8,9 @@ default=15,rejoin=3``, or ``--sets-per-cpu-s 60``: a search's CPU seconds × tha
 rate times how much slower a search runs beside the stream than alone).  Prints ok sets, mean
 joint error over ok sets and over all sets with a pose, searches by kind, and the bad sets' clip
 frames.  ``--catch-up N`` sets how many sets a search's pose is brought forward through
-(``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id, ``--rejoin-headings`` the cheap rejoin's headings per seed.  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
+(``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id, ``--rejoin-headings`` the cheap rejoin's headings per seed.  The fitter's clock is the thread's CPU time, so
+``rejoin_cpu_ms`` lists the CPU of each rejoin run in a set's time (``rejoin_ok``: how many of those
+sets ended ok).  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
 runs on one tree.
 
     python bench/live_replay.py [--json] [--sets 180] [--gaps 1 2 3 2,1,3] [--search-sets default=15,rejoin=3]
@@ -79,7 +81,8 @@ def main() -> None:
             extra["catch_up_sets"] = args.catch_up
         if args.rejoin_headings is not None:
             extra["rejoin_headings"] = args.rejoin_headings
-        fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, **extra)
+        # the fitter's clock is the thread's CPU: a record's fit_ms / rejoin_ms are CPU, not wall
+        fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, clock=time.thread_time, **extra)
         c0 = time.process_time()
         rep = replay_live(clip, every_nth(args.sets, gap, start=args.start), fitter=fitter, use_rois=not args.no_rois)
         cpu = time.process_time() - c0
@@ -90,6 +93,8 @@ def main() -> None:
                "mean_joint_error_all_m": float(np.nanmean(err)) if np.isfinite(err).any() else None,
                "searches": dict(getattr(fitter, "search_kinds", {"all": fitter.searches})), "rejoined": fitter.rejoined,
                "held_sets": [s for _, s in runner.held],
+               "rejoin_cpu_ms": [round(r["rejoin_ms"], 1) for r in rep.records if "rejoin_ms" in r],
+               "rejoin_ok": sum(bool(r.get("ok")) for r in rep.records if "rejoin_ms" in r),
                "roi_sets": rep.roi_sets, "cpu_ms_per_set": 1e3 * cpu / max(1, len(rep.records)),
                "bad_clip_frames": [int(r["frame"]) % clip.n_frames for r in rep.records if not r.get("ok")]}
         runs.append(run)
@@ -97,7 +102,8 @@ def main() -> None:
             e_ok, e_all = run["mean_joint_error_ok_m"], run["mean_joint_error_all_m"]
             print(f"gaps {gaps:>6}: ok {run['ok']}/{run['sets']}, error ok {100 * (e_ok or np.nan):.2f} cm, "
                   f"all {100 * (e_all or np.nan):.2f} cm, searches {run['searches']}, rejoined {run['rejoined']}, "
-                  f"{run['cpu_ms_per_set']:.1f} ms CPU per set; bad clip frames {run['bad_clip_frames']}", flush=True)
+                  f"{run['cpu_ms_per_set']:.1f} ms CPU per set; rejoins in the set's time {len(run['rejoin_cpu_ms'])} "
+                  f"({run['rejoin_ok']} ok, {sum(run['rejoin_cpu_ms']):.0f} ms CPU); bad clip frames {run['bad_clip_frames']}", flush=True)
     out = {"machine_ref_ms": ref, "search_sets": args.search_sets, "sets_per_cpu_s": args.sets_per_cpu_s,
            "old_recovery": args.old_recovery, "catch_up": args.catch_up, "start": args.start,
            "rejoin_headings": args.rejoin_headings, "rois": not args.no_rois, "runs": runs}

@@ -206,3 +206,35 @@ def test_rejoin_takes_the_first_sure_seed_and_skips_bad_ones():
     assert rejoin(model, cams, sils, chamfer, [bad]) is None
     assert rejoin(model, cams, sils, chamfer, [last], options=SearchOptions.for_recovery(accept_iou=1.01),
                   accept_iou=1.01) is None
+
+
+def test_rejoin_refines_the_best_scoring_seed_first_and_stops_at_the_gate(monkeypatch):
+    """``rejoin`` scores every seed's starts together and refines the best seed's first: with a
+    stale seed (33 frames back) given before a near one (3 frames back) it returns what
+    ``local_search`` from the near seed alone returns, bit for bit, with as many LM refinements
+    (the stale seed is never refined); two equal seeds are refined once."""
+    import tracker.search.recovery as rec
+    from tracker.search.initialise import search_views
+    from tracker.search.scoring import prepare_inputs
+
+    mot = _hop(74)
+    model, stale, near, truth = mot.model, mot.params[40], mot.params[70], mot.params[73]
+    cams = ring_cameras(4, size=(640, 480), start_deg=20.0)
+    sils, chamfer = rendered_views(model, truth, cams)
+    options = SearchOptions.for_recovery()
+    calls = []
+    refine = rec.refine
+    monkeypatch.setattr(rec, "refine", lambda *a, **k: calls.append(1) or refine(*a, **k))
+    inputs = prepare_inputs(model, cams, sils, chamfer)
+    hull, views = search_views(model, inputs, options, caller="test")
+    accept = min(0.8, options.accept_iou, views.expected_iou() - options.iou_margin)
+    alone = rec.local_search(model, inputs.cameras, inputs.chamfer, views, hull, model.clamp(near), accept_iou=accept,
+                             mirror_check=options.front_back)
+    n_alone = len(calls)
+    assert alone is not None and n_alone >= 1
+    calls.clear()
+    res = rec.rejoin(model, cams, sils, chamfer, [stale, near], options=options, accept_iou=0.8)
+    assert res is not None and np.array_equal(res.params, alone.params) and len(calls) == n_alone
+    calls.clear()
+    assert rec.rejoin(model, cams, sils, chamfer, [near, near.copy()], options=options, accept_iou=0.8) is not None
+    assert len(calls) == n_alone

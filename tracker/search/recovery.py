@@ -44,7 +44,7 @@ from tracker.search.mirror import front_back_cost, joints_at_limits, mirror_para
 from tracker.search.refine import InitResult, refine
 from tracker.search.scoring import ScoreViews, prepare_inputs
 
-__all__ = ["LossMonitor", "LossState", "recover", "local_search", "rejoin"]
+__all__ = ["LossMonitor", "LossState", "recover", "local_search", "local_starts", "local_refine", "rejoin"]
 
 OK, SUSPECT, LOST = "ok", "suspect", "lost"
 
@@ -151,18 +151,63 @@ def local_search(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
     """The cheap first stage of ``recover``: a local re-fit seeded from the last good pose.
 
     The last good pose as it was, and moved onto the hull at ``n_headings`` headings, is scored by
-    IoU; the best gets a limb search and one staged LM refinement (root, joints, everything), and
-    the lower ``front_back_cost`` of it and its mirror is kept.
+    IoU; the best is refined by ``local_refine``.
+
+    Parameters
+    ----------
+    model, cameras, chamfer, views, hull
+        As ``local_refine``.
+    last : ndarray, shape (n_params,)
+        The last good pose.
+    n_headings : int
+        Turns about the vertical tried on the hull.
+    accept_iou, min_inside_fraction, max_iterations, n_samples, prior_rad, reverse_weight, mirror_check, mirror_margin
+        As ``local_refine``.
+
+    Returns
+    -------
+    InitResult or None
+        As ``local_refine``.
+    """
+    poses = local_starts(model, hull, last, n_headings)
+    scores = views.scores(poses)
+    best = int(np.argmax(scores))  # the first of equal ones
+    return local_refine(model, cameras, chamfer, views, hull, poses[best], float(scores[best]), accept_iou=accept_iou,
+                        min_inside_fraction=min_inside_fraction, max_iterations=max_iterations, n_samples=n_samples,
+                        prior_rad=prior_rad, reverse_weight=reverse_weight, mirror_check=mirror_check,
+                        mirror_margin=mirror_margin)
+
+
+def local_starts(model: BodyModel, hull: VoxelHull, last: np.ndarray, n_headings: int) -> list[np.ndarray]:
+    """``last`` as it is, then moved onto the hull at ``n_headings`` headings: ``local_search``'s starts.
+
+    Returns
+    -------
+    list of ndarray, shape (n_params,)
+        ``1 + n_headings`` poses.
+    """
+    return [last] + [p for _, _, p in hull_placements(model, last, hull, n_headings)]
+
+
+def local_refine(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, views: ScoreViews,
+                 hull: VoxelHull, start: np.ndarray, score: float, *, accept_iou: float = 0.87,
+                 min_inside_fraction: float = 0.8, max_iterations: int = 8, n_samples: int = 6,
+                 prior_rad: float = 50.0, reverse_weight: float = 1.0, mirror_check: bool = True,
+                 mirror_margin: float = 0.1) -> InitResult | None:
+    """One start of the cheap recovery refined: a limb search, one staged LM, the front/back check.
+
+    ``start`` gets a limb search and one staged LM refinement (root, joints, everything), and the
+    lower ``front_back_cost`` of it and its mirror is kept.
 
     Parameters
     ----------
     model, cameras, views, hull
         The frame set's model, cameras, IoU scoring views and visual hull.
     chamfer : mapping str -> ChamferSampler
-    last : ndarray, shape (n_params,)
-        The last good pose.
-    n_headings : int
-        Turns about the vertical tried on the hull.
+    start : ndarray, shape (n_params,)
+        The start pose (within the limits).
+    score : float
+        Its mean silhouette IoU on ``views``.
     accept_iou, min_inside_fraction : float
         Least mean IoU and least fraction of contour points on the silhouettes of an accepted result.
     max_iterations, n_samples, prior_rad, reverse_weight : int, int, float, float
@@ -174,14 +219,8 @@ def local_search(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
     Returns
     -------
     InitResult or None
-        Label ``"local/kept"`` or ``"local/mirrored"``; None when not accepted (the caller then
-        runs the full search).
+        Label ``"local/kept"`` or ``"local/mirrored"``; None when not accepted.
     """
-    turned = [p for _, _, p in hull_placements(model, last, hull, n_headings)]
-    poses = [last] + turned
-    scores = views.scores(poses)
-    best = int(np.argmax(scores))  # the first of equal ones
-    score, start = float(scores[best]), poses[best]
     start, _ = limb_search(model, views, start, score)
     x, terms = refine(model, cameras, chamfer, start, max_iterations=max_iterations, n_samples=n_samples,
                       prior_rad=prior_rad, reverse_weight=reverse_weight)
@@ -262,25 +301,27 @@ def rejoin(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str
            accept_iou: float | None = None, min_inside_fraction: float = 0.8) -> InitResult | None:
     """The cheap stage of ``recover`` alone, from several seeds: a lost track rejoins or None.
 
-    ``local_search`` runs from each finite seed in turn (e.g. the last good pose, then the
-    tracker's last fit, or a stale search result to bring onto this frame set).  A result that
-    reaches ``recover``'s own acceptance IoU is returned at once; otherwise the best-scoring
-    result that reaches ``accept_iou`` after all seeds.  Its cost is bounded (one hull, at most
-    one limb search and two staged refinements per seed), so a caller can run it between frames.
+    Every finite seed (e.g. the last good pose, the tracker's last fit, a stale search result to
+    bring onto this frame set) gives ``local_search``'s starts, all scored by IoU together; the
+    seeds' best starts are then refined (``local_refine``) best first, and the first result that
+    passes the gate is returned, so a rejoin that succeeds usually refines one start.  Its cost is
+    bounded (one hull, at most one limb search and two staged refinements per seed), so a caller
+    can run it between frames.
 
     Parameters
     ----------
     model, cameras, silhouettes, chamfer
         As ``recover``.
     seeds : sequence of ndarray, shape (n_params,)
-        Start poses, tried in order; non-finite ones are skipped.
+        Start poses; non-finite ones are skipped.  Of seeds whose best starts score equally, the
+        earlier is refined first.
     options : SearchOptions
         ``accept_iou``, ``iou_margin``, ``front_back``, the hull and scoring views.
     n_headings : int, optional
         Headings tried per seed (default ``options.n_headings``).
     accept_iou, min_inside_fraction : float or None, float
         Least mean IoU and fraction of contour points on the silhouettes of an accepted result
-        (``accept_iou`` None: as ``recover``; a tracker passes its own quality gate).
+        (``accept_iou`` None: ``recover``'s own acceptance; a tracker passes its own quality gate).
 
     Returns
     -------
@@ -291,17 +332,21 @@ def rejoin(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str
     hull, views = search_views(model, inputs, options, caller="rejoin")
     sure = min(options.accept_iou, views.expected_iou() - options.iou_margin)
     accept = sure if accept_iou is None else min(float(accept_iou), sure)
-    best = None
-    for seed in seeds:
-        seed = np.asarray(seed, dtype=float)
-        if seed.shape != (model.n_params,) or not np.all(np.isfinite(seed)):
+    n_headings = options.n_headings if n_headings is None else int(n_headings)
+    starts = [local_starts(model, hull, model.clamp(np.asarray(seed, dtype=float)), n_headings) for seed in seeds
+              if np.shape(seed) == (model.n_params,) and np.all(np.isfinite(seed))]
+    if not starts:
+        return None
+    scores = views.scores([p for poses in starts for p in poses]).reshape(len(starts), -1)
+    best = np.argmax(scores, axis=1)  # per seed, the first of equal ones
+    tried: list[np.ndarray] = []
+    for k in np.argsort(-scores[np.arange(len(starts)), best], kind="stable"):
+        start = starts[k][best[k]]
+        if any(np.array_equal(start, t) for t in tried):  # two seeds, one start: refined once
             continue
-        res = local_search(model, inputs.cameras, inputs.chamfer, views, hull, model.clamp(seed),
-                           n_headings=options.n_headings if n_headings is None else int(n_headings),
-                           accept_iou=accept, min_inside_fraction=min_inside_fraction,
-                           mirror_check=options.front_back)
-        if res is not None and res.score >= sure:
+        tried.append(start)
+        res = local_refine(model, inputs.cameras, inputs.chamfer, views, hull, start, float(scores[k, best[k]]),
+                           accept_iou=accept, min_inside_fraction=min_inside_fraction, mirror_check=options.front_back)
+        if res is not None:
             return res
-        if res is not None and (best is None or res.score > best.score):
-            best = res
-    return best
+    return None
