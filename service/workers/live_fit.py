@@ -187,8 +187,10 @@ class LiveTrackerFitter(TrackerFitter):
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
         # schedules it found as many ok sets but longer bad runs while searches were held (docs/performance.md)
+        # no limb check (TrackerOptions.limb_every) live: its candidate fits run in the set's time and
+        # doubled the demo's fitting CPU per set (docs/performance.md)
         opts = tracker.options
-        tracker.options = replace(opts, iou_rms_jump=None,
+        tracker.options = replace(opts, iou_rms_jump=None, limb_every=0,
                                   initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
                                   recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
                                                          keep=int(recover_keep)))
