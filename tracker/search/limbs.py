@@ -27,7 +27,7 @@ import numpy as np
 
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
-from tracker.search.mirror import mirror_map, pelvis_heading
+from tracker.search.mirror import exchange_sides, mirror_map, pelvis_heading
 
 __all__ = ["LEGS", "ARMS", "exchange_limbs", "limb_dofs", "leg_candidates", "ankle_separation", "StrideWatch",
            "ExchangeVerdict", "arm_candidates", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
@@ -72,14 +72,7 @@ def exchange_limbs(model: BodyModel, params: np.ndarray, chain: tuple = LEGS) ->
     -------
     ndarray, shape (n_params,)
     """
-    p = np.asarray(params, dtype=float)
-    if p.shape != (model.n_params,):
-        raise ValueError(f"params: expected shape ({model.n_params},), got {p.shape}")
-    index, sign = mirror_map(model)
-    k = limb_dofs(model, chain)
-    out = p.copy()
-    out[index[k]] = sign[k] * p[k]
-    return out
+    return exchange_sides(model, params, np.asarray(limb_dofs(model, chain), dtype=int))
 
 
 def leg_candidates(model: BodyModel, params: np.ndarray) -> list[tuple[str, np.ndarray]]:

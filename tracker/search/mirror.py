@@ -40,7 +40,7 @@ from tracker.fitting.sampler import ChamferViews
 from tracker.search.refine import InitResult, Prepare, refine
 from tracker.search.scoring import ScoreViews, SearchInputs, prepare_inputs
 
-__all__ = ["mirror_map", "mirror_params", "mirror_joint_order", "joints_at_limits", "pelvis_heading",
+__all__ = ["mirror_map", "exchange_sides", "mirror_params", "mirror_joint_order", "joints_at_limits", "pelvis_heading",
            "front_back_cost", "hypothesis_cost", "FrontBack", "compare_front_back", "resolve_front_back"]
 
 _S = np.diag([1.0, -1.0, 1.0])
@@ -102,6 +102,18 @@ def mirror_joint_order(model: BodyModel) -> np.ndarray:
     return np.array([names.index(_other_side(n)) if _other_side(n) in names else i for i, n in enumerate(names)])
 
 
+def exchange_sides(model: BodyModel, params: np.ndarray, dofs: np.ndarray) -> np.ndarray:
+    """``params`` (n_params,) with the joint angles ``dofs`` (indices; left and right chains together)
+    moved to their other-side twins with the signs of ``mirror_map``; every other parameter unchanged."""
+    p = np.asarray(params, dtype=float)
+    if p.shape != (model.n_params,):
+        raise ValueError(f"params: expected shape ({model.n_params},), got {p.shape}")
+    index, sign = mirror_map(model)
+    out = p.copy()
+    out[index[dofs]] = sign[dofs] * p[dofs]
+    return out
+
+
 def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
     """The same body turned 180° about the vertical through the pelvis, left and right swapped.
 
@@ -119,12 +131,7 @@ def mirror_params(model: BodyModel, params: np.ndarray) -> np.ndarray:
     ndarray, shape (n_params,)
     """
     p = np.asarray(params, dtype=float)
-    if p.shape != (model.n_params,):
-        raise ValueError(f"params: expected shape ({model.n_params},), got {p.shape}")
-    index, sign = mirror_map(model)
-    out = p.copy()
-    joints = np.flatnonzero(model.param_kind == JOINT_ROTATION)
-    out[index[joints]] = sign[joints] * p[joints]
+    out = exchange_sides(model, p, np.flatnonzero(model.param_kind == JOINT_ROTATION))
     t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
     r_idx = np.flatnonzero(model.param_kind == ROOT_ROTATION)
     root = int(np.flatnonzero(model.parent < 0)[0])
