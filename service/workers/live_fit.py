@@ -65,6 +65,12 @@ class EffortLevel:
 EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLevel(2, 5, 6, 100))
 """Full effort first (the ``TrackerOptions`` defaults), then cheaper settings."""
 
+LIVE_VELOCITY_DAMPING = 0.5
+"""The live tracker's ``TrackerOptions.velocity_damping``: live the fits are one to three frames
+apart, and the full constant-velocity step across an uneven gap overshoots where the body
+accelerates (a hop's take-off and landing) and loses the track (docs/performance.md, "A damped
+prediction live")."""
+
 REJOIN_ACCEPT_IOU = None
 """Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
 ``TrackerOptions.min_iou``; docs/performance.md compares stricter ones)."""
@@ -162,8 +168,7 @@ class LiveTrackerFitter(TrackerFitter):
         Seconds (fit times); where searches run (default :class:`ThreadSearches`;
         ``service.live_replay`` runs them at once and holds their result for some sets).
     rejoin_headings, rejoin_accept_iou : int, float or None
-        The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; least IoU of
-        its pose (None: the tracker's own gate).
+        The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; its pose's least IoU (None: gate's).
     rejoin_spacing, rejoin_beside : int, bool
         A poor fit tries the cheap recovery at once when the last try was at least
         ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
@@ -173,8 +178,9 @@ class LiveTrackerFitter(TrackerFitter):
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
         a search runs only on a set with silhouettes from this fraction of the cameras.
-    catch_up_sets : int
-        Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none).
+    catch_up_sets, velocity_damping : int, float
+        Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none);
+        the tracker's ``TrackerOptions.velocity_damping`` live (:data:`LIVE_VELOCITY_DAMPING`).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -182,7 +188,8 @@ class LiveTrackerFitter(TrackerFitter):
                  clock: Callable[[], float] = time.perf_counter, search_runner=None, rejoin_headings: int = 12,
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
-                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8) -> None:
+                 initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8,
+                 velocity_damping: float = LIVE_VELOCITY_DAMPING) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -190,7 +197,8 @@ class LiveTrackerFitter(TrackerFitter):
         # no limb check (TrackerOptions.limb_every) live: its candidate fits run in the set's time and
         # doubled the demo's fitting CPU per set (docs/performance.md)
         opts = tracker.options
-        tracker.options = replace(opts, iou_rms_jump=None, limb_every=0,
+        # a damped constant-velocity prediction live (LIVE_VELOCITY_DAMPING)
+        tracker.options = replace(opts, iou_rms_jump=None, limb_every=0, velocity_damping=float(velocity_damping),
                                   initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
                                   recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
                                                          keep=int(recover_keep)))

@@ -128,6 +128,14 @@ def test_constant_velocity_prediction_and_bad_arguments(cameras):
     tr = Tracker(model, cameras, initial_params=model.zero(), options=TrackerOptions(constant_velocity=True))
     tr.previous, tr.params = model.zero(), model.zero() + 0.01
     np.testing.assert_allclose(tr.predict(), model.clamp(model.zero() + 0.02))
+    # damped, across a frame gap twice the last one: p + d * 2 * (p - p_prev)
+    rng = np.random.default_rng(3)
+    prev = model.random_params(rng, fraction=0.3)
+    last = model.clamp(prev + rng.normal(0, 0.01, prev.size))
+    tr = Tracker(model, cameras, initial_params=model.zero(), options=TrackerOptions(velocity_damping=0.5))
+    tr.previous, tr.params, tr._frames = prev, last, (10, 11)
+    np.testing.assert_allclose(tr.predict(13), model.clamp(last + 0.5 * 2.0 * (last - prev)))
+    np.testing.assert_allclose(tr.predict(12), model.clamp(last + 0.5 * (last - prev)))
     with pytest.raises(ValueError, match="solver"):
         Tracker(model, cameras, solver="newton")
     with pytest.raises(ValueError, match="initial_params"):

@@ -61,8 +61,8 @@ class TrackerOptions:
         The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
     palm_length
         The hands' length of the body the tracker fits (``palm_model``; None: the model's).
-    constant_velocity
-        Start each fit from the constant-velocity extrapolation.
+    constant_velocity, velocity_damping
+        Start each fit from the constant-velocity extrapolation, taking that fraction of its step.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
         Quality limits of a good frame (a worse frame is reported ``ok: false``).
     iou_every, iou_check_coverage, iou_rms_jump
@@ -118,6 +118,9 @@ class TrackerOptions:
     diagonal_floor: float = 0.0
     #: start from ``2 p_t - p_{t-1}`` (fewer iterations, lower joint error on the hop)
     constant_velocity: bool = True
+    #: fraction of the constant-velocity step the prediction takes (1: all of it; the live fitter
+    #: takes less: ``service.workers.live_fit.LIVE_VELOCITY_DAMPING``)
+    velocity_damping: float = 1.0
     #: the RMS limit of a good frame is ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median
     #: RMS of the last rms_window good frames))``: the RMS level is set by the segmentation (shadows,
     #: missing edges), not by the pose, px
@@ -398,9 +401,10 @@ class Tracker:
         """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
         before initialisation.
 
-        Constant velocity when enabled: ``p + (p - p_prev)``, scaled by the ratio of the frame-id gaps
-        (to ``frame_id`` over between the last two fits, at most :data:`MAX_EXTRAPOLATION`) when both
-        are known, so a live tracker that fits every n-th frame extrapolates by the frames elapsed.
+        Constant velocity when enabled: ``p + d (p - p_prev)``, ``d`` = ``TrackerOptions.velocity_damping``,
+        the step scaled by the ratio of the frame-id gaps (to ``frame_id`` over between the last two
+        fits, at most :data:`MAX_EXTRAPOLATION`) when both are known, so a live tracker that fits every
+        n-th frame extrapolates by the frames elapsed.
         """
         if self.params is None:
             return None
@@ -409,6 +413,7 @@ class Tracker:
             f_prev, f_last = self._frames
             if frame_id is not None and f_prev is not None and f_last is not None and f_last > f_prev:
                 scale = min(MAX_EXTRAPOLATION, max(0.0, (int(frame_id) - f_last) / (f_last - f_prev)))
+            scale *= float(self.options.velocity_damping)
             if scale == 1.0:
                 return self.model.clamp(2.0 * self.params - self.previous)
             return self.model.clamp(self.params + scale * (self.params - self.previous))
