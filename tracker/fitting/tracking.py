@@ -118,8 +118,8 @@ class TrackerOptions:
     diagonal_floor: float = 0.0
     #: start from ``2 p_t - p_{t-1}`` (fewer iterations, lower joint error on the hop)
     constant_velocity: bool = True
-    #: fraction of the constant-velocity step the prediction takes (1: all of it; the live fitter
-    #: takes less: ``service.workers.live_fit.LIVE_VELOCITY_DAMPING``)
+    #: fraction of the constant-velocity step the prediction takes (1: all of it; the live fitter's is
+    #: ``service.workers.live_fit.LIVE_VELOCITY_DAMPING``)
     velocity_damping: float = 1.0
     #: the RMS limit of a good frame is ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median
     #: RMS of the last rms_window good frames))``: the RMS level is set by the segmentation (shadows,
