@@ -36,6 +36,16 @@ def test_walk_turn_weights_by_speed_and_wraps():
     assert walk_turn(np.zeros(2), np.array([1.0, 0.0]), gain=0.5, speed_min=0.3, speed_full=0.6) == 0.0
 
 
+def test_walk_turn_leaves_large_angles_alone():
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        f, d = rng.uniform(-np.pi, np.pi, 2)
+        wrapped = np.angle(np.exp(1j * (d - f)))
+        got = walk_turn([np.cos(f), np.sin(f)], [np.cos(d), np.sin(d)], gain=1.0, speed_min=0.3, speed_full=0.6,
+                        max_rad=np.radians(45.0))
+        assert got == (pytest.approx(wrapped, abs=1e-9) if abs(wrapped) <= np.radians(45.0) else 0.0)
+
+
 def test_walk_heading_turns_a_pose_toward_its_walk(model):
     rng = np.random.default_rng(7)
     t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)

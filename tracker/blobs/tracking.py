@@ -129,6 +129,7 @@ class BlobOptions:
     walk_speed_min: float = 0.3
     walk_speed_full: float = 0.6
     walk_window_s: float = 0.3
+    walk_max_deg: float = 180.0
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
@@ -304,7 +305,8 @@ class BlobTracker:
                                      threshold=options.static_threshold, clearance_m=options.static_clearance_m)
                         if options.static_scene else None)
         self._walk = (WalkHeading(model, gain=options.walk_gain, speed_min=options.walk_speed_min,
-                                  speed_full=options.walk_speed_full, window_s=options.walk_window_s)
+                                  speed_full=options.walk_speed_full, window_s=options.walk_window_s,
+                                  max_rad=np.radians(options.walk_max_deg))
                       if options.walk_gain > 0 else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)

@@ -18,7 +18,8 @@ from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.search.mirror import pelvis_heading
 
 
-def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_full: float) -> float:
+def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_full: float,
+              max_rad: float = np.pi) -> float:
     """Turn (radians, about +z) a fraction of the way from ``facing_xy`` to ``velocity_xy``.
 
     Parameters
@@ -31,6 +32,9 @@ def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_fu
         Fraction of the angle turned at full speed, in [0, 1].
     speed_min, speed_full : float
         Speeds (m/s) where the weight starts from 0 and reaches 1 (``speed_full > speed_min``).
+    max_rad : float
+        Largest angle between facing and walking that is corrected; beyond it (walking sideways or
+        backwards, or a velocity the fit made up) no turn.
 
     Returns
     -------
@@ -45,6 +49,8 @@ def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_fu
         return 0.0
     d = np.arctan2(v[1], v[0]) - np.arctan2(f[1], f[0])
     d = float(np.angle(np.exp(1j * d)))
+    if abs(d) > max_rad:
+        return 0.0
     return float(gain * w * d)
 
 
@@ -60,10 +66,12 @@ class WalkHeading:
         :func:`walk_turn`'s speeds, m/s.
     window_s : float
         Time span of the velocity estimate, seconds (> 0).
+    max_rad : float
+        :func:`walk_turn`'s largest corrected angle, radians.
     """
 
     def __init__(self, model: BodyModel, *, gain: float, speed_min: float, speed_full: float,
-                 window_s: float) -> None:
+                 window_s: float, max_rad: float = np.pi) -> None:
         if not 0.0 <= gain <= 1.0:
             raise ValueError(f"gain: expected a value in [0, 1], got {gain!r}")
         if not 0.0 <= speed_min < speed_full:
@@ -73,6 +81,7 @@ class WalkHeading:
             raise ValueError(f"window_s: expected > 0, got {window_s!r}")
         self.model = model
         self.gain, self.speed_min, self.speed_full, self.window_s = gain, speed_min, speed_full, window_s
+        self.max_rad = float(max_rad)
         self._t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
         self._track: deque = deque()
 
@@ -96,4 +105,4 @@ class WalkHeading:
     def turn(self, params: np.ndarray) -> float:
         """Turn (radians about +z) this pose's pelvis should make toward the walking direction."""
         return walk_turn(pelvis_heading(self.model, params), self.velocity(), gain=self.gain,
-                         speed_min=self.speed_min, speed_full=self.speed_full)
+                         speed_min=self.speed_min, speed_full=self.speed_full, max_rad=self.max_rad)
