@@ -72,4 +72,14 @@ def test_walk_options_validated(model):
         WalkHeading(model, gain=0.5, speed_min=0.6, speed_full=0.3, window_s=0.3)
     with pytest.raises(ValueError, match="window_s"):
         WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.0)
-    assert BlobOptions().walk_gain >= 0
+    with pytest.raises(ValueError, match="walk_source"):
+        BlobOptions(walk_source="feet")
+
+
+def test_walk_heading_from_points(model):
+    rng = np.random.default_rng(11)
+    v = rng.normal(size=2)
+    wh = WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3)
+    for k in range(20):
+        wh.add(k / 25.0, point_xy=v * k / 25.0 + rng.normal(0, 1e-4, 2))
+    assert np.allclose(wh.velocity(), v, atol=0.01)

@@ -84,8 +84,8 @@ class BlobOptions:
     of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
     ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
     squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
-    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : the
-    start pose turned toward the direction of walking (``tracker.blobs.walk_heading``; walk_gain 0: off).
+    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start
+    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: fitted pelvis or hull centroid).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -130,10 +130,13 @@ class BlobOptions:
     walk_speed_full: float = 0.6
     walk_window_s: float = 0.3
     walk_max_deg: float = 180.0
+    walk_source: str = "fit"
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
             raise ValueError(f"arm_goals_move: expected 'all', 'twist' or 'arm', got {self.arm_goals_move!r}")
+        if self.walk_source not in ("fit", "hull"):
+            raise ValueError(f"walk_source: expected 'fit' or 'hull', got {self.walk_source!r}")
         if self.ik not in ("ccd", "dls"):
             raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
         if int(self.em_iterations) < 1:
@@ -498,6 +501,10 @@ class BlobTracker:
             self.previous = self.params
         self.params = params
         if self._walk is not None:
-            self._walk.add(1e-9 * int(timestamp_ns), params)
+            if o.walk_source == "hull":
+                w = hull.volumes
+                self._walk.add(1e-9 * int(timestamp_ns), point_xy=(w @ hull.centres[:, :2]) / w.sum())
+            else:
+                self._walk.add(1e-9 * int(timestamp_ns), params)
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record

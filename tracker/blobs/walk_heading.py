@@ -96,9 +96,12 @@ class WalkHeading:
         (t0, p0), (t1, p1) = self._track[0], self._track[-1]
         return (p1 - p0) / (t1 - t0) if t1 > t0 else np.zeros(2)
 
-    def add(self, t_s: float, params: np.ndarray) -> None:
-        """Record the fitted pose's pelvis at time ``t_s`` (seconds); drop positions older than the window."""
-        self._track.append((float(t_s), np.asarray(params, dtype=float)[self._t_idx[:2]].copy()))
+    def add(self, t_s: float, params: np.ndarray | None = None, *, point_xy=None) -> None:
+        """Record the fitted pose's pelvis (``params``), or a body point ``point_xy`` (2,) metres such as
+        the hull's centroid, at time ``t_s`` (seconds); drop positions older than the window."""
+        xy = (np.asarray(params, dtype=float)[self._t_idx[:2]] if point_xy is None
+              else np.asarray(point_xy, dtype=float).reshape(2))
+        self._track.append((float(t_s), xy.copy()))
         while len(self._track) > 2 and self._track[-1][0] - self._track[1][0] >= self.window_s:
             self._track.popleft()
 
