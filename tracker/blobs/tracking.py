@@ -43,10 +43,12 @@ from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.props import carve
 from tracker.blobs.start import StartPending
 from tracker.blobs.static_voxels import StaticVoxels
+from tracker.blobs.walk_heading import WalkHeading
 from tracker.blobs.kernels import cones_contain, lattice_member
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
-from tracker.body.model import JOINT_ROTATION, BodyModel
+from tracker.body.model import JOINT_ROTATION, ROOT_TRANSLATION, BodyModel
+from tracker.search.candidates import turn_about_vertical
 
 __all__ = ["BlobOptions", "BlobTracker", "initialise_from_images"]
 
@@ -82,7 +84,8 @@ class BlobOptions:
     of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
     ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
     squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
-    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`).
+    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start
+    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: fitted pelvis or hull centroid).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -122,10 +125,18 @@ class BlobOptions:
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
     arm_goals_move: str = "all"
+    walk_gain: float = 0.0
+    walk_speed_min: float = 0.3
+    walk_speed_full: float = 0.6
+    walk_window_s: float = 0.3
+    walk_max_deg: float = 180.0
+    walk_source: str = "fit"
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
             raise ValueError(f"arm_goals_move: expected 'all', 'twist' or 'arm', got {self.arm_goals_move!r}")
+        if self.walk_source not in ("fit", "hull"):
+            raise ValueError(f"walk_source: expected 'fit' or 'hull', got {self.walk_source!r}")
         if self.ik not in ("ccd", "dls"):
             raise ValueError(f"ik: expected 'ccd' or 'dls', got {self.ik!r}")
         if int(self.em_iterations) < 1:
@@ -296,6 +307,10 @@ class BlobTracker:
         self._static = (StaticVoxels(options.hull.min_voxel_m, rate=options.static_rate,
                                      threshold=options.static_threshold, clearance_m=options.static_clearance_m)
                         if options.static_scene else None)
+        self._walk = (WalkHeading(model, gain=options.walk_gain, speed_min=options.walk_speed_min,
+                                  speed_full=options.walk_speed_full, window_s=options.walk_window_s,
+                                  max_rad=np.radians(options.walk_max_deg))
+                      if options.walk_gain > 0 else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
 
@@ -434,6 +449,11 @@ class BlobTracker:
             return fail("no camera")
         cams = [self.cameras[n] for n in names]
         start = self.predict()
+        if start is not None and self._walk is not None:
+            angle = self._walk.turn(start)
+            if angle:
+                start = turn_about_vertical(self.model, start, angle,
+                                            start[self.model.param_kind == ROOT_TRANSLATION])
         if start is None:
             if self.initialiser is None:
                 return fail("no initial pose: pass initial_params or an initialiser")
@@ -456,6 +476,8 @@ class BlobTracker:
         t_hull = self.clock()
         if hull.n_voxels < o.min_voxels:
             self.previous = None
+            if self._walk is not None:
+                self._walk.reset()
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
             self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
@@ -478,5 +500,11 @@ class BlobTracker:
         else:
             self.previous = self.params
         self.params = params
+        if self._walk is not None:
+            if o.walk_source == "hull":
+                w = hull.volumes
+                self._walk.add(1e-9 * int(timestamp_ns), point_xy=(w @ hull.centres[:, :2]) / w.sum())
+            else:
+                self._walk.add(1e-9 * int(timestamp_ns), params)
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record
