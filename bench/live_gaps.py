@@ -33,12 +33,11 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from machine_ref import machine_ref_ms  # noqa: E402
+from segmented_frames import segment_session  # noqa: E402
 
-from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
-from segmentation.pipeline import segment_frame  # noqa: E402
 from service.demo import DemoOptions, demo_session  # noqa: E402
-from service.offline import background_models, session_model  # noqa: E402
+from service.offline import session_model  # noqa: E402
 from service.workers.live_fit import EFFORT_LEVELS  # noqa: E402
 from tracker.fitting.tracking import Tracker  # noqa: E402
 
@@ -50,13 +49,7 @@ def segmented(root: Path):
     """(session, truth records, [(frame id, timestamp, {cam: chamfer}, {cam: silhouette})])."""
     session = load_session(root)
     truth = [json.loads(line) for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
-    names = list(session.camera_names)
-    bgs, _ = background_models(session, names)
-    frames = []
-    for fid, group in iter_frame_sets(session, frames=range(0, len(truth))):
-        segs = {n: segment_frame(bgs[n], f.image) for n, f in group.items()}
-        ts = next(iter(group.values())).timestamp_ns
-        frames.append((fid, ts, {n: s.chamfer for n, s in segs.items()}, {n: s.silhouette for n, s in segs.items()}))
+    frames, _ = segment_session(session, len(truth))
     return session, truth, frames
 
 

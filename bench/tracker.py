@@ -60,33 +60,15 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from machine_ref import machine_ref_ms  # noqa: E402
+from segmented_frames import segment_session  # noqa: E402
 
 from capture.replay import iter_frame_sets  # noqa: E402
 from capture.session import load_session  # noqa: E402
-from segmentation.pipeline import segment_frame  # noqa: E402
 from service.offline import background_models, session_model  # noqa: E402
 from service.synthetic_session import make_synthetic_session  # noqa: E402
 from tracker.synthetic.synth import bundled_motion  # noqa: E402
 from tracker.fitting.cost import ChamferCost  # noqa: E402
 from tracker.fitting.tracking import Tracker, TrackerOptions  # noqa: E402
-
-
-def segment_session(session, frames: int, cpu_ms: list | None = None):
-    """Chamfer images and silhouettes per frame: list of (frame_id, ts, {cam: chamfer}, {cam: sil});
-    ``cpu_ms`` (optional) receives each frame set's segmentation CPU time."""
-    names = list(session.camera_names)
-    bgs, _ = background_models(session, names)
-    out, ms = [], []
-    for fid, group in iter_frame_sets(session, frames=range(0, frames)):
-        # this thread's CPU: the video decoder's own threads (which may decode ahead) are not segmentation
-        t0, c0 = time.perf_counter(), time.thread_time()
-        segs = {n: segment_frame(bgs[n], f.image) for n, f in group.items()}
-        ms.append(1e3 * (time.perf_counter() - t0) / max(len(group), 1))
-        if cpu_ms is not None:
-            cpu_ms.append(1e3 * (time.thread_time() - c0))
-        ts = next(iter(group.values())).timestamp_ns
-        out.append((fid, ts, {n: s.chamfer for n, s in segs.items()}, {n: s.silhouette for n, s in segs.items()}))
-    return out, float(np.median(ms))
 
 
 def track(model, cameras, frames, *, initial, sliding=True, solver="lm"):

@@ -67,9 +67,7 @@ EFFORT_LEVELS = (EffortLevel(0, 8, 12, 150), EffortLevel(1, 6, 8, 120), EffortLe
 
 LIVE_VELOCITY_DAMPING = 1.0
 """The live tracker's ``TrackerOptions.velocity_damping`` (1: the full constant-velocity step across
-the live frame gaps).  Less halved the losses on the demo clip (``bench/live_gaps.py``) but lost the
-hop's take-off in the live replays of ``tests/service/test_live_replay.py`` and raised the false oks
-of bodies that are not the model (docs/performance.md, "A damped prediction live")."""
+the live frame gaps; why less was not adopted: docs/performance.md, "A damped prediction live")."""
 
 REJOIN_ACCEPT_IOU = None
 """Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
