@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from tracker.blobs.tracking import BlobOptions
 from tracker.blobs.walk_heading import WalkHeading, walk_turn
-from tracker.body.model import ROOT_TRANSLATION, load_model
+from tracker.body.kinematics import forward, joint_centre_array, so3_exp
+from tracker.body.model import ROOT_ROTATION, ROOT_TRANSLATION, load_model
 from tracker.search.candidates import turn_about_vertical
 from tracker.search.mirror import pelvis_heading
 
@@ -46,23 +48,71 @@ def test_walk_turn_leaves_large_angles_alone():
         assert got == (pytest.approx(wrapped, abs=1e-9) if abs(wrapped) <= np.radians(45.0) else 0.0)
 
 
+def _pelvis_joint(model, params):
+    return joint_centre_array(model, forward(model, params))[list(model.joint_names).index("pelvis")]
+
+
 def test_walk_heading_turns_a_pose_toward_its_walk(model):
     rng = np.random.default_rng(7)
     t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
     for _ in range(10):
         p = turn_about_vertical(model, model.zero(), rng.uniform(-np.pi, np.pi), np.zeros(3))
         walk = rng.uniform(-np.pi, np.pi)
-        wh = WalkHeading(model, gain=1.0, speed_min=0.3, speed_full=0.6, window_s=0.3)
+        wh = WalkHeading(model, gain=1.0, speed_min=0.3, speed_full=0.6, window_s=0.3, upright=0.9)
         for k in range(12):  # 1 m/s along `walk`, 30 frames per second
             q = p.copy()
             q[t_idx[:2]] += (k / 30.0) * np.array([np.cos(walk), np.sin(walk)])
-            wh.add(k / 30.0, q)
+            wh.add_pose(k / 30.0, joint_centre_array(model, forward(model, q)))
         assert np.allclose(wh.velocity(), [np.cos(walk), np.sin(walk)], atol=1e-9)
         turned = turn_about_vertical(model, q, wh.turn(q), q[t_idx])
         assert np.degrees(abs(np.angle(np.exp(1j * (_angle(pelvis_heading(model, turned)) - walk))))) < 0.01
         assert np.allclose(turned[t_idx], q[t_idx])
         wh.reset()
         assert wh.turn(q) == 0.0
+
+
+def test_leaning_over_still_feet_is_no_walk(model):
+    """The root rotates about the model's origin on the floor: a lean moves the root translation, not the
+    pelvis joint.  A pose leaning forward at up to 35 degrees with the pelvis joint kept still gives no
+    velocity (the root translation's own 'velocity' is well above walking speed)."""
+    rng = np.random.default_rng(13)
+    t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)
+    for _ in range(5):
+        base = turn_about_vertical(model, model.zero(), rng.uniform(-np.pi, np.pi), np.zeros(3))
+        wh = WalkHeading(model, gain=1.0, speed_min=0.3, speed_full=0.6, window_s=0.3)
+        still = _pelvis_joint(model, base)
+        roots = []
+        for k in range(10):
+            axis = np.append(pelvis_heading(model, base)[::-1] * [-1, 1], 0.0)  # horizontal, across the body
+            q = _lean(model, base, axis, np.radians(3.5 * k))
+            q[t_idx] += still - _pelvis_joint(model, q)
+            roots.append(q[t_idx[:2]].copy())
+            wh.add_pose(k / 30.0, joint_centre_array(model, forward(model, q)))
+        assert np.hypot(*wh.velocity()) < 1e-6
+        assert wh.turn(q) == 0.0
+        assert np.hypot(*(roots[-1] - roots[0])) / (9 / 30.0) > 1.0
+
+
+def test_low_pelvis_gives_no_turn(model):
+    rng = np.random.default_rng(17)
+    wh = WalkHeading(model, gain=1.0, speed_min=0.3, speed_full=0.6, window_s=0.3, upright=0.9)
+    p = turn_about_vertical(model, model.zero(), rng.uniform(-np.pi, np.pi), np.zeros(3))
+    walk = _angle(pelvis_heading(model, p)) + np.radians(40.0)
+    for z_frac, turns in ((0.8, False), (0.95, True)):
+        wh.reset()
+        for k in range(12):  # 1 m/s at 40 degrees from the facing direction
+            wh.add(k / 30.0, (k / 30.0) * np.array([np.cos(walk), np.sin(walk)]), z_frac * wh.standing_z)
+        assert (wh.turn(p) != 0.0) == turns
+        if turns:
+            assert wh.turn(p) == pytest.approx(np.radians(40.0), abs=1e-6)
+
+
+def _lean(model, params, axis, angle):
+    """``params`` with the root rotated by ``angle`` about the horizontal ``axis`` (through the origin)."""
+    q = params.copy()
+    r = np.flatnonzero(model.param_kind == ROOT_ROTATION)
+    q[r] = Rotation.from_matrix(so3_exp(axis / np.linalg.norm(axis) * angle) @ so3_exp(q[r])).as_rotvec()
+    return q
 
 
 def test_walk_options_validated(model):
@@ -72,6 +122,8 @@ def test_walk_options_validated(model):
         WalkHeading(model, gain=0.5, speed_min=0.6, speed_full=0.3, window_s=0.3)
     with pytest.raises(ValueError, match="window_s"):
         WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.0)
+    with pytest.raises(ValueError, match="upright"):
+        WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3, upright=1.2)
     with pytest.raises(ValueError, match="walk_source"):
         BlobOptions(walk_source="feet")
 
@@ -81,5 +133,19 @@ def test_walk_heading_from_points(model):
     v = rng.normal(size=2)
     wh = WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3)
     for k in range(20):
-        wh.add(k / 25.0, point_xy=v * k / 25.0 + rng.normal(0, 1e-4, 2))
+        wh.add(k / 25.0, v * k / 25.0 + rng.normal(0, 1e-4, 2))
     assert np.allclose(wh.velocity(), v, atol=0.01)
+
+
+def test_velocity_is_the_least_squares_slope(model):
+    """Noise on the last point moves a least-squares slope over the window less than an end-to-end one."""
+    rng = np.random.default_rng(19)
+    for _ in range(20):
+        v = rng.normal(size=2)
+        wh = WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3)
+        t = np.arange(10) / 30.0
+        xy = t[:, None] * v + rng.normal(0, 0.01, (10, 2))
+        for k in range(10):
+            wh.add(t[k], xy[k])
+        slope = np.polyfit(t, xy, 1)[0]
+        assert np.allclose(wh.velocity(), slope, atol=1e-9)
