@@ -48,6 +48,18 @@ def test_walk_turn_leaves_large_angles_alone():
         assert got == (pytest.approx(wrapped, abs=1e-9) if abs(wrapped) <= np.radians(45.0) else 0.0)
 
 
+def test_walk_turn_dead_band_turns_only_the_excess():
+    rng = np.random.default_rng(23)
+    dead, top = np.radians(30.0), np.radians(90.0)
+    for _ in range(50):
+        f, d = rng.uniform(-np.pi, np.pi, 2)
+        wrapped = np.angle(np.exp(1j * (d - f)))
+        got = walk_turn([np.cos(f), np.sin(f)], [np.cos(d), np.sin(d)], gain=0.5, speed_min=0.3, speed_full=0.6,
+                        max_rad=top, dead_rad=dead)
+        want = 0.5 * np.sign(wrapped) * (abs(wrapped) - dead) if dead < abs(wrapped) <= top else 0.0
+        assert got == pytest.approx(want, abs=1e-9)
+
+
 def _pelvis_joint(model, params):
     return joint_centre_array(model, forward(model, params))[list(model.joint_names).index("pelvis")]
 
@@ -122,6 +134,8 @@ def test_walk_options_validated(model):
         WalkHeading(model, gain=0.5, speed_min=0.6, speed_full=0.3, window_s=0.3)
     with pytest.raises(ValueError, match="window_s"):
         WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.0)
+    with pytest.raises(ValueError, match="dead_rad"):
+        WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3, max_rad=1.0, dead_rad=1.0)
     with pytest.raises(ValueError, match="upright"):
         WalkHeading(model, gain=0.5, speed_min=0.3, speed_full=0.6, window_s=0.3, upright=1.2)
     with pytest.raises(ValueError, match="walk_source"):

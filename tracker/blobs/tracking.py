@@ -132,6 +132,7 @@ class BlobOptions:
     walk_max_deg: float = 180.0
     walk_source: str = "fit"
     walk_upright: float = 0.0
+    walk_dead_deg: float = 0.0
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
@@ -310,7 +311,8 @@ class BlobTracker:
                         if options.static_scene else None)
         self._walk = (WalkHeading(model, gain=options.walk_gain, speed_min=options.walk_speed_min,
                                   speed_full=options.walk_speed_full, window_s=options.walk_window_s,
-                                  max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright)
+                                  max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright,
+                                  dead_rad=np.radians(options.walk_dead_deg))
                       if options.walk_gain > 0 else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)

@@ -25,7 +25,7 @@ from tracker.search.mirror import pelvis_heading
 
 
 def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_full: float,
-              max_rad: float = np.pi) -> float:
+              max_rad: float = np.pi, dead_rad: float = 0.0) -> float:
     """Turn (radians, about +z) a fraction of the way from ``facing_xy`` to ``velocity_xy``.
 
     Parameters
@@ -41,11 +41,15 @@ def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_fu
     max_rad : float
         Largest angle between facing and walking that is corrected; beyond it (walking sideways or
         backwards, or a velocity the fit made up) no turn.
+    dead_rad : float
+        Dead band: the angle's first ``dead_rad`` radians are not turned (walking on a curve, the
+        pelvis's swing in a stride), ``0 <= dead_rad < max_rad``.
 
     Returns
     -------
     float
-        The turn in (-pi, pi] times the weight; 0 when slow or when ``facing_xy`` is zero.
+        (|angle| - ``dead_rad``) with the angle's sign (angle in (-pi, pi]) times ``gain`` and the weight;
+        0 when slow, inside the dead band, beyond ``max_rad`` or when ``facing_xy`` is zero.
     """
     f = np.asarray(facing_xy, dtype=float)
     v = np.asarray(velocity_xy, dtype=float)
@@ -55,9 +59,9 @@ def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_fu
         return 0.0
     d = np.arctan2(v[1], v[0]) - np.arctan2(f[1], f[0])
     d = float(np.angle(np.exp(1j * d)))
-    if abs(d) > max_rad:
+    if abs(d) > max_rad or abs(d) <= dead_rad:
         return 0.0
-    return float(gain * w * d)
+    return float(gain * w * np.sign(d) * (abs(d) - dead_rad))
 
 
 class WalkHeading:
@@ -72,15 +76,15 @@ class WalkHeading:
         :func:`walk_turn`'s speeds, m/s.
     window_s : float
         Time span of the velocity estimate, seconds (> 0).
-    max_rad : float
-        :func:`walk_turn`'s largest corrected angle, radians.
+    max_rad, dead_rad : float
+        :func:`walk_turn`'s largest corrected angle and dead band, radians.
     upright : float
         Fraction of the model's standing pelvis height (its rest pose's) the latest pelvis must be at
         or above for any turn, in [0, 1] (0: no height gate).
     """
 
     def __init__(self, model: BodyModel, *, gain: float, speed_min: float, speed_full: float,
-                 window_s: float, max_rad: float = np.pi, upright: float = 0.0) -> None:
+                 window_s: float, max_rad: float = np.pi, dead_rad: float = 0.0, upright: float = 0.0) -> None:
         if not 0.0 <= gain <= 1.0:
             raise ValueError(f"gain: expected a value in [0, 1], got {gain!r}")
         if not 0.0 <= speed_min < speed_full:
@@ -88,11 +92,13 @@ class WalkHeading:
                              f"{speed_min!r}, {speed_full!r}")
         if not window_s > 0:
             raise ValueError(f"window_s: expected > 0, got {window_s!r}")
+        if not 0.0 <= dead_rad < max_rad:
+            raise ValueError(f"dead_rad: expected 0 <= dead_rad < max_rad, got {dead_rad!r}")
         if not 0.0 <= upright <= 1.0:
             raise ValueError(f"upright: expected a value in [0, 1], got {upright!r}")
         self.model = model
         self.gain, self.speed_min, self.speed_full, self.window_s = gain, speed_min, speed_full, window_s
-        self.max_rad = float(max_rad)
+        self.max_rad, self.dead_rad = float(max_rad), float(dead_rad)
         self.root_joint = list(model.joint_names).index("pelvis")
         rest = joint_centre_array(model, forward(model, model.zero()))
         #: the pelvis joint's height in the model's rest pose (metres): the standing height
@@ -135,4 +141,5 @@ class WalkHeading:
         if self._z < self.min_z:
             return 0.0
         return walk_turn(pelvis_heading(self.model, params), self.velocity(), gain=self.gain,
-                         speed_min=self.speed_min, speed_full=self.speed_full, max_rad=self.max_rad)
+                         speed_min=self.speed_min, speed_full=self.speed_full, max_rad=self.max_rad,
+                         dead_rad=self.dead_rad)
