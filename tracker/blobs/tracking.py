@@ -84,8 +84,8 @@ class BlobOptions:
     of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
     ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
     squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
-    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start turned
-    toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: pelvis joint or hull centroid; upright).
+    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start
+    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: pelvis joint or hull centroid).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -125,7 +125,7 @@ class BlobOptions:
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
     arm_goals_move: str = "all"
-    walk_gain: float = 0.0
+    walk_gain: float = 0.1
     walk_speed_min: float = 0.3
     walk_speed_full: float = 0.6
     walk_window_s: float = 0.3
