@@ -163,3 +163,53 @@ def test_velocity_is_the_least_squares_slope(model):
             wh.add(t[k], xy[k])
         slope = np.polyfit(t, xy, 1)[0]
         assert np.allclose(wh.velocity(), slope, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def skeleton():
+    from tracker.synthetic.bvh import load_bvh
+    from tracker.synthetic.synth import bundled_motion
+
+    return load_bvh(bundled_motion("scaled_131_01"))
+
+
+def _retargeted(skeleton, name, seed, frames=40):
+    from tracker.synthetic.motions import make_motion
+    from tracker.synthetic.retarget import retarget_bvh
+
+    motion = make_motion(name, skeleton, frames=frames, fps=30.0, rng=np.random.default_rng(seed))
+    return retarget_bvh(motion, fps=30.0, height_m=1.75)
+
+
+def test_synthetic_crouch_gives_no_turn_and_a_walk_does(skeleton):
+    """``tracker.synthetic.motions``' crouch (35 deg lean, thighs near horizontal) and walk_turn, put on the model by
+    ``retarget_bvh``: the default options' cue never turns the crouch (its pelvis joint moves < 0.3 m/s; its root
+    translation does not matter), and turns a walking pose held 60 deg off its walk back toward it."""
+    o = BlobOptions()
+    for seed in (1, 2):
+        crouch = _retargeted(skeleton, "crouch", seed)
+        model = crouch.model
+        wh = WalkHeading(model, gain=o.walk_gain, speed_min=o.walk_speed_min, speed_full=o.walk_speed_full,
+                         window_s=o.walk_window_s)
+        old = WalkHeading(model, gain=o.walk_gain, speed_min=o.walk_speed_min, speed_full=o.walk_speed_full,
+                          window_s=o.walk_window_s)  # fed the root translation, as round 8's cue was
+        t_idx = np.flatnonzero(model.param_kind == ROOT_TRANSLATION)[:2]
+        old_turned = False
+        for k, p in enumerate(crouch.params):
+            wh.add_pose(k / 30.0, joint_centre_array(model, forward(model, p)))
+            assert wh.turn(p) == 0.0, k
+            old.add(k / 30.0, p[t_idx])
+            old_turned |= old.turn(p) != 0.0
+        assert old_turned
+        if seed != 1:
+            continue
+        walk = _retargeted(skeleton, "walk_turn", seed)
+        wh.reset()
+        for k, p in enumerate(walk.params[:11]):  # the walk before its turn (which starts at 30 % of the clip)
+            wh.add_pose(k / 30.0, joint_centre_array(walk.model, forward(walk.model, p)))
+        heading = _angle(wh.velocity())
+        off = turn_about_vertical(walk.model, p, heading + np.radians(60.0) - _angle(pelvis_heading(walk.model, p)),
+                                  p[np.flatnonzero(walk.model.param_kind == ROOT_TRANSLATION)])
+        turn = wh.turn(off)
+        assert np.hypot(*wh.velocity()) > o.walk_speed_min
+        assert -np.radians(60.0) * o.walk_gain - 1e-9 <= turn < -0.5 * np.radians(60.0) * o.walk_gain
