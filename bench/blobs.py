@@ -13,7 +13,7 @@ swapped than to the truth), frames reported ``ok: false``, per-frame CPU time of
 one core.  BLAS/OpenMP threads and OpenCV are limited to one thread.  ``machine_ref_ms`` (bench/
 machine_ref.py) is measured in this process: quote times as ratios to it.
 
-    python bench/blobs.py [--json] [--frames 120] [--ik ccd|dls] [--cache DIR]
+    python bench/blobs.py [--json] [--frames 120] [--ik ccd|dls] [--cache DIR] [--blob-option NAME=NUMBER]
 """
 
 from __future__ import annotations
@@ -99,11 +99,23 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=None, help="keep (or reuse) the rendered sessions here")
     ap.add_argument("--no-static-scene", action="store_true",
                     help="BlobOptions(static_scene=False): no static-scene voxel memory (for A/B)")
+    ap.add_argument("--blob-option", action="append", default=[], metavar="NAME=NUMBER",
+                    help="a numeric BlobOptions field for this run (e.g. walk_gain=0.1); repeatable")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)
     options = replace(BlobOptions(), ik=args.ik, static_scene=not args.no_static_scene)
+    numeric = {k: type(v) for k, v in vars(options).items() if type(v) in (int, float)}
+    for pair in args.blob_option:
+        name, _, value = pair.partition("=")
+        if name not in numeric:
+            ap.error(f"--blob-option {pair!r}: expected NAME=NUMBER with NAME one of {', '.join(sorted(numeric))}")
+        try:
+            options = replace(options, **{name: numeric[name](value)})
+        except ValueError as exc:
+            ap.error(f"--blob-option {pair!r}: {exc}")
     ref = machine_ref_ms()
-    result = {"method": "blobs", "ik": args.ik, "init": "ground_truth_frame0", "machine_ref_ms": ref, "sessions": {}}
+    result = {"method": "blobs", "ik": args.ik, "init": "ground_truth_frame0", "machine_ref_ms": ref,
+              "blob_options": args.blob_option, "sessions": {}}
     with tempfile.TemporaryDirectory() as tmp:
         base = args.cache or Path(tmp)
         for name, (n_cams, size) in SESSIONS.items():

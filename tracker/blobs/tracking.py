@@ -85,7 +85,7 @@ class BlobOptions:
     ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
     squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
     arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start
-    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: fitted pelvis or hull centroid).
+    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: pelvis joint or hull centroid).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -125,12 +125,14 @@ class BlobOptions:
     static_clearance_m: float = 0.1
     prop_weight: float = 10.0
     arm_goals_move: str = "all"
-    walk_gain: float = 0.0
+    walk_gain: float = 0.1
     walk_speed_min: float = 0.3
     walk_speed_full: float = 0.6
     walk_window_s: float = 0.3
     walk_max_deg: float = 180.0
     walk_source: str = "fit"
+    walk_upright: float = 0.0
+    walk_dead_deg: float = 0.0
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
@@ -309,7 +311,8 @@ class BlobTracker:
                         if options.static_scene else None)
         self._walk = (WalkHeading(model, gain=options.walk_gain, speed_min=options.walk_speed_min,
                                   speed_full=options.walk_speed_full, window_s=options.walk_window_s,
-                                  max_rad=np.radians(options.walk_max_deg))
+                                  max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright,
+                                  dead_rad=np.radians(options.walk_dead_deg))
                       if options.walk_gain > 0 else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
@@ -503,8 +506,9 @@ class BlobTracker:
         if self._walk is not None:
             if o.walk_source == "hull":
                 w = hull.volumes
-                self._walk.add(1e-9 * int(timestamp_ns), point_xy=(w @ hull.centres[:, :2]) / w.sum())
+                self._walk.add(1e-9 * int(timestamp_ns), (w @ hull.centres[:, :2]) / w.sum(),
+                               joints[self._walk.root_joint, 2])
             else:
-                self._walk.add(1e-9 * int(timestamp_ns), params)
+                self._walk.add_pose(1e-9 * int(timestamp_ns), joints)
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record
