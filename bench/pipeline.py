@@ -6,7 +6,7 @@ solved), ``poses_per_s`` (live: poses over the replay window; ``fps_out`` is the
 first and the last pose), ``mean_joint_error_m`` (against the synthetic ground truth: a pipeline that keeps up by
 losing the track is no good) and where the time goes: ``cpu_by_component`` (percent of one core,
 over the run, per worker role — camera, segment, track — and ``hub``: this process, which records
-the poses and bridges frames and chamfers to rerun) (``--json``) or a table.  ``--live`` replays in
+the poses and bridges them to rerun; live, frames and chamfers only with ``--image-cameras N``) (``--json``) or a table.  ``--live`` replays in
 real time (the tracker demands the frames it can take); the default is lossless (every frame,
 back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plugins:fitter_factory``
 measures the transport and segmentation without the tracker.  ``cpu_ms_per_pose``: CPU of the

@@ -66,7 +66,7 @@ class DemoOptions:
     live_start_delay_s, live_duration_s : float
         Live: seconds until session time 0 is due (the workers start meanwhile); seconds of replay.
     live_image_cameras : int
-        Live: cameras whose frames and silhouettes are tapped for rerun.
+        Live: cameras whose frames and silhouettes are tapped for rerun (default none: poses only).
     live_preload_mb : float
         Live: the replay cameras decode the clip into memory first when it takes at most this many
         MB decoded (0: never; they then decode the session's videos while streaming).
@@ -87,7 +87,7 @@ class DemoOptions:
     timeout_s: float = 1800.0
     live_start_delay_s: float = 8.0
     live_duration_s: float = 20.0
-    live_image_cameras: int = 1
+    live_image_cameras: int = 0
     live_preload_mb: float = 1024.0
     segment_plugin: str | None = None
     fit_plugin: str | None = None

@@ -35,9 +35,10 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache", default=None, help="where the rendered session is kept (~/.cache/contourcap)")
     parser.add_argument("--timeout-s", type=float, default=1800.0)
     parser.add_argument("--duration-s", type=float, default=20.0, help="live: how long the looped replay runs")
-    parser.add_argument("--image-cameras", type=int, default=1,
-                        help="live: how many cameras' images the viewer (demo.rrd) takes (default 1: decoding "
-                             "every camera's frames in the demo process competes with the pipeline)")
+    parser.add_argument("--image-cameras", type=int, default=0,
+                        help="live: how many cameras' images and silhouettes the viewer (demo.rrd) takes (default "
+                             "0: poses only; a tapped camera's every frame reaches the demo process, which competes "
+                             "with the pipeline)")
     parser.add_argument("--segment-plugin", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--fit-plugin", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")

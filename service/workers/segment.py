@@ -143,6 +143,16 @@ class SegmentWorker:
             self.count("bad")
             return False
 
+    def _count_kind(self, segment: Segmenter, roi: tuple[int, int, int, int] | None, cpu_s: float) -> None:
+        """Count a demanded live frame as ``roi`` or ``whole`` (counters), add its thread CPU seconds
+        ``cpu_s`` to ``roi_cpu_s`` or ``whole_cpu_s`` and an ROI's area to ``roi_px`` (pixels)."""
+        if roi is not None and getattr(segment, "takes_roi", False):
+            self.count("roi_cpu_s", cpu_s)
+            self.count("roi_px", (roi[2] - roi[0]) * (roi[3] - roi[1]))
+        else:
+            self.count("whole")
+            self.count("whole_cpu_s", cpu_s)
+
     def _publish(self, name: str, out: ChamferMessage, sent_ns: int | None) -> None:
         self.pubs[name].put(out.to_bytes(), attachment=attachment_ns(sent_ns) if sent_ns is not None else None)
         self.count("processed")
@@ -181,7 +191,9 @@ class SegmentWorker:
             fid, data, sent_ns = got
             with self.lock:
                 roi = self.demand_rois.get(fid, {}).get(name)
+            t0 = time.thread_time()
             out = self._segment_one(name, segment, data, roi)
+            self._count_kind(segment, roi, time.thread_time() - t0)
             if out is None:
                 learning = True
                 self.count("learning")

@@ -72,8 +72,9 @@ def test_demo_live_summary_and_rrd(tmp_path):
     rrchunk = pytest.importorskip("rerun.chunk")
     opts = DemoOptions(cameras=2, size=(160, 120), frames=30, fps=30.0, out_dir=tmp_path / "out",
                        cache_dir=tmp_path / "cache", timeout_s=120.0, delivery="live", image_every=3,
-                       live_start_delay_s=4.0, live_duration_s=4.0,
+                       live_start_delay_s=4.0, live_duration_s=4.0, live_image_cameras=1,
                        fit_plugin="tests.support.plugins:fitter_factory")
+    assert DemoOptions().live_image_cameras == 0  # live images only when asked for
     summary = run_demo(opts, progress=lambda m: None)
     assert summary.frames > 0
     # poses over the whole 4 s replay window (not between the first and the last pose)
