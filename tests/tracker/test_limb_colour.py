@@ -86,18 +86,31 @@ def test_part_margins_per_view_are_the_pooled_formula_per_camera():
     own = learned.part_margins(surface_colours(model, truth, cams, images, chamfer), parts)
     assert np.nanmax(own) <= 1e-9
     assert learned.part_margins(pooled, parts)[0] > 1.0
-    # a brute-force margin at random colours: own distance minus the nearest other learned half's
+    # brute force at random colours: own = the nearer of its own and its other side's learned half,
+    # other = the nearest learned half of any third part
     rng = np.random.default_rng(5)
+    learned.mean = rng.random((model.n_parts, 2, 3))
+    learned.weight = np.where(rng.random((model.n_parts, 2)) < 0.8, 50.0, 0.0)
     s = ColourSamples(rng.random((model.n_parts, 2, 3)), rng.integers(0, 8, (model.n_parts, 2)).astype(float),
                       np.zeros((model.n_parts, 2, 3)))
-    got = learned.part_margins(s, parts)
-    for i, p in enumerate(parts):
-        num = den = 0.0
+    names = model.part_names
+    every = list(range(model.n_parts))
+    got_own, got_other = learned.part_distances(s, every)
+    for i, p in enumerate(every):
+        twin = names.index(names[p].replace("left_", "@").replace("right_", "left_").replace("@", "right_"))
+        num_own = num_other = den = 0.0
         for h in (0, 1):
             if s.count[p, h] < 3 or learned.weight[p, h] < 10:
                 continue
             dist = np.minimum((((s.mean[p, h] - learned.mean) / learned.sigma) ** 2).sum(-1), 9.0)
-            other = np.where((learned.weight >= 10) & (np.arange(model.n_parts) != p)[:, None], dist, np.inf).min()
-            num += s.count[p, h] * (dist[p, h] - other)
+            dist[learned.weight < 10] = np.inf
+            third = np.ones(model.n_parts, bool)
+            third[[p, twin]] = False
+            num_own += s.count[p, h] * min(dist[p, h], dist[twin, h])
+            num_other += s.count[p, h] * dist[third].min()
             den += s.count[p, h]
-        assert (np.isnan(got[i]) and den == 0) or got[i] == pytest.approx(num / den)
+        if den == 0:
+            assert np.isnan(got_own[i]) and np.isnan(got_other[i])
+        else:
+            assert got_own[i] == pytest.approx(num_own / den) and got_other[i] == pytest.approx(num_other / den)
+    assert np.isfinite(got_own).sum() >= 5

@@ -182,12 +182,12 @@ class TrackerOptions:
     #: a limb lost inside the silhouette (its fit as good as a right one's): with the frame's colour
     #: images and the front/back guard's learned colours, each forearm and hand is sampled per camera
     #: (``tracker.search.appearance.view_colours``); in a camera it looks lost when its samples are
-    #: ``limb_colour_margin`` nearer another part's learned colour than its own and within
-    #: ``limb_colour_match`` of it (``AppearanceModel.part_distances``: squared distances in units of
-    #: the model's ``sigma``); lost in more than ``limb_colour_share`` of the cameras that see it, at
+    #: ``limb_colour_margin`` nearer the learned colour of a part of the trunk, upper arms or legs than
+    #: its own and within ``limb_colour_match`` of it (``AppearanceModel.part_distances``: squared
+    #: distances in units of the model's ``sigma``); lost in more than ``limb_colour_share`` of the cameras that see it, at
     #: least ``limb_colour_views`` of them, it makes an otherwise good frame not ok ("limb_colour")
     #: (None: off; the constants' source: docs/robustness.md, round 10)
-    limb_colour_margin: float | None = 3.0
+    limb_colour_margin: float | None = 2.5
     limb_colour_match: float = 1.0
     limb_colour_share: float = 0.5
     limb_colour_views: int = 1
@@ -621,7 +621,8 @@ class Tracker:
             return ""
         samples = view_colours(model, params, cams, [images[c.name] for c in cams], [chs[c.name] for c in cams],
                                parts=parts)
-        own, other = self.guard.appearance.part_distances(samples, parts)  # (n_cameras, n_parts) each
+        trunk = [i for i, n in enumerate(model.part_names) if i not in parts and n != "head"]
+        own, other = self.guard.appearance.part_distances(samples, parts, others=trunk)  # (n_cameras, n_parts) each
         seen = np.isfinite(own)
         above = np.count_nonzero(seen & (own - other > o.limb_colour_margin) & (other < o.limb_colour_match), axis=0)
         n_seen = np.count_nonzero(seen, axis=0)
@@ -630,7 +631,7 @@ class Tracker:
             return ""
         names = ", ".join(f"{model.part_names[p].replace('_', ' ')} ({a} of {n} cameras)"
                           for p, a, n in zip(parts[lost], above[lost], n_seen[lost]))
-        return f"limb colour: {names} nearer another part's colour than its own"
+        return f"limb colour: {names} nearer the trunk's, arms' or legs' colour than its own"
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None,

@@ -238,10 +238,11 @@ class AppearanceModel:
         d = np.minimum(d, clip)
         return np.where((samples.count >= min_count) & (self.weight >= 10.0), d, np.nan)
 
-    def part_distances(self, samples: ColourSamples, parts: Sequence[int], *, min_count: float = 3.0,
-                       clip: float = 9.0) -> tuple[np.ndarray, np.ndarray]:
-        """Per part of ``parts``: the samples' distance to its own learned colour and to the nearest
-        learned half of any other part, each the sample-weighted mean over the part's halves seen
+    def part_distances(self, samples: ColourSamples, parts: Sequence[int], *, others: Sequence[int] | None = None,
+                       min_count: float = 3.0, clip: float = 9.0) -> tuple[np.ndarray, np.ndarray]:
+        """Per part of ``parts``: the samples' distance to its own learned colour (or its other side's,
+        ``left_*`` <-> ``right_*``: sleeves and hands are alike both sides) and to the nearest learned
+        half of any other part (of ``others``, None: all), each the sample-weighted mean over the part's halves seen
         (``min_count`` samples, 10 learned) of squared normalised feature distances clipped at
         ``clip``.  ``samples`` may carry leading axes (``view_colours``: one per camera); returns
         ``(own, other)``, each (..., len(parts)), NaN where no half is seen."""
@@ -249,8 +250,13 @@ class AppearanceModel:
         m, c = samples.mean[..., parts, :, :], samples.count[..., parts, :]  # (..., k, 2, 3), (..., k, 2)
         d = np.minimum((((m[..., None, None, :] - self.mean) / self.sigma) ** 2).sum(axis=-1), clip)  # (..., k, 2, P, 2)
         k = np.arange(parts.size)
-        own = np.stack([d[..., k, h, parts, h] for h in (FRONT, BACK)], axis=-1)  # (..., k, 2)
-        other_ok = (self.weight >= 10.0)[None, :, :] & (np.arange(self.model.n_parts)[None, :] != parts[:, None])[..., None]
+        twin = _part_mirror(self.model)[parts]
+        learned = self.weight >= 10.0
+        own = np.stack([np.minimum(d[..., k, h, parts, h], np.where(learned[twin, h], d[..., k, h, twin, h], np.inf))
+                        for h in (FRONT, BACK)], axis=-1)  # (..., k, 2)
+        idx = np.arange(self.model.n_parts)[None, :]
+        candidates = np.ones(self.model.n_parts, bool) if others is None else np.isin(idx[0], np.asarray(others, int))
+        other_ok = learned[None, :, :] & ((idx != parts[:, None]) & (idx != twin[:, None]) & candidates)[..., None]
         other = np.where(other_ok[:, None], d, np.inf).min(axis=(-2, -1))  # (..., k, 2)
         w = np.where((c >= min_count) & (self.weight[parts] >= 10.0) & np.isfinite(other), c, 0.0)
         total = w.sum(axis=-1)
