@@ -135,10 +135,16 @@ def test_a_tpose_subject_is_never_tracked_turned_after_one_second(tmp_path, seed
     random place and heading (held, arms lowered with straight legs: the silhouettes cannot tell front
     from back), then moving; 4 cameras at 320x240; with ``shoes="shadow"`` the segmentation loses
     the feet.  No frame after the first second is mirrored, no mirrored frame is reported ok, and
-    the frames after the first second are ok."""
+    the frames after the first second are ok (or refused by the limb colour check with a hand truly lost)."""
     records, truth = _track(tmp_path, seed, shoes=shoes)
     mirrored = mirrored_frames(records, truth)
     assert [f for f in mirrored if f >= 30] == [], mirrored
     assert [r["frame"] for r in records if r["frame"] in mirrored and r["ok"]] == []
     late = [r for r in records if r["frame"] >= 30]
-    assert sum(r["ok"] for r in late) >= 0.9 * len(late), [r.get("reason") for r in late if not r["ok"]]
+
+    def hand_lost(r) -> bool:  # refused by the limb colour check with a wrist truly off (> 80 mm)
+        t = truth[r["frame"]]["joints"]
+        return "limb_colour" in r.get("failed", ()) and max(
+            np.linalg.norm(np.subtract(r["joints"][w], t[w])) for w in ("left_wrist", "right_wrist")) > 0.08
+
+    assert sum(r["ok"] or hand_lost(r) for r in late) >= 0.9 * len(late), [r.get("reason") for r in late if not r["ok"]]

@@ -34,6 +34,7 @@ from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_mar
 from tracker.search.initialise import SearchOptions, initialise
 from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_separation, arm_candidates,
                                   chain_joint_distance, exchange_verdict, leg_candidates)
+from tracker.search.appearance import view_colours
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
@@ -71,8 +72,8 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same
-        The check for lost or exchanged limbs.
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same,
+    limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : lost or exchanged limbs; colour
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
@@ -178,6 +179,18 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
+    #: a limb lost inside the silhouette (its fit as good as a right one's): with the frame's colour
+    #: images and the front/back guard's learned colours, each forearm and hand is sampled per camera
+    #: (``tracker.search.appearance.view_colours``); in a camera it looks lost when its samples are
+    #: ``limb_colour_margin`` nearer the learned colour of a part of the trunk, upper arms or legs than
+    #: its own and within ``limb_colour_match`` of it (``AppearanceModel.part_distances``: squared
+    #: distances in units of the model's ``sigma``); lost in more than ``limb_colour_share`` of the cameras that see it, at
+    #: least ``limb_colour_views`` of them, it makes an otherwise good frame not ok ("limb_colour")
+    #: (None: off; the constants' source: docs/robustness.md, round 10)
+    limb_colour_margin: float | None = 2.5
+    limb_colour_match: float = 1.0
+    limb_colour_share: float = 0.5
+    limb_colour_views: int = 1
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -596,6 +609,30 @@ class Tracker:
             self.n_turned += 1
         return res, terms, terms.rms_px(), terms.inside_fraction(), bad, swapped, out.reason
 
+    def _limb_colour(self, cams, chs, images, params) -> str:
+        """The colour check of the distal limbs (``TrackerOptions.limb_colour_margin``): why the frame
+        is not ok ("" if it passed, or when there are no images or no learned colours)."""
+        o, model = self.options, self.model
+        if (o.limb_colour_margin is None or self.guard is None or not self.guard.appearance.learned or not images
+                or not all(c.name in images for c in cams)):
+            return ""
+        parts = _distal_parts(model)
+        if not parts.size:
+            return ""
+        samples = view_colours(model, params, cams, [images[c.name] for c in cams], [chs[c.name] for c in cams],
+                               parts=parts)
+        trunk = [i for i, n in enumerate(model.part_names) if i not in parts and n != "head"]
+        own, other = self.guard.appearance.part_distances(samples, parts, others=trunk)  # (n_cameras, n_parts) each
+        seen = np.isfinite(own)
+        above = np.count_nonzero(seen & (own - other > o.limb_colour_margin) & (other < o.limb_colour_match), axis=0)
+        n_seen = np.count_nonzero(seen, axis=0)
+        lost = (n_seen >= o.limb_colour_views) & (above > o.limb_colour_share * n_seen)
+        if not lost.any():
+            return ""
+        names = ", ".join(f"{model.part_names[p].replace('_', ' ')} ({a} of {n} cameras)"
+                          for p, a, n in zip(parts[lost], above[lost], n_seen[lost]))
+        return f"limb colour: {names} nearer the trunk's, arms' or legs' colour than its own"
+
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None,
              images: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -714,10 +751,11 @@ class Tracker:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
                                                                         views)
             restarted = restarted or swapped
+        colour = "" if bad or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not bad and not unsure and not limbs, params=[float(v) for v in res.params],
+            ok=not bad and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -726,10 +764,11 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if bad or unsure or limbs:
+        if bad or unsure or limbs or colour:
             record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else [])
-                                         + ([limbs] if limbs else []))
-            record["failed"] = list(bad.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
+                                         + ([limbs] if limbs else []) + ([colour] if colour else []))
+            record["failed"] = (list(bad.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
+                                + (["limb_colour"] if colour else []))
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
@@ -745,6 +784,11 @@ class Tracker:
                 self._good_rms = (self._good_rms + [float(rms)])[-self.options.rms_window:]
         record["latency_ms"] = 1e3 * (self.clock() - t0)
         return record
+
+
+def _distal_parts(model: BodyModel) -> np.ndarray:
+    """Indices of the parts the colour check samples: the forearms and hands."""
+    return np.array([i for i, n in enumerate(model.part_names) if n.endswith(("forearm", "hand"))], int)
 
 
 def _finite(x: float) -> float | None:

@@ -33,7 +33,7 @@ from capture.camera import Camera
 from tracker.body.kinematics import forward
 from tracker.body.model import BodyModel
 
-__all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "mirror_samples", "AppearanceModel", "head_cue",
+__all__ = ["FRONT", "BACK", "ColourSamples", "surface_colours", "view_colours", "mirror_samples", "AppearanceModel", "head_cue",
            "feet_forward", "colour_features", "SKIN_BGR"]
 
 FRONT, BACK = 0, 1
@@ -103,16 +103,34 @@ def surface_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Came
     cameras' ``ChamferImages`` (samples off the observed silhouette are dropped) or None.
     A point counts in a camera when its normal is within acos(``min_facing``) of the direction to
     the camera, its pixel belongs to its own part in a coarse label image (``label_scale``) and it
-    lies on the silhouette.
+    lies on the silhouette.  The cameras' samples pooled (``view_colours`` keeps them apart).
     """
+    sums, bgr_sums, count = _view_sums(model, params, cameras, images, chamfer, n_theta, n_z, min_facing, label_scale)
+    return _means(sums.sum(axis=0), bgr_sums.sum(axis=0), count.sum(axis=0))
+
+
+def view_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], images: Sequence[np.ndarray],
+                 chamfer: Sequence | None = None, *, n_theta: int = 12, n_z: int = 3, min_facing: float = 0.4,
+                 label_scale: float = 0.5, parts: Sequence[int] | None = None) -> ColourSamples:
+    """``surface_colours`` per camera: a ColourSamples whose arrays have a leading camera axis
+    (``mean`` (n_cameras, n_parts, 2, 3), ``count`` (n_cameras, n_parts, 2), ``bgr`` likewise).
+    ``parts``: sample only these part indices (the others still hide them; None: all)."""
+    return _means(*_view_sums(model, params, cameras, images, chamfer, n_theta, n_z, min_facing, label_scale, parts))
+
+
+def _view_sums(model, params, cameras, images, chamfer, n_theta, n_z, min_facing, label_scale, parts=None):
+    """Per camera: the feature and BGR sums (n_cameras, n_parts, 2, 3) and counts (n_cameras, n_parts, 2)."""
     local, normals, side, used = _layout(model, n_theta, n_z)
+    if parts is not None:
+        used = used & np.isin(np.arange(model.n_parts), np.asarray(parts, dtype=int))
     pose = forward(model, np.asarray(params, dtype=float))
     world = np.einsum("pij,pmj->pmi", pose.rotation, local) + pose.translation[:, None, :]
     nworld = np.einsum("pij,pmj->pmi", pose.rotation, normals)
     part = np.broadcast_to(np.arange(model.n_parts)[:, None], side.shape)
-    sums = np.zeros((model.n_parts, 2, 3))
-    bgr_sums = np.zeros((model.n_parts, 2, 3))
-    count = np.zeros((model.n_parts, 2))
+    n_views = len(cameras)
+    sums = np.zeros((n_views, model.n_parts, 2, 3))
+    bgr_sums = np.zeros((n_views, model.n_parts, 2, 3))
+    count = np.zeros((n_views, model.n_parts, 2))
     for k, (cam, img) in enumerate(zip(cameras, images)):
         img = np.asarray(img)
         if img.ndim != 3 or img.shape[:2] != (cam.height, cam.width):
@@ -141,9 +159,13 @@ def surface_colours(model: BodyModel, params: np.ndarray, cameras: Sequence[Came
         feats = colour_features(colours)
         n_bins = 2 * model.n_parts
         for c in range(3):
-            sums[..., c] += np.bincount(bins, feats[:, c], minlength=n_bins).reshape(-1, 2)
-            bgr_sums[..., c] += np.bincount(bins, colours[:, c], minlength=n_bins).reshape(-1, 2)
-        count += np.bincount(bins, minlength=n_bins).reshape(-1, 2)
+            sums[k, ..., c] = np.bincount(bins, feats[:, c], minlength=n_bins).reshape(-1, 2)
+            bgr_sums[k, ..., c] = np.bincount(bins, colours[:, c], minlength=n_bins).reshape(-1, 2)
+        count[k] = np.bincount(bins, minlength=n_bins).reshape(-1, 2)
+    return sums, bgr_sums, count
+
+
+def _means(sums: np.ndarray, bgr_sums: np.ndarray, count: np.ndarray) -> ColourSamples:
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(count[..., None] > 0, sums / np.maximum(count, 1.0)[..., None], 0.0)
         bgr = np.where(count[..., None] > 0, bgr_sums / np.maximum(count, 1.0)[..., None], 0.0)
@@ -215,6 +237,38 @@ class AppearanceModel:
         d = (((samples.mean - self.mean) / self.sigma) ** 2).sum(axis=-1)
         d = np.minimum(d, clip)
         return np.where((samples.count >= min_count) & (self.weight >= 10.0), d, np.nan)
+
+    def part_distances(self, samples: ColourSamples, parts: Sequence[int], *, others: Sequence[int] | None = None,
+                       min_count: float = 3.0, clip: float = 9.0) -> tuple[np.ndarray, np.ndarray]:
+        """Per part of ``parts``: the samples' distance to its own learned colour (or its other side's,
+        ``left_*`` <-> ``right_*``: sleeves and hands are alike both sides) and to the nearest learned
+        half of any other part (of ``others``, None: all), each the sample-weighted mean over the part's halves seen
+        (``min_count`` samples, 10 learned) of squared normalised feature distances clipped at
+        ``clip``.  ``samples`` may carry leading axes (``view_colours``: one per camera); returns
+        ``(own, other)``, each (..., len(parts)), NaN where no half is seen."""
+        parts = np.asarray(parts, dtype=int)
+        m, c = samples.mean[..., parts, :, :], samples.count[..., parts, :]  # (..., k, 2, 3), (..., k, 2)
+        d = np.minimum((((m[..., None, None, :] - self.mean) / self.sigma) ** 2).sum(axis=-1), clip)  # (..., k, 2, P, 2)
+        k = np.arange(parts.size)
+        twin = _part_mirror(self.model)[parts]
+        learned = self.weight >= 10.0
+        own = np.stack([np.minimum(d[..., k, h, parts, h], np.where(learned[twin, h], d[..., k, h, twin, h], np.inf))
+                        for h in (FRONT, BACK)], axis=-1)  # (..., k, 2)
+        idx = np.arange(self.model.n_parts)[None, :]
+        candidates = np.ones(self.model.n_parts, bool) if others is None else np.isin(idx[0], np.asarray(others, int))
+        other_ok = learned[None, :, :] & ((idx != parts[:, None]) & (idx != twin[:, None]) & candidates)[..., None]
+        other = np.where(other_ok[:, None], d, np.inf).min(axis=(-2, -1))  # (..., k, 2)
+        w = np.where((c >= min_count) & (self.weight[parts] >= 10.0) & np.isfinite(other), c, 0.0)
+        total = w.sum(axis=-1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = lambda x: np.where(total > 0, (w * np.where(w > 0, x, 0.0)).sum(axis=-1) / total, np.nan)  # noqa: E731
+            return mean(own), mean(other)
+
+    def part_margins(self, samples: ColourSamples, parts: Sequence[int], **kwargs) -> np.ndarray:
+        """``own − other`` of ``part_distances`` (keywords passed on): positive where a part's
+        samples are nearer another part's learned colour than its own (it is not on its limb)."""
+        own, other = self.part_distances(samples, parts, **kwargs)
+        return own - other
 
     def evidence(self, samples: ColourSamples, *, min_pairs: int = 4) -> float:
         """How much better the samples fit as labelled than mirrored (``mirror_samples``): mean
