@@ -43,7 +43,8 @@ from tracker.blobs.floor_samples import SampleFloorTest
 from tracker.blobs.props import carve
 from tracker.blobs.start import StartPending
 from tracker.blobs.static_voxels import StaticVoxels
-from tracker.blobs.walk_heading import WalkHeading
+from tracker.blobs.walk_heading import WalkHeading, speed_weight
+from tracker.blobs.leg_velocity import LegVelocity
 from tracker.blobs.kernels import cones_contain, lattice_member
 from tracker.blobs.ik import ccd, damped_least_squares, fit_root, floor_contact
 from tracker.body.kinematics import forward, joint_centre_array
@@ -57,35 +58,35 @@ _ROOT_BLOBS = ("pelvis", "abdomen", "torso.0")
 
 @dataclass(frozen=True)
 class BlobOptions:
-    """Options of :class:`BlobTracker`.  hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of interest around the predicted body
-    surface; em_iterations : expectation–maximisation–IK rounds per frame; colour_weight : factor on the colour term
-    of eq. 2; log_det : add the Gaussians' log-determinants to eq. 2 (``tracker.blobs.em.expectation``); soft :
-    share each voxel among its ``soft`` nearest blobs instead of the paper's hard assignment (0); gate : largest
-    position term of an assigned voxel (squared Mahalanobis); motion_sigma_m : spread added to every blob's position
-    covariance in the expectation (the uncertainty of the predicted pose: a limb a few cm off its prediction still
-    reaches its voxels); min_fill : filling below which a blob is inactive; colour_prior_weight, skin_prior_weight :
-    how much a blob's colour is pulled back to its prior each frame (skin blobs: face and hands); ik : ``"ccd"`` or
-    ``"dls"``; ccd_sweeps, ccd_attenuation, ccd_damping : ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping :
-    ``damped_least_squares``; dls_root : the root moves in it too (the legs' goals lower the trunk into a crouch);
-    root_blobs : the rigid root fit's blobs; offset_weight, max_offset_m : ``learn_blobs``' learnt attachment
-    offsets (0: none); orientation_weight, max_turn_deg : the root's orientation constraint (``fit_root``);
-    floor_snap_m : ``floor_contact`` (None: no floor constraint); velocity_gain : predict ``p_t + g (p_t −
-    p_{t−1})`` (0: the last pose; the contour tracker uses 1, but blob fits are noisier than contour fits and the
-    extrapolation amplifies their noise); min_voxels, min_active_fraction, max_goal_rms_m : below/above these a
-    frame is ``ok: false``; min_part_support : a frame is ``ok: false`` when some part (clavicles aside) has less
-    than this fraction of its interior points (its cone shrunk to half its radii) in the hull, within half a finest
-    voxel (:func:`hull_support`): a limb the fit put where the cameras see background (or where nothing was
-    reconstructed) is not explained by the images, however well the blobs fit (0: no such test); max_unexplained : a
-    frame is ``ok: false`` when more than this fraction of the hull's volume lies outside the fitted body (every
-    part grown by a finest voxel, :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a
-    limb reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test);
-    floor_test : the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras);
-    static_scene : voxels of lattice cubes that stay occupied away from the fitted body are left out of the EM and
-    of the unexplained volume (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``,
-    ``static_clearance_m``; e.g. a chair not in the background); prop_weight : with ``props``, the damped least
-    squares' residual per metre a part comes too near a prop (``tracker.blobs.props``; goals: metres × √weight);
-    arm_goals_move : what the arm goals pull in the damped least squares (:func:`arm_goal_moves`); walk_* : start
-    turned toward the walk (``tracker.blobs.walk_heading``; gain 0: off; source: pelvis joint or hull centroid).
+    """Options of :class:`BlobTracker`. hull : ``HullOptions`` of the coloured hull; zone_margin_m : the zone of
+    interest around the predicted body surface; em_iterations : expectation–maximisation–IK rounds per frame;
+    colour_weight : factor on the colour term of eq. 2; log_det : add the Gaussians' log-determinants to eq. 2
+    (``tracker.blobs.em.expectation``); soft : share each voxel among its ``soft`` nearest blobs instead of the paper's
+    hard assignment (0); gate : largest position term of an assigned voxel (squared Mahalanobis); motion_sigma_m :
+    spread added to every blob's position covariance in the expectation (the uncertainty of the predicted pose: a limb
+    a few cm off its prediction still reaches its voxels); min_fill : filling below which a blob is inactive;
+    colour_prior_weight, skin_prior_weight : how much a blob's colour is pulled back to its prior each frame (skin
+    blobs: face and hands); ik : ``"ccd"`` or ``"dls"``; ccd_sweeps, ccd_attenuation, ccd_damping :
+    ``tracker.blobs.ik.ccd``; dls_iterations, dls_damping : ``damped_least_squares``; dls_root : the root moves in it
+    too (the legs' goals lower the trunk into a crouch); root_blobs : the rigid root fit's blobs; offset_weight,
+    max_offset_m : ``learn_blobs``' learnt attachment offsets (0: none); orientation_weight, max_turn_deg : the root's
+    orientation constraint (``fit_root``); floor_snap_m : ``floor_contact`` (None: no floor constraint); velocity_gain
+    : predict ``p_t + g (p_t − p_{t−1})`` (0: the last pose; the contour tracker uses 1, but blob fits are noisier than
+    contour fits and the extrapolation amplifies their noise); min_voxels, min_active_fraction, max_goal_rms_m :
+    below/above these a frame is ``ok: false``; min_part_support : a frame is ``ok: false`` when some part (clavicles
+    aside) has less than this fraction of its interior points (its cone shrunk to half its radii) in the hull, within
+    half a finest voxel (:func:`hull_support`): a limb the fit put where the cameras see background (or where nothing
+    was reconstructed) is not explained by the images, however well the blobs fit (0: no such test); max_unexplained :
+    a frame is ``ok: false`` when more than this fraction of the hull's volume lies outside the fitted body (every part
+    grown by a finest voxel, :func:`body_contains`): the fit leaves much of what the cameras see unexplained (a limb
+    reconstructed where the model has none, or a hull too coarse to constrain the pose; 1: no such test); floor_test :
+    the hull's shadow-like samples go through ``tracker.blobs.floor_samples`` (2+ cameras); static_scene : voxels of
+    lattice cubes that stay occupied away from the fitted body are left out of the EM and of the unexplained volume
+    (``tracker.blobs.static_voxels``, with ``static_rate``, ``static_threshold``, ``static_clearance_m``; e.g. a chair
+    not in the background); prop_weight : with ``props``, the damped least squares' residual per metre a part comes too
+    near a prop (``tracker.blobs.props``; goals: metres × √weight); arm_goals_move : what the arm goals pull in the
+    damped least squares (:func:`arm_goal_moves`); walk_*, leg_velocity_* : ``tracker.blobs.walk_heading`` (start
+    turned toward the walk; source: pelvis joint or hull centroid), ``tracker.blobs.leg_velocity`` (gains 0: off).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -133,6 +134,8 @@ class BlobOptions:
     walk_source: str = "fit"
     walk_upright: float = 0.0
     walk_dead_deg: float = 0.0
+    leg_velocity_gain: float = 0.0
+    leg_velocity_frames: int = 3
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
@@ -314,6 +317,12 @@ class BlobTracker:
                                   max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright,
                                   dead_rad=np.radians(options.walk_dead_deg))
                       if options.walk_gain > 0 else None)
+        self._legs = (LegVelocity(model, gain=options.leg_velocity_gain, frames=options.leg_velocity_frames)
+                      if options.leg_velocity_gain > 0 else None)
+        self._gait = self._walk  # the pelvis velocity the leg velocity is weighted by
+        if self._legs is not None and self._gait is None:
+            self._gait = WalkHeading(model, gain=0.0, speed_min=options.walk_speed_min,
+                                     speed_full=options.walk_speed_full, window_s=options.walk_window_s)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
 
@@ -452,6 +461,9 @@ class BlobTracker:
             return fail("no camera")
         cams = [self.cameras[n] for n in names]
         start = self.predict()
+        if start is not None and self._legs is not None:
+            start = self._legs.start(start, speed_weight(self._gait.velocity(), speed_min=o.walk_speed_min,
+                                                         speed_full=o.walk_speed_full))
         if start is not None and self._walk is not None:
             angle = self._walk.turn(start)
             if angle:
@@ -481,12 +493,17 @@ class BlobTracker:
             self.previous = None
             if self._walk is not None:
                 self._walk.reset()
+            if self._legs is not None:
+                self._legs.reset()
+                self._gait.reset()
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
             self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
                                      offset_weight=o.offset_weight, max_offset_m=o.max_offset_m)
         params, quality = self.fit(hull, start)
         joints = joint_centre_array(self.model, forward(self.model, params))
+        if self._legs is not None:
+            self._legs.add(params)
         why = self.judge(quality)
         record.update(
             ok=not why, params=[float(v) for v in params],
@@ -503,6 +520,8 @@ class BlobTracker:
         else:
             self.previous = self.params
         self.params = params
+        if self._gait is not None and self._gait is not self._walk:
+            self._gait.add_pose(1e-9 * int(timestamp_ns), joints)
         if self._walk is not None:
             if o.walk_source == "hull":
                 w = hull.volumes

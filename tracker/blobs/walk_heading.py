@@ -24,6 +24,13 @@ from tracker.body.model import BodyModel
 from tracker.search.mirror import pelvis_heading
 
 
+def speed_weight(velocity_xy, *, speed_min: float, speed_full: float) -> float:
+    """Weight in [0, 1] of a horizontal velocity (2,) m/s: 0 up to ``speed_min``, 1 from ``speed_full``
+    (m/s, ``speed_full > speed_min``), linear between."""
+    speed = float(np.hypot(*np.asarray(velocity_xy, dtype=float).reshape(2)))
+    return float(np.clip((speed - speed_min) / (speed_full - speed_min), 0.0, 1.0))
+
+
 def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_full: float,
               max_rad: float = np.pi, dead_rad: float = 0.0) -> float:
     """Turn (radians, about +z) a fraction of the way from ``facing_xy`` to ``velocity_xy``.
@@ -53,8 +60,7 @@ def walk_turn(facing_xy, velocity_xy, *, gain: float, speed_min: float, speed_fu
     """
     f = np.asarray(facing_xy, dtype=float)
     v = np.asarray(velocity_xy, dtype=float)
-    speed = float(np.hypot(*v))
-    w = np.clip((speed - speed_min) / (speed_full - speed_min), 0.0, 1.0)
+    w = speed_weight(v, speed_min=speed_min, speed_full=speed_full)
     if w <= 0 or not np.any(f):
         return 0.0
     d = np.arctan2(v[1], v[0]) - np.arctan2(f[1], f[0])
