@@ -1,4 +1,4 @@
-"""The colour check of the distal limbs (``AppearanceModel.part_margins``, ``Tracker`` option
+"""The colour check of the distal limbs (``AppearanceModel.part_distances``, ``Tracker`` option
 ``limb_colour_margin``): a forearm fitted onto the torso samples the shirt, not its own skin."""
 
 from __future__ import annotations
@@ -65,6 +65,12 @@ def test_a_forearm_folded_onto_the_torso_is_flagged_and_the_right_pose_is_not(se
     assert bare._limb_colour(cams, chs, imgs, lost) == ""
 
 
+def _margins(learned, samples, parts):
+    """own − other of ``part_distances``: positive where a part's samples are nearer another part's colour."""
+    own, other = learned.part_distances(samples, parts)
+    return own - other
+
+
 def test_part_margins_per_view_are_the_pooled_formula_per_camera():
     model, truth, lost, cams, images, chamfer = _scene(2)
     learned = AppearanceModel(model)
@@ -77,15 +83,15 @@ def test_part_margins_per_view_are_the_pooled_formula_per_camera():
     mean = (per_view.mean * per_view.count[..., None]).sum(axis=0)[both] / pooled.count[both][:, None]
     assert np.allclose(mean, pooled.mean[both])
     parts = [model.part_names.index(n) for n in ("left_forearm", "right_forearm", "left_shank")]
-    m = learned.part_margins(per_view, parts)
+    m = _margins(learned, per_view, parts)
     assert m.shape == (len(cams), 3)
     for v in range(len(cams)):
         one = ColourSamples(per_view.mean[v], per_view.count[v], per_view.bgr[v])
-        assert np.allclose(learned.part_margins(one, parts), m[v], equal_nan=True)
+        assert np.allclose(_margins(learned, one, parts), m[v], equal_nan=True)
     # the learned pose's own samples are nearest their own colours; the folded forearm is not
-    own = learned.part_margins(surface_colours(model, truth, cams, images, chamfer), parts)
+    own = _margins(learned, surface_colours(model, truth, cams, images, chamfer), parts)
     assert np.nanmax(own) <= 1e-9
-    assert learned.part_margins(pooled, parts)[0] > 1.0
+    assert _margins(learned, pooled, parts)[0] > 1.0
     # brute force at random colours: own = the nearer of its own and its other side's learned half,
     # other = the nearest learned half of any third part
     rng = np.random.default_rng(5)

@@ -312,17 +312,14 @@ class BlobTracker:
         self._static = (StaticVoxels(options.hull.min_voxel_m, rate=options.static_rate,
                                      threshold=options.static_threshold, clearance_m=options.static_clearance_m)
                         if options.static_scene else None)
+        # the pelvis's walk: the yaw cue's, and the speed weight of the legs' rate
         self._walk = (WalkHeading(model, gain=options.walk_gain, speed_min=options.walk_speed_min,
                                   speed_full=options.walk_speed_full, window_s=options.walk_window_s,
                                   max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright,
                                   dead_rad=np.radians(options.walk_dead_deg))
-                      if options.walk_gain > 0 else None)
+                      if options.walk_gain > 0 or options.leg_velocity_gain > 0 else None)
         self._legs = (LegVelocity(model, gain=options.leg_velocity_gain, frames=options.leg_velocity_frames)
                       if options.leg_velocity_gain > 0 else None)
-        self._gait = self._walk  # the pelvis velocity the leg velocity is weighted by
-        if self._legs is not None and self._gait is None:
-            self._gait = WalkHeading(model, gain=0.0, speed_min=options.walk_speed_min,
-                                     speed_full=options.walk_speed_full, window_s=options.walk_window_s)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
 
@@ -462,9 +459,9 @@ class BlobTracker:
         cams = [self.cameras[n] for n in names]
         start = self.predict()
         if start is not None and self._legs is not None:
-            start = self._legs.start(start, speed_weight(self._gait.velocity(), speed_min=o.walk_speed_min,
+            start = self._legs.start(start, speed_weight(self._walk.velocity(), speed_min=o.walk_speed_min,
                                                          speed_full=o.walk_speed_full))
-        if start is not None and self._walk is not None:
+        if start is not None and o.walk_gain > 0:
             angle = self._walk.turn(start)
             if angle:
                 start = turn_about_vertical(self.model, start, angle,
@@ -495,7 +492,6 @@ class BlobTracker:
                 self._walk.reset()
             if self._legs is not None:
                 self._legs.reset()
-                self._gait.reset()
             return fail(f"hull in the zone of interest has {hull.n_voxels} voxels < {o.min_voxels}")
         if self.blobs is None:
             self.blobs = learn_blobs(self.model, start, hull.centres, hull.sizes, hull.colours, layout=self.layout,
@@ -520,8 +516,6 @@ class BlobTracker:
         else:
             self.previous = self.params
         self.params = params
-        if self._gait is not None and self._gait is not self._walk:
-            self._gait.add_pose(1e-9 * int(timestamp_ns), joints)
         if self._walk is not None:
             if o.walk_source == "hull":
                 w = hull.volumes

@@ -264,12 +264,6 @@ class AppearanceModel:
             mean = lambda x: np.where(total > 0, (w * np.where(w > 0, x, 0.0)).sum(axis=-1) / total, np.nan)  # noqa: E731
             return mean(own), mean(other)
 
-    def part_margins(self, samples: ColourSamples, parts: Sequence[int], **kwargs) -> np.ndarray:
-        """``own − other`` of ``part_distances`` (keywords passed on): positive where a part's
-        samples are nearer another part's learned colour than its own (it is not on its limb)."""
-        own, other = self.part_distances(samples, parts, **kwargs)
-        return own - other
-
     def evidence(self, samples: ColourSamples, *, min_pairs: int = 4) -> float:
         """How much better the samples fit as labelled than mirrored (``mirror_samples``): mean
         over the halves seen both ways of (distance mirrored − distance as labelled); 0 when
