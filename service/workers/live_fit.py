@@ -500,10 +500,6 @@ class LiveTrackerFitter(TrackerFitter):
         gap = max(1, int(frame_id) - self._last_frame)
         margin = min(self.roi_max_margin_m, self.roi_margin_m + self.roi_margin_per_frame_m * (gap - 1))
         cams = list(tr.cameras.values())
-        out = {}
-        # the last fitted pose and the prediction: the body moves between them, the union covers the path
-        for cam, now, then in zip(cams, pose_rois(tr.model, pred, cams, margin_m=margin, margin_px=self.roi_margin_px),
-                                  pose_rois(tr.model, tr.params, cams, margin_m=margin, margin_px=self.roi_margin_px)):
-            if now is not None and then is not None:
-                out[cam.name] = (min(now[0], then[0]), min(now[1], then[1]), max(now[2], then[2]), max(now[3], then[3]))
-        return out
+        # the last fitted pose and the prediction: the body moves between them, the rectangle covers the path
+        rects = pose_rois(tr.model, np.stack([pred, tr.params]), cams, margin_m=margin, margin_px=self.roi_margin_px)
+        return {cam.name: rect for cam, rect in zip(cams, rects) if rect is not None}

@@ -66,10 +66,53 @@ def test_whole_frame_when_the_projection_cannot_be_trusted(model):
     assert pose_rois(model, q, [outside]) == [None]
 
 
+def _per_camera_rois(model, params, cams, margin_m, margin_px):
+    """The rectangles computed camera by camera with ``Camera.depth`` / ``Camera.project`` (the reference)."""
+    from tracker.imaging.roi import part_box_corners
+
+    corners = part_box_corners(model, forward(model, params), margin_m=margin_m)
+    out = []
+    for cam in cams:
+        w, h = cam.size
+        if not np.all(cam.depth(corners) > 0.05):
+            out.append(None)
+            continue
+        uv = cam.project(corners)
+        lo, hi = np.floor(uv.min(axis=0)) - margin_px, np.ceil(uv.max(axis=0)) + margin_px + 1
+        x0, y0 = int(np.clip(lo[0], 0, w - 1)), int(np.clip(lo[1], 0, h - 1))
+        out.append((x0, y0, int(np.clip(hi[0], x0 + 1, w)), int(np.clip(hi[1], y0 + 1, h))))
+    return out
+
+
+def test_all_cameras_at_once_equal_camera_by_camera_and_two_poses_their_union(model):
+    """Distorted cameras of two sizes, one of them inside the body's volume (None), random poses: the
+    rectangles equal the per-camera reference; two poses give the union of their rectangles."""
+    rng = np.random.default_rng(7)
+    cams = [Camera.look_at(f"c{i}", [3.0 * np.cos(q), 3.0 * np.sin(q), 1.3], [0.0, 0.0, 1.0],
+                           size=(640, 480) if i % 2 else (320, 240), distortion=(-0.2, 0.05, 0.001, -0.002, 0.0))
+            for i, q in enumerate(np.linspace(0, 2 * np.pi, 6)[:-1])]
+    cams.append(Camera.look_at("inside", [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], size=(320, 240)))
+    for _ in range(10):
+        p, q = (model.random_params(rng, fraction=0.4) for _ in range(2))
+        p[:3] += rng.normal(0.0, 0.8, 3)  # bodies reaching out of some images
+        margin, px = float(rng.uniform(0.0, 0.3)), int(rng.integers(0, 10))
+        one = pose_rois(model, p, cams, margin_m=margin, margin_px=px)
+        assert one == _per_camera_rois(model, p, cams, margin, px)
+        both = pose_rois(model, np.stack([p, q]), cams, margin_m=margin, margin_px=px)
+        for a, b, ab in zip(one, pose_rois(model, q, cams, margin_m=margin, margin_px=px), both):
+            if a is None or b is None:
+                assert ab is None
+            else:
+                assert ab == (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+    assert any(r is None for r in one) and any(r is not None for r in one)
+
+
 def test_rejects_bad_arguments(model):
     cams = ring_cameras(2, size=(320, 240))
     with pytest.raises(ValueError, match="params"):
         pose_rois(model, np.zeros(3), cams)
+    with pytest.raises(ValueError, match="params"):
+        pose_rois(model, np.zeros((2, 2, model.n_params)), cams)
     with pytest.raises(ValueError, match="margin_m"):
         pose_rois(model, model.zero(), cams, margin_m=-1.0)
     with pytest.raises(ValueError, match="margin_px"):

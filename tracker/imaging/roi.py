@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from capture.camera import Camera
+from capture.camera import Camera, project_many, stack_cameras
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
 
@@ -96,8 +96,9 @@ def pose_rois(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], *
     Parameters
     ----------
     model : BodyModel
-    params : ndarray, shape (n_params,)
-        The pose, e.g. the tracker's prediction for the frame.
+    params : ndarray, shape (n_params,) or (n_poses, n_params)
+        The pose, e.g. the tracker's prediction for the frame; several poses: the rectangle around
+        all of them (e.g. the last fitted pose and the prediction: the path between them).
     cameras : sequence of Camera
     margin_m : float or ndarray, shape (n_parts,)
         Every part's box grown by this much (metres): the prediction's expected error; one per part
@@ -118,24 +119,23 @@ def pose_rois(model: BodyModel, params: np.ndarray, cameras: Sequence[Camera], *
     if int(margin_px) != margin_px or margin_px < 0:
         raise ValueError(f"margin_px: expected an integer >= 0, got {margin_px!r}")
     params = np.asarray(params, dtype=float)
-    if params.shape != (model.n_params,):
-        raise ValueError(f"params: expected shape ({model.n_params},), got {params.shape}")
-    if not np.all(np.isfinite(params)):
+    if params.shape[-1:] != (model.n_params,) or params.ndim not in (1, 2) or not params.size:
+        raise ValueError(f"params: expected shape ({model.n_params},) or (n_poses, {model.n_params}), "
+                         f"got {params.shape}")
+    cameras = list(cameras)
+    if not np.all(np.isfinite(params)) or not cameras:
         return [None for _ in cameras]
-    corners = part_box_corners(model, forward(model, params), margin_m=margin)
-    out: list[tuple[int, int, int, int] | None] = []
-    for cam in cameras:
-        w, h = (int(v) for v in cam.size)
-        if not np.all(cam.depth(corners) > _MIN_DEPTH_M):
-            out.append(None)
-            continue
-        uv = cam.project(corners)
-        if not np.all(np.isfinite(uv)):
-            out.append(None)
-            continue
-        lo = np.floor(uv.min(axis=0)) - margin_px
-        hi = np.ceil(uv.max(axis=0)) + margin_px + 1  # half-open
-        x0, y0 = int(np.clip(lo[0], 0, w - 1)), int(np.clip(lo[1], 0, h - 1))
-        x1, y1 = int(np.clip(hi[0], x0 + 1, w)), int(np.clip(hi[1], y0 + 1, h))
-        out.append((x0, y0, x1, y1))
-    return out
+    corners = np.concatenate([part_box_corners(model, forward(model, p), margin_m=margin)
+                              for p in params.reshape(-1, model.n_params)])
+    st = stack_cameras(cameras)
+    depth = corners @ st.rotation[:, 2, :].T + st.translation[:, 2]  # (n_corners, n_cams)
+    uv = project_many(cameras, np.broadcast_to(corners, (len(cameras),) + corners.shape))  # (n_cams, n, 2)
+    size = np.array([[int(v) for v in cam.size] for cam in cameras])  # (n_cams, 2): w, h
+    with np.errstate(invalid="ignore"):
+        lo = np.floor(uv.min(axis=1)) - margin_px
+        hi = np.ceil(uv.max(axis=1)) + margin_px + 1  # half-open
+        ok = np.all(depth > _MIN_DEPTH_M, axis=0) & np.all(np.isfinite(uv), axis=(1, 2))
+        x0y0 = np.clip(lo, 0, size - 1)
+        x1y1 = np.clip(hi, x0y0 + 1, size)
+    return [(int(a[0]), int(a[1]), int(b[0]), int(b[1])) if good else None
+            for a, b, good in zip(x0y0, x1y1, ok)]
