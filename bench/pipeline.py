@@ -12,7 +12,8 @@ back-pressure) which measures throughput.  ``--fit-plugin tests.test_service_plu
 measures the transport and segmentation without the tracker.  ``cpu_ms_per_pose``: CPU of the
 whole pipeline (workers and this process) per pose, ``fit_ms_p50``: the median fit time (pose
 records' ``fit_ms``) and ``fit_cpu_ms_p50`` its CPU time (``fit_cpu_ms``: ``fit_ms`` less the time the
-track worker waited for a core) — figures that a machine shared with other work changes less than the
+track worker waited for a core; ``fit_cpu_ms_mean`` its mean, ``rejoin_sets`` the sets that ran the
+in-set rejoin) — figures that a machine shared with other work changes less than the
 wall-clock ones.  Live, ``cpu_by_component_replay`` is ``cpu_by_component`` over the replay window only
 (session time 0 to its end: the start-up's decoding and compiling left out) and
 ``cpu_ms_per_set_by_component`` that CPU per published pose, milliseconds.  Live, the replay cameras hold the clip decoded in memory as the demo's do (when
@@ -186,6 +187,10 @@ def main(argv=None) -> int:
     result["cpu_ms_per_pose"] = round(1e3 * cpu.total_s() / summary.frames, 1) if summary.frames else None
     result["fit_ms_p50"] = round(float(np.percentile(fits, 50)), 2) if fits else None
     result["fit_cpu_ms_p50"] = round(float(np.percentile(fit_cpu, 50)), 2) if fit_cpu else None
+    # the mean (in-set rejoins included) against cpu_ms_per_set_by_component["track"]: the rest of the track
+    # worker's CPU per set is its background searches, the transport's threads and its loop
+    result["fit_cpu_ms_mean"] = round(float(np.mean(fit_cpu)), 2) if fit_cpu else None
+    result["rejoin_sets"] = sum("rejoin_ms" in r for r in records)
     result["wall_s"] = round(summary.wall_s, 1)
     result["machine_ref_ms"] = round(ref_ms, 2)
     if opts.json:

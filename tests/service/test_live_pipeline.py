@@ -172,3 +172,42 @@ def test_live_demo_publishes_complete_sets_in_order_with_latency(tmp_path):
             assert "effort" in p or p["reason"].startswith("searching")
     assert summary.latency_ms_p50 is not None
     assert summary.replay_ns[0] < summary.replay_ns[1]  # the replay window (bench/pipeline.py's CPU split)
+
+
+@pytest.mark.parametrize("margin", [None, 0.05])
+def test_a_soft_dip_after_an_ok_set_skips_the_in_set_rejoin(margin):
+    """Scripted fits (``Tracker.step`` replaced): a poor set right after an ok one, failing only the
+    IoU gate by less than ``rejoin_soft_margin``, runs no in-set rejoin; a second poor set in a row, a
+    deeper dip or another failed limit does (None: every poor set does)."""
+    from segmentation.distance import chamfer_images
+    from service.workers.components import chamfer_to_message
+    from tracker.body.model import load_model
+    from tracker.fitting.tracking import Tracker
+    from tracker.synthetic.scene import ring_cameras
+    from service.workers.live_fit import LiveTrackerFitter
+
+    class Runner:
+        def start(self, fn, name, then=None):
+            pass
+
+        def busy(self):
+            return False
+
+    tr = Tracker(load_model("knossow40"), ring_cameras(4, size=(80, 60)))
+    fit = LiveTrackerFitter(tr, search_runner=Runner(), rejoin_spacing=0, rejoin_soft_margin=margin, adaptive=False)
+    tr.params = tr.model.zero()
+    body = np.zeros((60, 80), np.uint8)
+    body[20:50, 30:40] = 255
+    msgs = {n: chamfer_to_message(n, 0, 0, chamfer_images(body, body)) for n in tr.cameras}
+    script, rejoined = [], []
+    tr.step = lambda fid, ts, images, silhouettes=None: dict(script.pop(0), frame=fid)
+    fit._rejoin_now = lambda fid, ts, images, silhouettes: rejoined.append(fid)
+    ok = {"ok": True, "iou": 0.86}
+    soft = {"ok": False, "iou": 0.77, "failed": ["iou"]}
+    deep = {"ok": False, "iou": 0.70, "failed": ["iou"]}
+    rms = {"ok": False, "iou": 0.77, "failed": ["iou", "rms"]}
+    for fid, rec in enumerate([ok, soft, soft, ok, deep, ok, rms, ok, soft]):
+        script.append(rec)
+        fit(fid, fid, msgs)
+    expected = [1, 2, 4, 6, 8] if margin is None else [2, 4, 6]
+    assert rejoined == expected
