@@ -172,10 +172,9 @@ class LiveTrackerFitter(TrackerFitter):
     rejoin_headings, rejoin_accept_iou : int, float or None
         The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; its pose's least IoU (None: gate's).
     rejoin_spacing, rejoin_beside, rejoin_soft_margin : int, bool, float or None
-        A poor fit (not a soft dip: :data:`REJOIN_SOFT_MARGIN`) tries the cheap recovery at once when
-        the last try was at least ``rejoin_spacing`` sets ago (-1: never; the search after
-        ``patience`` bad sets remains),
-        in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
+        A poor fit (not a soft dip: :data:`REJOIN_SOFT_MARGIN`) tries the cheap recovery at once when the
+        last try was >= ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets
+        remains), in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
     limbs_both, recover_keep, initialise_demand_s, min_search_cameras : bool, int, float, float
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
