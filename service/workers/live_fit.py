@@ -69,10 +69,6 @@ LIVE_VELOCITY_DAMPING = 1.0
 """The live tracker's ``TrackerOptions.velocity_damping`` (1: the full constant-velocity step across
 the live frame gaps; why less was not adopted: docs/performance.md, "A damped prediction live")."""
 
-REJOIN_SOFT_MARGIN = None
-"""A poor set right after an ok one that failed the tracker's gate by the silhouette IoU alone, by
-less than this, does not run the in-set rejoin (None: every poor set may; docs/performance.md)."""
-
 REJOIN_ACCEPT_IOU = None
 """Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
 ``TrackerOptions.min_iou``; docs/performance.md compares stricter ones)."""
@@ -171,10 +167,10 @@ class LiveTrackerFitter(TrackerFitter):
         ``service.live_replay`` runs them at once and holds their result for some sets).
     rejoin_headings, rejoin_accept_iou : int, float or None
         The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; its pose's least IoU (None: gate's).
-    rejoin_spacing, rejoin_beside, rejoin_soft_margin : int, bool, float or None
-        A poor fit (not a soft dip: :data:`REJOIN_SOFT_MARGIN`) tries the cheap recovery at once when the
-        last try was >= ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets
-        remains), in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
+    rejoin_spacing, rejoin_beside : int, bool
+        A poor fit tries the cheap recovery at once when the last try was at least
+        ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
+        in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
         latency spike; its pose is taken a few sets later, as a search's).
     limbs_both, recover_keep, initialise_demand_s, min_search_cameras : bool, int, float, float
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
@@ -191,8 +187,7 @@ class LiveTrackerFitter(TrackerFitter):
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
                  initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8,
-                 velocity_damping: float = LIVE_VELOCITY_DAMPING,
-                 rejoin_soft_margin: float | None = REJOIN_SOFT_MARGIN) -> None:
+                 velocity_damping: float = LIVE_VELOCITY_DAMPING) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -221,9 +216,6 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoin_headings, self.rejoin_accept_iou = int(rejoin_headings), rejoin_accept_iou
         self.rejoin_spacing, self._sets_since_rejoin = int(rejoin_spacing), int(rejoin_spacing)
         self.rejoin_beside = bool(rejoin_beside)
-        if rejoin_soft_margin is not None and not (np.isfinite(rejoin_soft_margin) and rejoin_soft_margin >= 0):
-            raise ValueError(f"rejoin_soft_margin: expected None or a finite value >= 0, got {rejoin_soft_margin!r}")
-        self.rejoin_soft_margin = rejoin_soft_margin
         self.initialise_demand_s = float(initialise_demand_s)
         self.min_search_cameras = float(min_search_cameras)
         self.catch_up_sets = int(catch_up_sets)
@@ -420,13 +412,6 @@ class LiveTrackerFitter(TrackerFitter):
         self.rejoined += 1
         return tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
 
-    def _soft_dip(self, failed: set, record: dict) -> bool:
-        """Whether this poor set follows an ok one and failed only the IoU gate, by less than
-        ``rejoin_soft_margin`` (no in-set rejoin for it)."""
-        iou, gate = record.get("iou"), self.tracker.options.min_iou
-        return (self.rejoin_soft_margin is not None and self._last_ok and failed == {"iou"} and iou is not None
-                and float(iou) >= gate - self.rejoin_soft_margin)
-
     def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:
         """The record of a set that arrives while a search runs: not ok, the prediction if any."""
         from tracker.body.kinematics import forward, joint_centre_array
@@ -478,8 +463,7 @@ class LiveTrackerFitter(TrackerFitter):
                     if self.auto_subject is not None:
                         self.auto_subject.observe(frame_id, record, silhouettes)
                 if not record.get("ok"):
-                    failed = set(record.get("failed") or ()) - {"front_back"}
-                    poor = bool(failed) and not self._soft_dip(failed, record)  # a gate limit, not the guard
+                    poor = bool(set(record.get("failed") or ()) - {"front_back"})  # a gate limit, not the guard
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
                     else:
