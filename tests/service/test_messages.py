@@ -70,6 +70,25 @@ def test_frame_pixels_survive(rng):
     assert np.abs(FrameMessage.from_bytes(jpg.to_bytes()).image().astype(int) - 128).max() <= 2
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_raw_frame_of_immutable_bytes_is_a_read_only_view_and_of_mutable_bytes_a_copy(rng, dtype):
+    img = rng.integers(0, 255, size=(24, 32, 3)).astype(dtype)
+    wire = FrameMessage.from_image("cam0", 1, 1, img).to_bytes()
+    view = FrameMessage.from_bytes(wire).image()
+    assert np.array_equal(view, img) and not view.flags.writeable
+    with pytest.raises(ValueError):
+        view[0, 0, 0] = 1
+    mutable = bytearray(wire)
+    msg = FrameMessage.from_bytes(mutable)
+    copy = msg.image()
+    mutable[-1] ^= 0xFF  # the sender's buffer changes afterwards: the message and its image do not
+    assert np.array_equal(copy, img) and np.array_equal(msg.image(), img)
+    assert FrameMessage.from_bytes(msg.to_bytes()).to_bytes() == wire
+    short = FrameMessage("cam0", 1, 1, "raw", (24, 32, 3), bytes(10), np.dtype(dtype).name)
+    with pytest.raises(MessageError, match="bytes"):
+        short.image()
+
+
 def test_pose_is_plain_design_json(rng):
     rec = _pose(rng)
     obj = json.loads(rec.to_bytes().decode())
