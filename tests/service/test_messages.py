@@ -89,6 +89,21 @@ def test_raw_frame_of_immutable_bytes_is_a_read_only_view_and_of_mutable_bytes_a
         short.image()
 
 
+@pytest.mark.parametrize("encoding, dtype, shape", [("raw", np.uint8, (24, 32, 3)), ("raw", np.uint16, (9, 7)),
+                                                    ("png", np.uint8, (24, 32, 3)), ("jpeg", np.uint8, (16, 16))])
+def test_wire_of_image_is_the_message_bytes(rng, encoding, dtype, shape):
+    img = rng.integers(0, 255, size=shape).astype(dtype)
+    strided = np.zeros((shape[0], 2 * shape[1]) + shape[2:], dtype)[:, ::2]  # not contiguous
+    strided[...] = img
+    for image in (strided, img):  # the last: the caller's own array
+        wire = FrameMessage.wire_of_image("cam1", 7, 99, image, encoding=encoding, jpeg_quality=80)
+        assert wire == FrameMessage.from_image("cam1", 7, 99, img, encoding=encoding, jpeg_quality=80).to_bytes()
+    if encoding != "jpeg":  # lossless: the bytes hold the pixels as they were, not a view of the array
+        before = img.copy()
+        img[0] = 0
+        np.testing.assert_array_equal(FrameMessage.from_bytes(wire).image(), before)
+
+
 def test_pose_is_plain_design_json(rng):
     rec = _pose(rng)
     obj = json.loads(rec.to_bytes().decode())
