@@ -8,6 +8,7 @@ there, the real uu_studio held-out background false-positive rate; and segmentat
 predicted pose's rectangle per camera (``tracker.imaging.roi``) on a rendered hop session.
 
     python bench/segmentation.py [--json] [--repeats N] [--roi-frames 20] [--only-pose-roi]
+    python bench/segmentation.py --live-session DIR [--live-frames 40]   (the live worker's sequence)
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from machine_ref import machine_ref_ms  # noqa: E402
 
-from segmentation import (BackgroundModel, SegmentationParams, clean_silhouette, distance_to_mask,  # noqa: E402
-                          segment_frame, silhouette_edges, silhouette_from_distance)
+from segmentation import (BackgroundModel, SegmentationParams, chamfer_images, clean_silhouette,  # noqa: E402
+                          distance_to_mask, segment_frame, silhouette_edges, silhouette_from_distance)
 from segmentation.distance import content_box, quantise  # noqa: E402
 from segmentation.synthetic import synthetic_scene  # noqa: E402
 
@@ -312,6 +313,63 @@ def bench_pose_roi(frames: int, cameras: int, size, repeats: int, session_dir: P
     return out
 
 
+def bench_live_sequence(root: Path, frames: int, passes: int = 3) -> dict:
+    """The live segment worker's per-frame CPU on a session with ground truth (e.g. the cached
+    ``bench/pipeline.py --size 640x480`` studio): every camera frame segmented once in sequence (cold
+    caches, a new ROI shape each frame, as live), with the live fitter's ROI (the union of the pose two
+    frames back and the current one, 0.16 m + 8 px: a pose every second frame) and without (the
+    automatic box); CPU ms per frame, median over ``passes``, and each stage's CPU in one more pass."""
+    from capture.replay import iter_frame_sets
+    from capture.session import load_session
+    from service.offline import background_models, session_model
+    from tracker.imaging.roi import pose_rois
+
+    session = load_session(root)
+    truth = [json.loads(line)["params"] for line in (root / "ground_truth.jsonl").read_text().splitlines() if line]
+    model = session_model(session, "knossow40")
+    cams = list(session.calibration)
+    bgs, _ = background_models(session, [c.name for c in cams])
+    jobs = []
+    for fid, group in iter_frame_sets(session, frames=range(2, frames)):
+        now = pose_rois(model, np.asarray(truth[fid]), cams, margin_m=0.16, margin_px=8)
+        then = pose_rois(model, np.asarray(truth[fid - 2]), cams, margin_m=0.16, margin_px=8)
+        for cam, a, b in zip(cams, now, then):
+            roi = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+            jobs.append((bgs[cam.name], group[cam.name].image.copy(), roi))
+    params = SegmentationParams()
+    out = {"camera_frames": len(jobs), "size": list(bgs[cams[0].name].size),
+           "roi_px_mean": float(np.mean([(r[2] - r[0]) * (r[3] - r[1]) for _, _, r in jobs]))}
+    for kind in ("roi", "whole"):
+        per = []
+        for _ in range(passes + 1):  # the first pass warms up (compiles, learns the coarse models)
+            t0 = time.process_time()
+            for bg, img, roi in jobs:
+                segment_frame(bg, img, roi=roi if kind == "roi" else None, params=params)
+            per.append(1e3 * (time.process_time() - t0) / len(jobs))
+        out[f"{kind}_cpu_ms"] = float(np.median(per[1:]))
+    stages: dict = {}
+    for bg, img, roi in jobs:
+        w, h = bg.size
+        x0, y0, x1, y1 = roi
+        t = [time.process_time()]
+        d = bg.distance(img, roi=roi)
+        t.append(time.process_time())
+        sil = clean_silhouette(d, low=params.low, high=params.high, min_area_px=params.min_area_px((w, h)),
+                               max_hole_fraction=params.max_hole_fraction, open_px=params.open_px,
+                               close_px=params.close_px, max_components=params.max_components)
+        t.append(time.process_time())
+        edges = silhouette_edges(img[y0:y1, x0:x1], sil, low=params.canny_low, high=params.canny_high,
+                                 dilate_px=params.edge_dilate_px, blur_sigma=params.blur_sigma)
+        t.append(time.process_time())
+        chamfer_images(sil, edges, max_distance_px=params.max_distance_px, resolution_px=params.resolution_px,
+                       precise=params.precise, precise_edges=params.precise_edges, offset_xy=(x0, y0), image_size=(w, h))
+        t.append(time.process_time())
+        for name, a, b in zip(("background", "cleanup", "edges", "chamfer"), t, t[1:]):
+            stages[name] = stages.get(name, 0.0) + 1e3 * (b - a) / len(jobs)
+    out["roi_stage_cpu_ms"] = stages
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true", help="print one JSON object")
@@ -323,6 +381,9 @@ def main(argv=None) -> int:
     ap.add_argument("--roi-size", default="800x600")
     ap.add_argument("--roi-session", type=Path, default=None, help="reuse (or write) the hop session here")
     ap.add_argument("--only-pose-roi", action="store_true", help="run only the predicted-pose ROI part")
+    ap.add_argument("--live-session", type=Path, default=None,
+                    help="a session with ground_truth.jsonl: the live worker's per-frame CPU there (then exit)")
+    ap.add_argument("--live-frames", type=int, default=40, help="frames of --live-session")
     args = ap.parse_args(argv)
     roi_size = [int(v) for v in args.roi_size.lower().split("x")]
     global CLOCK
@@ -335,6 +396,10 @@ def main(argv=None) -> int:
         "loadavg_at_start": list(os.getloadavg()),
         "opencv": cv2.__version__,
     }
+    if args.live_session is not None:
+        result["live_sequence"] = bench_live_sequence(args.live_session, args.live_frames)
+        print(json.dumps(result, indent=1))
+        return 0
     if args.roi_frames > 2:
         result["pose_roi"] = bench_pose_roi(args.roi_frames, 6, roi_size, args.repeats, args.roi_session)
     if args.only_pose_roi:

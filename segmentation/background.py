@@ -382,16 +382,16 @@ class BackgroundModel:
         cv2.divide(out, t, dst=out)
 
     def _workspace(self, shape: tuple[int, int]) -> dict:
-        """Reused float32 scratch buffers for one ROI shape (avoids page faults on fresh arrays)."""
-        ws = self._scratch.get(shape)
-        if ws is None:
-            h, w = shape
-            ws = {k: np.empty((h, w, 3), np.float32) for k in ("bgr", "p", "t3", "q")}
-            ws.update({k: np.empty((h, w), np.float32) for k in ("c", "b", "s", "t")})
-            if len(self._scratch) > 4:  # ROIs change: keep a few shapes only
-                self._scratch.clear()
-            self._scratch[shape] = ws
-        return ws
+        """Float32 scratch arrays of ``shape`` (a band), views of flat buffers reused for every shape
+        (ROIs change every frame: fresh arrays would page-fault on each)."""
+        h, w = shape
+        n = h * w
+        if self._scratch.get("n", 0) < n:
+            self._scratch = {"n": n, **{k: np.empty(3 * n, np.float32) for k in ("bgr", "p", "t3", "q")},
+                             **{k: np.empty(n, np.float32) for k in ("c", "b", "s", "t")}}
+        ws = self._scratch
+        return {**{k: ws[k][:3 * n].reshape(h, w, 3) for k in ("bgr", "p", "t3", "q")},
+                **{k: ws[k][:n].reshape(h, w) for k in ("c", "b", "s", "t")}}
 
     def distance_terms(self, image_bgr: np.ndarray, *, roi=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`distance`, the plain Mahalanobis distance (no shadow relaxation) and the

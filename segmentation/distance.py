@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from segmentation.checks import check_finite_array, check_mask
+from segmentation.quantise import quantise
 
 __all__ = ["ChamferImages", "ChamferSample", "chamfer_images", "distance_to_mask", "sample_bilinear",
            "quantise", "content_box"]
@@ -73,26 +74,6 @@ def distance_to_mask(mask: np.ndarray, *, max_distance_px: float, precise: bool 
     src = cv2.compare(mask, 0, cv2.CMP_EQ)
     dt = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_5)
     return cv2.min(dt, float(max_distance_px))
-
-
-def quantise(distance: np.ndarray, *, resolution_px: float, dtype) -> np.ndarray:
-    """Round ``distance / resolution_px`` to an unsigned integer type (values must fit).
-
-    Parameters
-    ----------
-    distance : ndarray, float32
-        Pixels.
-    resolution_px : float
-        Pixels per step.
-    dtype : numpy.uint8 or numpy.uint16
-
-    Returns
-    -------
-    ndarray of ``dtype``, shape of ``distance``
-    """
-    if dtype == np.uint8:
-        return cv2.convertScaleAbs(distance, alpha=1.0 / resolution_px)
-    return (distance * np.float32(1.0 / resolution_px) + np.float32(0.5)).astype(np.uint16)
 
 
 def content_box(masks, *, margin_px: int, region: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
@@ -329,9 +310,17 @@ def chamfer_images(silhouette: np.ndarray, edges: np.ndarray, *, max_distance_px
     if sil_c.size == 0:
         empty = np.zeros((0, 0), dtype)
         return ChamferImages(empty, empty.copy(), (ox, oy), float(resolution_px), float(max_distance_px), image_size)
-    ds = distance_to_mask(sil_c, max_distance_px=max_distance_px, precise=precise)
-    de = distance_to_mask(edg_c, max_distance_px=max_distance_px,
-                          precise=precise if precise_edges is None else precise_edges)
-    return ChamferImages(quantise(ds, resolution_px=resolution_px, dtype=dtype),
-                         quantise(de, resolution_px=resolution_px, dtype=dtype),
-                         (ox + x0, oy + y0), float(resolution_px), float(max_distance_px), image_size)
+    codes = [_codes(m, max_distance_px, resolution_px, dtype, p)
+             for m, p in ((sil_c, precise), (edg_c, precise if precise_edges is None else precise_edges))]
+    return ChamferImages(codes[0], codes[1], (ox + x0, oy + y0), float(resolution_px), float(max_distance_px),
+                         image_size)
+
+
+def _codes(mask: np.ndarray, max_distance_px: float, resolution_px: float, dtype, precise: bool) -> np.ndarray:
+    """``quantise(distance_to_mask(mask, ...))`` of a validated mask (exact: in one compiled pass)."""
+    if precise:
+        from segmentation.edt import exact_codes  # numba is imported on first use, not with the package
+
+        return exact_codes(mask, float(max_distance_px), float(resolution_px), dtype)
+    return quantise(distance_to_mask(mask, max_distance_px=max_distance_px, precise=False),
+                    resolution_px=resolution_px, dtype=dtype)

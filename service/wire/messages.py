@@ -221,6 +221,11 @@ def _array(payload: memoryview, offset: int, dtype: np.dtype, shape: tuple[int, 
     return arr
 
 
+def _immutable(data) -> bool:
+    """Whether ``data`` is ``bytes`` or a read-only memoryview of ``bytes`` (no one can change it)."""
+    return isinstance(data, bytes) or (isinstance(data, memoryview) and data.readonly and isinstance(data.obj, bytes))
+
+
 def _frozen(arr: np.ndarray) -> np.ndarray:
     if not (isinstance(arr, np.ndarray) and not arr.flags.writeable and arr.flags.c_contiguous):
         arr = np.array(arr, copy=True, order="C")
@@ -235,14 +240,16 @@ def _frozen(arr: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class FrameMessage:
     """One camera frame. ``data`` is the raw pixel bytes (C order, ``shape`` (h, w[, c]), ``dtype``)
-    when ``encoding == "raw"``, else the JPEG/PNG file bytes whose decoded image has ``shape``."""
+    when ``encoding == "raw"``, else the JPEG/PNG file bytes whose decoded image has ``shape``
+    (:meth:`from_bytes` of ``bytes``: a read-only view of them; :meth:`image` of immutable raw data:
+    a read-only view, not a copy)."""
 
     camera: str
     frame_id: int
     timestamp_ns: int
     encoding: str
     shape: tuple[int, ...]
-    data: bytes
+    data: bytes | memoryview
     dtype: str = "uint8"
 
     TYPE = TYPE_FRAME
@@ -283,10 +290,31 @@ class FrameMessage:
         return cls(camera, int(frame_id), int(timestamp_ns), encoding, tuple(image.shape), data,
                    image.dtype.name)
 
+    @classmethod
+    def wire_of_image(cls, camera: str, frame_id: int, timestamp_ns: int, image: np.ndarray, *,
+                      encoding: str = "raw", jpeg_quality: int = 90) -> bytes:
+        """``from_image(...).to_bytes()`` (same parameters, same bytes), copying a raw image's pixels
+        once into the message instead of twice."""
+        if encoding != "raw":
+            return cls.from_image(camera, frame_id, timestamp_ns, image, encoding=encoding,
+                                  jpeg_quality=jpeg_quality).to_bytes()
+        image = np.ascontiguousarray(image)
+        pixels = image.astype(image.dtype.newbyteorder("<"), copy=False)
+        # a message around a view of the caller's array, packed at once and never kept
+        return cls(camera, int(frame_id), int(timestamp_ns), "raw", tuple(image.shape),
+                   memoryview(pixels).cast("B"), image.dtype.name).to_bytes()
+
     def image(self) -> np.ndarray:
         """Decoded image, shape ``self.shape``; MessageError if it does not decode to that shape."""
         if self.encoding == "raw":
-            return _array(memoryview(self.data), 0, _dtype(self.dtype, "dtype"), self.shape, "data")
+            dtype = _dtype(self.dtype, "dtype")
+            if _immutable(self.data) and (dtype.itemsize == 1 or dtype.isnative):  # a read-only view, no copy
+                n = int(np.prod(self.shape))
+                if n * dtype.itemsize != memoryview(self.data).nbytes:
+                    raise MessageError(f"data: shape {self.shape} x {dtype.name} needs {n * dtype.itemsize} bytes, "
+                                       f"got {memoryview(self.data).nbytes}")
+                return np.frombuffer(self.data, dtype=dtype, count=n).reshape(self.shape)
+            return _array(memoryview(self.data), 0, dtype, self.shape, "data")
         import cv2
 
         img = cv2.imdecode(np.frombuffer(self.data, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -319,8 +347,9 @@ class FrameMessage:
             raise MessageError(f"camera {camera}: shape {shape} x {dtype.name} != payload {len(payload)} bytes")
         if encoding != "raw" and len(payload) == 0:
             raise MessageError(f"camera {camera}: empty {encoding} payload")
+        # immutable bytes in: keep a read-only view of their payload (a frame is ~1 MB: no copy)
         return cls(camera, meta_int(meta, "frame_id"), meta_int(meta, "timestamp_ns"), encoding, shape,
-                   bytes(payload), dtype.name)
+                   payload.toreadonly() if _immutable(data) else bytes(payload), dtype.name)
 
 
 @dataclass(frozen=True)

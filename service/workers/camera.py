@@ -166,9 +166,9 @@ class CameraWorker:
                           f"{frame_id} within {self.credit_timeout_s:g} s")
 
     def _publish(self, name: str, frame) -> None:
-        msg = FrameMessage.from_image(name, frame.frame_id, frame.timestamp_ns, frame.image,
-                                      encoding=self.encodings.get(name, "raw"), jpeg_quality=self.jpeg_quality)
-        self.pubs[name].put(msg.to_bytes(), attachment=attachment_ns(self.wall_ns()))
+        wire = FrameMessage.wire_of_image(name, frame.frame_id, frame.timestamp_ns, frame.image,
+                                          encoding=self.encodings.get(name, "raw"), jpeg_quality=self.jpeg_quality)
+        self.pubs[name].put(wire, attachment=attachment_ns(self.wall_ns()))
         self.last_sent = frame.frame_id if self.last_sent is None else max(self.last_sent, frame.frame_id)
         self.status.count("processed")
 

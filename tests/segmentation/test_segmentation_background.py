@@ -134,6 +134,23 @@ def test_roi_only_processes_the_box(scene, models):
     assert not seg.silhouette[outside].any()
 
 
+@pytest.mark.parametrize("cov", ["full", "diag"])
+def test_distance_in_boxes_of_changing_shapes_as_in_a_fresh_model(scene, models, cov, rng):
+    # the scratch buffers are reused across box shapes, growing and shrinking: a box's result must not
+    # depend on the boxes before it (a fresh model has no history)
+    model, frame = models[cov], scene.frames[1]
+    w, h = model.size
+    for _ in range(12):
+        x0, x1 = sorted(int(v) for v in rng.choice(w + 1, 2, replace=False))
+        y0, y1 = sorted(int(v) for v in rng.choice(h + 1, 2, replace=False))
+        fresh = BackgroundModel(model.mean_yuv, model.cov_yuv, covariance=cov)
+        np.testing.assert_array_equal(model.distance(frame, roi=(x0, y0, x1, y1)),
+                                      fresh.distance(frame, roi=(x0, y0, x1, y1)))
+        for got, ref in zip(model.distance_terms(frame, roi=(x0, y0, x1, y1)),
+                            fresh.distance_terms(frame, roi=(x0, y0, x1, y1))):
+            np.testing.assert_array_equal(got, ref)
+
+
 def test_auto_roi_matches_full_image(scene, models):
     """The half-resolution first pass finds the person; the full-resolution result inside its box
     is the same as processing the whole image."""

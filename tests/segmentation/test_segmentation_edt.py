@@ -10,7 +10,8 @@ import pytest
 from scipy.ndimage import distance_transform_edt
 
 from segmentation import distance_to_mask
-from segmentation.edt import exact_distance
+from segmentation.edt import MAX_TABLE_PX, exact_codes, exact_distance
+from segmentation.quantise import quantise
 
 
 def _opencv_precise(mask: np.ndarray, max_px: float) -> np.ndarray:
@@ -66,3 +67,25 @@ def test_non_contiguous_and_bool_masks(rng):
 def test_bad_truncation_rejected(bad):
     with pytest.raises(ValueError, match="max_distance_px"):
         distance_to_mask(np.zeros((4, 4), np.uint8), max_distance_px=bad)
+
+
+@pytest.mark.parametrize("max_px, resolution, dtype", [(48.0, 0.25, np.uint8), (7.3, 0.1, np.uint8),
+                                                       (48.0, 0.125, np.uint16), (300.0, 0.25, np.uint16)])
+def test_codes_are_the_quantised_exact_distance(rng, max_px, resolution, dtype):
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(1, 120, 2))
+        density = rng.choice([0.0, 0.0005, 0.01, 0.2, 0.9])
+        mask = ((rng.random((h, w)) < density) * 255).astype(np.uint8)
+        got = exact_codes(mask, max_px, resolution, dtype)
+        assert got.dtype == dtype and got.shape == (h, w)
+        np.testing.assert_array_equal(got, quantise(_exact(mask, max_px), resolution_px=resolution, dtype=dtype))
+
+
+def test_truncation_beyond_the_table_is_opencv_precise():
+    mask = np.zeros((40, 2100), np.uint8)
+    mask[0, 0] = mask[39, 10] = 255  # the far end: distances beyond MAX_TABLE_PX and truncated
+    max_px = MAX_TABLE_PX + 1000.5
+    np.testing.assert_array_equal(exact_distance(mask, max_px), _opencv_precise(mask, max_px))
+    np.testing.assert_array_equal(exact_codes(mask, max_px, 0.25, np.uint16),
+                                  quantise(_opencv_precise(mask, max_px), resolution_px=0.25, dtype=np.uint16))
+    assert exact_distance(mask, max_px).max() > MAX_TABLE_PX

@@ -70,6 +70,40 @@ def test_frame_pixels_survive(rng):
     assert np.abs(FrameMessage.from_bytes(jpg.to_bytes()).image().astype(int) - 128).max() <= 2
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_raw_frame_of_immutable_bytes_is_a_read_only_view_and_of_mutable_bytes_a_copy(rng, dtype):
+    img = rng.integers(0, 255, size=(24, 32, 3)).astype(dtype)
+    wire = FrameMessage.from_image("cam0", 1, 1, img).to_bytes()
+    view = FrameMessage.from_bytes(wire).image()
+    assert np.array_equal(view, img) and not view.flags.writeable
+    with pytest.raises(ValueError):
+        view[0, 0, 0] = 1
+    mutable = bytearray(wire)
+    msg = FrameMessage.from_bytes(mutable)
+    copy = msg.image()
+    mutable[-1] ^= 0xFF  # the sender's buffer changes afterwards: the message and its image do not
+    assert np.array_equal(copy, img) and np.array_equal(msg.image(), img)
+    assert FrameMessage.from_bytes(msg.to_bytes()).to_bytes() == wire
+    short = FrameMessage("cam0", 1, 1, "raw", (24, 32, 3), bytes(10), np.dtype(dtype).name)
+    with pytest.raises(MessageError, match="bytes"):
+        short.image()
+
+
+@pytest.mark.parametrize("encoding, dtype, shape", [("raw", np.uint8, (24, 32, 3)), ("raw", np.uint16, (9, 7)),
+                                                    ("png", np.uint8, (24, 32, 3)), ("jpeg", np.uint8, (16, 16))])
+def test_wire_of_image_is_the_message_bytes(rng, encoding, dtype, shape):
+    img = rng.integers(0, 255, size=shape).astype(dtype)
+    strided = np.zeros((shape[0], 2 * shape[1]) + shape[2:], dtype)[:, ::2]  # not contiguous
+    strided[...] = img
+    for image in (strided, img):  # the last: the caller's own array
+        wire = FrameMessage.wire_of_image("cam1", 7, 99, image, encoding=encoding, jpeg_quality=80)
+        assert wire == FrameMessage.from_image("cam1", 7, 99, img, encoding=encoding, jpeg_quality=80).to_bytes()
+    if encoding != "jpeg":  # lossless: the bytes hold the pixels as they were, not a view of the array
+        before = img.copy()
+        img[0] = 0
+        np.testing.assert_array_equal(FrameMessage.from_bytes(wire).image(), before)
+
+
 def test_pose_is_plain_design_json(rng):
     rec = _pose(rng)
     obj = json.loads(rec.to_bytes().decode())
