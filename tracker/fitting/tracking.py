@@ -155,6 +155,15 @@ class TrackerOptions:
     #: search: a track that stays below ``min_iou`` is searched again now and then (a drifting limb
     #: keeps the IoU near the body's usual), not on every frame
     soft_search_gap: int = 30
+    #: a body unlike the model overshoots the silhouettes where the pose is right, a lost limb leaves the
+    #: silhouette's own limb uncovered: a frame below ``min_iou`` (at or above ``iou_explained_floor``)
+    #: is not failed by the IoU when the share of the silhouettes the model leaves uncovered is at most
+    #: ``iou_unexplained_margin`` above the median share of the last ``iou_window`` frames that passed
+    #: ``min_iou`` (at least ``iou_explained_samples`` of them); the IoU is then checked on the next
+    #: frame too (``iou_unexplained_margin`` None: off)
+    iou_unexplained_margin: float | None = 0.015
+    iou_explained_floor: float = 0.7
+    iou_explained_samples: int = 2
     #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
     #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
     #: mirror of the fit is fitted too (``front_back_iterations`` LM steps); when its
@@ -375,6 +384,8 @@ class Tracker:
                                    min_inside_fraction=options.min_inside_fraction, patience=patience)
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
+        self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
+        self._explained = False  # the last IoU check let a frame below min_iou pass
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
@@ -487,7 +498,16 @@ class Tracker:
         o = self.options
         jump = (o.iou_rms_jump is not None and bool(self._good_rms)
                 and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
-        return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
+        return (self._last_bad or self._explained or self._since_iou + 1 >= o.iou_every or self._suspect(terms)
+                or jump)
+
+    def _iou_explained(self, iou: float, unexplained: float) -> bool:
+        """Whether a frame below ``min_iou`` leaves no more of the silhouettes uncovered than the
+        track's recent good frames (``TrackerOptions.iou_unexplained_margin``)."""
+        o = self.options
+        return (o.iou_unexplained_margin is not None and iou >= o.iou_explained_floor
+                and len(self._good_unexplained) >= max(1, o.iou_explained_samples)
+                and unexplained <= float(np.median(self._good_unexplained)) + o.iou_unexplained_margin)
 
     def _bad(self, terms, views) -> "Verdict":
         """Why the fit at ``terms`` is poor (false when it is good); ``views``: a callable returning
@@ -503,11 +523,15 @@ class Tracker:
             why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
             failed.append("inside")
         if views is not None and (why or self._iou_due(terms)):
-            iou = float(views().score(np.asarray(terms.pose.params)))
+            ious, uncovered = views().ious_unexplained(np.asarray(terms.pose.params))
+            iou, unexplained = float(ious.mean()), float(uncovered.mean())
             self._last_iou = iou
-            if not iou >= o.min_iou:
+            self._explained = not iou >= o.min_iou and self._iou_explained(iou, unexplained)
+            if not iou >= o.min_iou and not self._explained:
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
                 failed.append("iou")
+            if not why and iou >= o.min_iou:
+                self._good_unexplained = (self._good_unexplained + [unexplained])[-o.iou_window:]
             if not why or (failed == ["iou"] and iou >= self.lost_iou_limit()):
                 self._good_iou = (self._good_iou + [iou])[-o.iou_window:]
         return Verdict("; ".join(why), tuple(failed))
