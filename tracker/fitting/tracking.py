@@ -156,13 +156,13 @@ class TrackerOptions:
     #: keeps the IoU near the body's usual), not on every frame
     soft_search_gap: int = 30
     #: a body unlike the model overshoots the silhouettes where the pose is right, a lost limb leaves the
-    #: silhouette's own limb uncovered: a frame below ``min_iou`` (at or above ``iou_explained_floor``)
-    #: is not failed by the IoU when the share of the silhouettes the model leaves uncovered is at most
-    #: ``iou_unexplained_margin`` above the median share of the last ``iou_window`` frames that passed
-    #: ``min_iou`` (at least ``iou_explained_samples`` of them); the IoU is then checked on the next
-    #: frame too (``iou_unexplained_margin`` None: off)
+    #: silhouette's own limb uncovered: a frame that fails only ``min_iou`` (at or above
+    #: ``iou_explained_floor``) is excused (``Verdict.excused``: reported ok, tracked as before) when the
+    #: share of the silhouettes the model leaves uncovered is at most ``iou_unexplained_margin`` above the
+    #: median share of the last ``iou_window`` frames that passed ``min_iou`` (at least
+    #: ``iou_explained_samples`` of them) (``iou_unexplained_margin`` None: off)
     iou_unexplained_margin: float | None = 0.015
-    iou_explained_floor: float = 0.7
+    iou_explained_floor: float = 0.75
     iou_explained_samples: int = 2
     #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
     #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
@@ -318,10 +318,14 @@ class Verdict:
         Why it failed, for the pose record's ``reason`` ("" when it passed).
     failed : tuple of str
         The limits it failed, from ``"rms"``, ``"inside"``, ``"iou"`` (the pose record's ``failed``).
+    excused : bool
+        It failed only the IoU, and the silhouettes' uncovered share says the body is unlike the model,
+        not the pose wrong (``TrackerOptions.iou_unexplained_margin``): reported ok, tracked as failed.
     """
 
     text: str = ""
     failed: tuple = ()
+    excused: bool = False
 
     def __bool__(self) -> bool:
         return bool(self.failed)
@@ -385,7 +389,6 @@ class Tracker:
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
         self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
-        self._explained = False  # the last IoU check let a frame below min_iou pass
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
@@ -498,8 +501,7 @@ class Tracker:
         o = self.options
         jump = (o.iou_rms_jump is not None and bool(self._good_rms)
                 and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
-        return (self._last_bad or self._explained or self._since_iou + 1 >= o.iou_every or self._suspect(terms)
-                or jump)
+        return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
 
     def _iou_explained(self, iou: float, unexplained: float) -> bool:
         """Whether a frame below ``min_iou`` leaves no more of the silhouettes uncovered than the
@@ -515,7 +517,7 @@ class Tracker:
         o = self.options
         rms, inside = terms.rms_px(), terms.inside_fraction()
         lim = self.rms_limit()
-        why, failed = [], []
+        why, failed, explained = [], [], False
         if not (np.isfinite(rms) and rms <= lim):
             why.append(f"rms {rms:.2f} px > {lim:.3g}")
             failed.append("rms")
@@ -526,15 +528,15 @@ class Tracker:
             ious, uncovered = views().ious_unexplained(np.asarray(terms.pose.params))
             iou, unexplained = float(ious.mean()), float(uncovered.mean())
             self._last_iou = iou
-            self._explained = not iou >= o.min_iou and self._iou_explained(iou, unexplained)
-            if not iou >= o.min_iou and not self._explained:
+            if not iou >= o.min_iou:
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
                 failed.append("iou")
+                explained = self._iou_explained(iou, unexplained)
             if not why and iou >= o.min_iou:
                 self._good_unexplained = (self._good_unexplained + [unexplained])[-o.iou_window:]
             if not why or (failed == ["iou"] and iou >= self.lost_iou_limit()):
                 self._good_iou = (self._good_iou + [iou])[-o.iou_window:]
-        return Verdict("; ".join(why), tuple(failed))
+        return Verdict("; ".join(why), tuple(failed), explained and failed == ["iou"])
 
     def _front_back(self, cams, chs, res, terms, views):
         """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
@@ -775,11 +777,12 @@ class Tracker:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
                                                                         views)
             restarted = restarted or swapped
-        colour = "" if bad or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
+        shown = Verdict() if bad.excused else bad  # what the record reports; the track goes on from ``bad``
+        colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not bad and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
+            ok=not shown and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -788,10 +791,10 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if bad or unsure or limbs or colour:
-            record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else [])
+        if shown or unsure or limbs or colour:
+            record["reason"] = "; ".join(([f"poor fit: {shown}"] if shown else []) + ([unsure] if unsure else [])
                                          + ([limbs] if limbs else []) + ([colour] if colour else []))
-            record["failed"] = (list(bad.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
+            record["failed"] = (list(shown.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
                                 + (["limb_colour"] if colour else []))
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
