@@ -92,6 +92,25 @@ def test_an_excused_frame_is_checked_again_on_the_next(scene):
     assert all(r["ok"] for r in recs)
 
 
+def test_no_excuse_right_after_the_front_back_question(scene):
+    # the question re-opened (guard.reset) takes two ambiguous frames to settle; the excuse waits
+    # iou_excuse_after_ambiguous frames after the last ambiguous one
+    cameras, model, p0, ch, sil = scene
+
+    def run(after: int) -> list[dict]:
+        tracker = Tracker(model, cameras, initial_params=p0,
+                          options=TrackerOptions(min_iou=STRICT, iou_every=1, iou_excuse_after_ambiguous=after))
+        recs = [tracker.step(k, k, ch, sil) for k in range(2)]
+        tracker.guard.reset()
+        recs += [tracker.step(k, k, ch, sil) for k in range(2, 6)]
+        return recs + [tracker.step(k, k, ch, thinner(sil)) for k in range(6, 9)]
+
+    blocked, free = run(30), run(0)
+    assert any("front/back ambiguous" in r.get("reason", "") for r in blocked[2:6]) and blocked[5]["ok"]
+    assert not any(r["ok"] for r in blocked[6:]) and all(r["failed"] == ["iou"] for r in blocked[6:])
+    assert all(r["ok"] for r in free[5:])
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_ious_unexplained_against_the_masks(scene, seed):
     cameras, model, p0, ch, sil = scene

@@ -28,7 +28,7 @@ from capture.camera import Camera
 from tracker.body.kinematics import joint_centre_array
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
-from tracker.fitting.hypotheses import FrontBackGuard, FrontBackOptions
+from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
 from tracker.search.initialise import SearchOptions, initialise
@@ -160,10 +160,13 @@ class TrackerOptions:
     #: ``iou_explained_floor``) is excused (``Verdict.excused``: reported ok, tracked as before) when the
     #: share of the silhouettes the model leaves uncovered is at most ``iou_unexplained_margin`` above the
     #: median share of the last ``iou_window`` frames that passed ``min_iou`` (at least
-    #: ``iou_explained_samples`` of them) (``iou_unexplained_margin`` None: off)
+    #: ``iou_explained_samples`` of them), unless the front/back guard was ambiguous within the last
+    #: ``iou_excuse_after_ambiguous`` frames (the side of the pose just settled, the excuse vouches only
+    #: for the body) (``iou_unexplained_margin`` None: off)
     iou_unexplained_margin: float | None = 0.015
     iou_explained_floor: float = 0.75
     iou_explained_samples: int = 2
+    iou_excuse_after_ambiguous: int = 30
     #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
     #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
     #: mirror of the fit is fitted too (``front_back_iterations`` LM steps); when its
@@ -389,6 +392,7 @@ class Tracker:
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
         self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
+        self._since_ambiguous = 1 << 30  # frames since the front/back guard's last ambiguous frame
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
@@ -683,6 +687,7 @@ class Tracker:
         """
         t0 = self.clock()
         self._since_search += 1
+        self._since_ambiguous += 1
         record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
         unknown = sorted(name for name in chamfer if name not in self.cameras)
         sils = silhouettes if silhouettes is not None else {}
@@ -777,7 +782,10 @@ class Tracker:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
                                                                         views)
             restarted = restarted or swapped
-        shown = Verdict() if bad.excused else bad  # what the record reports; the track goes on from ``bad``
+        # what the record reports; the track goes on from ``bad``
+        shown = Verdict() if bad.excused and self._since_ambiguous > self.options.iou_excuse_after_ambiguous else bad
+        if self.guard is not None and self.guard.state == AMBIGUOUS:
+            self._since_ambiguous = 0
         colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
