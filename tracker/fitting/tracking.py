@@ -28,7 +28,7 @@ from capture.camera import Camera
 from tracker.body.kinematics import joint_centre_array
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
-from tracker.fitting.hypotheses import FrontBackGuard, FrontBackOptions
+from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
 from tracker.search.initialise import SearchOptions, initialise
@@ -155,6 +155,18 @@ class TrackerOptions:
     #: search: a track that stays below ``min_iou`` is searched again now and then (a drifting limb
     #: keeps the IoU near the body's usual), not on every frame
     soft_search_gap: int = 30
+    #: a body unlike the model overshoots the silhouettes where the pose is right, a lost limb leaves the
+    #: silhouette's own limb uncovered: a frame that fails only ``min_iou`` (at or above
+    #: ``iou_explained_floor``) is excused (``Verdict.excused``: reported ok, tracked as before) when the
+    #: share of the silhouettes the model leaves uncovered is at most ``iou_unexplained_margin`` above the
+    #: median share of the last ``iou_window`` frames that passed ``min_iou`` (at least
+    #: ``iou_explained_samples`` of them), unless the front/back guard was ambiguous within the last
+    #: ``iou_excuse_after_ambiguous`` frames (the side of the pose just settled, the excuse vouches only
+    #: for the body) (``iou_unexplained_margin`` None: off)
+    iou_unexplained_margin: float | None = 0.015
+    iou_explained_floor: float = 0.75
+    iou_explained_samples: int = 2
+    iou_excuse_after_ambiguous: int = 30
     #: silhouettes hardly tell a body from its mirror, so a track can run turned round: every
     #: ``front_back_every`` frames that bring silhouettes (0: never; not right after a search) the
     #: mirror of the fit is fitted too (``front_back_iterations`` LM steps); when its
@@ -309,10 +321,14 @@ class Verdict:
         Why it failed, for the pose record's ``reason`` ("" when it passed).
     failed : tuple of str
         The limits it failed, from ``"rms"``, ``"inside"``, ``"iou"`` (the pose record's ``failed``).
+    excused : bool
+        It failed only the IoU, and the silhouettes' uncovered share says the body is unlike the model,
+        not the pose wrong (``TrackerOptions.iou_unexplained_margin``): reported ok, tracked as failed.
     """
 
     text: str = ""
     failed: tuple = ()
+    excused: bool = False
 
     def __bool__(self) -> bool:
         return bool(self.failed)
@@ -375,6 +391,8 @@ class Tracker:
                                    min_inside_fraction=options.min_inside_fraction, patience=patience)
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
+        self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
+        self._since_ambiguous = 1 << 30  # frames since the front/back guard's last ambiguous frame
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
         self._since_front_back = 0
@@ -489,13 +507,21 @@ class Tracker:
                 and not terms.rms_px() <= o.iou_rms_jump * float(np.median(self._good_rms)))
         return self._last_bad or self._since_iou + 1 >= o.iou_every or self._suspect(terms) or jump
 
+    def _iou_explained(self, iou: float, unexplained: float) -> bool:
+        """Whether a frame below ``min_iou`` leaves no more of the silhouettes uncovered than the
+        track's recent good frames (``TrackerOptions.iou_unexplained_margin``)."""
+        o = self.options
+        return (o.iou_unexplained_margin is not None and iou >= o.iou_explained_floor
+                and len(self._good_unexplained) >= max(1, o.iou_explained_samples)
+                and unexplained <= float(np.median(self._good_unexplained)) + o.iou_unexplained_margin)
+
     def _bad(self, terms, views) -> "Verdict":
         """Why the fit at ``terms`` is poor (false when it is good); ``views``: a callable returning
         ScoreViews (built on first use), or None (no IoU check)."""
         o = self.options
         rms, inside = terms.rms_px(), terms.inside_fraction()
         lim = self.rms_limit()
-        why, failed = [], []
+        why, failed, explained = [], [], False
         if not (np.isfinite(rms) and rms <= lim):
             why.append(f"rms {rms:.2f} px > {lim:.3g}")
             failed.append("rms")
@@ -503,14 +529,18 @@ class Tracker:
             why.append(f"{100 * inside:.0f}% of contour on the silhouettes < {100 * o.min_inside_fraction:.0f}%")
             failed.append("inside")
         if views is not None and (why or self._iou_due(terms)):
-            iou = float(views().score(np.asarray(terms.pose.params)))
+            ious, uncovered = views().ious_unexplained(np.asarray(terms.pose.params))
+            iou, unexplained = float(ious.mean()), float(uncovered.mean())
             self._last_iou = iou
             if not iou >= o.min_iou:
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
                 failed.append("iou")
+                explained = self._iou_explained(iou, unexplained)
+            if not why and iou >= o.min_iou:
+                self._good_unexplained = (self._good_unexplained + [unexplained])[-o.iou_window:]
             if not why or (failed == ["iou"] and iou >= self.lost_iou_limit()):
                 self._good_iou = (self._good_iou + [iou])[-o.iou_window:]
-        return Verdict("; ".join(why), tuple(failed))
+        return Verdict("; ".join(why), tuple(failed), explained and failed == ["iou"])
 
     def _front_back(self, cams, chs, res, terms, views):
         """The front/back check (``TrackerOptions``): ``(res, terms)`` of the turned pose when the
@@ -657,6 +687,7 @@ class Tracker:
         """
         t0 = self.clock()
         self._since_search += 1
+        self._since_ambiguous += 1
         record = {"frame": int(frame_id), "timestamp_ns": int(timestamp_ns), "model": self.model.name}
         unknown = sorted(name for name in chamfer if name not in self.cameras)
         sils = silhouettes if silhouettes is not None else {}
@@ -751,11 +782,15 @@ class Tracker:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
                                                                         views)
             restarted = restarted or swapped
-        colour = "" if bad or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
+        # what the record reports; the track goes on from ``bad``
+        shown = Verdict() if bad.excused and self._since_ambiguous > self.options.iou_excuse_after_ambiguous else bad
+        if self.guard is not None and self.guard.state == AMBIGUOUS:
+            self._since_ambiguous = 0
+        colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not bad and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
+            ok=not shown and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -764,10 +799,10 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if bad or unsure or limbs or colour:
-            record["reason"] = "; ".join(([f"poor fit: {bad}"] if bad else []) + ([unsure] if unsure else [])
+        if shown or unsure or limbs or colour:
+            record["reason"] = "; ".join(([f"poor fit: {shown}"] if shown else []) + ([unsure] if unsure else [])
                                          + ([limbs] if limbs else []) + ([colour] if colour else []))
-            record["failed"] = (list(bad.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
+            record["failed"] = (list(shown.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
                                 + (["limb_colour"] if colour else []))
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped

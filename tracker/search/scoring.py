@@ -170,6 +170,32 @@ class ScoreViews:
         self.n_scored += len(poses)
         return out
 
+    def ious_unexplained(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per-camera IoU (as ``ious``) and share of the observed silhouette the model leaves uncovered.
+
+        Parameters
+        ----------
+        params : ndarray, shape (n_params,)
+
+        Returns
+        -------
+        ious : ndarray, shape (n_cams,)
+            IoU in [0, 1] (1 where both are empty).
+        unexplained : ndarray, shape (n_cams,)
+            Silhouette pixels outside the model's silhouette over silhouette pixels, in [0, 1] (0 where
+            the silhouette is empty).
+        """
+        ious, unexplained = np.ones(len(self.masks)), np.zeros(len(self.masks))
+        for k, r in enumerate(self._draw([params], None, None)):
+            inter = np.count_nonzero(r & self._masks_u8[k])
+            union = np.count_nonzero(r) + self._areas[k] - inter
+            if union:
+                ious[k] = inter / union
+            if self._areas[k]:
+                unexplained[k] = (self._areas[k] - inter) / self._areas[k]
+        self.n_scored += 1
+        return ious, unexplained
+
     def expected_iou(self, *, loss_per_boundary: float = 0.28) -> float:
         """The mean IoU a correct pose reaches on these views.
 
