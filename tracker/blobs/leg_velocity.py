@@ -10,6 +10,12 @@ gate: a hand outside the hull says nothing against the legs) and moves the legs'
 parameters of a start pose by ``gain`` × their mean change per frame over that history, times a
 weight of the pelvis's horizontal speed (the tracker's: ``walk_heading.speed_weight``, so a body
 crouching or waving in place keeps its start: the prior is one of gait).
+
+Two restrictions keep the rate to the gait's swing (``flexion_only``, ``antiphase``): only the
+thighs' and shanks' flexions are carried (a rate of twist or abduction between two fits is mostly
+the fits' noise about poorly seen axes), and only while the two thighs' flexion rates have opposite
+signs (one leg swinging forward while the other goes back, as through a crossing); both thighs
+moving the same way is no stride, and is not carried.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import numpy as np
 
 from tracker.body.model import JOINT_ROTATION, BodyModel
 
-__all__ = ["LegVelocity", "leg_params"]
+__all__ = ["LegVelocity", "leg_params", "thigh_flexions"]
 
 _LEG_PARTS = ("thigh", "shank", "foot")
 
@@ -31,6 +37,11 @@ def leg_params(model: BodyModel) -> np.ndarray:
     return (model.param_kind == JOINT_ROTATION) & legs[model.param_part]
 
 
+def thigh_flexions(model: BodyModel) -> tuple[int, int]:
+    """Indices of the left and right thighs' flexion parameters."""
+    return model.param_index("left_thigh.flexion"), model.param_index("right_thigh.flexion")
+
+
 class LegVelocity:
     """Per-frame rate of the legs' joint angles over the last fits (module docstring).
 
@@ -39,14 +50,21 @@ class LegVelocity:
     model : BodyModel
     gain : float >= 0, fraction of the mean rate added to the start (0: none)
     frames : int >= 2, fitted poses the rate is measured over
+    flexion_only : carry only the legs' flexion parameters (module docstring)
+    antiphase : carry nothing unless the thighs' flexion rates have opposite signs
     """
 
-    def __init__(self, model: BodyModel, *, gain: float = 1.0, frames: int = 3) -> None:
+    def __init__(self, model: BodyModel, *, gain: float = 1.0, frames: int = 3, flexion_only: bool = True,
+                 antiphase: bool = True) -> None:
         if not (gain >= 0 and int(frames) >= 2):
             raise ValueError(f"LegVelocity: need gain >= 0 and frames >= 2, got {gain!r}, {frames!r}")
         self.model = model
         self.gain = float(gain)
         self.legs = leg_params(model)
+        if flexion_only:
+            self.legs &= np.array([n.endswith(".flexion") for n in model.param_names])
+        self.antiphase = bool(antiphase)
+        self._thighs = thigh_flexions(model)
         self._poses: deque = deque(maxlen=int(frames))
 
     def reset(self) -> None:
@@ -58,12 +76,15 @@ class LegVelocity:
         self._poses.append(np.asarray(params, float).copy())
 
     def rate(self) -> np.ndarray:
-        """Mean change per frame of every parameter (0 off the legs, or with too short a history);
-        (n_params,)."""
+        """Mean change per frame of the carried parameters (0 elsewhere, with too short a history, or
+        with ``antiphase`` and the thighs' flexion rates not of opposite signs); (n_params,) rad/frame."""
         out = np.zeros(self.model.n_params)
         if len(self._poses) < 2:
             return out
         out[self.legs] = (self._poses[-1][self.legs] - self._poses[0][self.legs]) / (len(self._poses) - 1)
+        left, right = self._thighs
+        if self.antiphase and not out[left] * out[right] < 0:
+            out[:] = 0.0
         return out
 
     def start(self, params: np.ndarray, weight: float = 1.0) -> np.ndarray:

@@ -136,6 +136,8 @@ class BlobOptions:
     walk_dead_deg: float = 0.0
     leg_velocity_gain: float = 0.0
     leg_velocity_frames: int = 3
+    leg_velocity_flexion_only: bool = True
+    leg_velocity_antiphase: bool = True
 
     def __post_init__(self):
         if self.arm_goals_move not in ("all", "twist", "arm"):
@@ -318,7 +320,9 @@ class BlobTracker:
                                   max_rad=np.radians(options.walk_max_deg), upright=options.walk_upright,
                                   dead_rad=np.radians(options.walk_dead_deg))
                       if options.walk_gain > 0 or options.leg_velocity_gain > 0 else None)
-        self._legs = (LegVelocity(model, gain=options.leg_velocity_gain, frames=options.leg_velocity_frames)
+        self._legs = (LegVelocity(model, gain=options.leg_velocity_gain, frames=options.leg_velocity_frames,
+                                  flexion_only=options.leg_velocity_flexion_only,
+                                  antiphase=options.leg_velocity_antiphase)
                       if options.leg_velocity_gain > 0 else None)
         self._floor = (SampleFloorTest(cameras, self.backgrounds, low=options.hull.low)
                        if options.floor_test and len(self.cameras) >= 2 else None)
