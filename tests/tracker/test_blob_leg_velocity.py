@@ -74,12 +74,13 @@ def test_start_stays_within_the_joint_limits(model):
     assert np.allclose(out, model.clamp(out))
 
 
-def test_options_validation_and_default_off(model):
+def test_options_validation_and_default_on(model):
     with pytest.raises(ValueError):
         LegVelocity(model, gain=-0.1)
     with pytest.raises(ValueError):
         LegVelocity(model, frames=1)
-    assert BlobOptions().leg_velocity_gain == 0.0
+    o = BlobOptions()
+    assert o.leg_velocity_gain == 1.0 and o.leg_velocity_flexion_only and o.leg_velocity_antiphase
 
 
 def test_speed_weight_gates_the_start(model):

@@ -86,7 +86,7 @@ class BlobOptions:
     not in the background); prop_weight : with ``props``, the damped least squares' residual per metre a part comes too
     near a prop (``tracker.blobs.props``; goals: metres × √weight); arm_goals_move : what the arm goals pull in the
     damped least squares (:func:`arm_goal_moves`); walk_*, leg_velocity_* : ``tracker.blobs.walk_heading`` (start
-    turned toward the walk; source: pelvis joint or hull centroid), ``tracker.blobs.leg_velocity`` (gains 0: off).
+    turned toward the walk; source: pelvis joint or hull centroid), ``tracker.blobs.leg_velocity`` (a gain 0: that cue off).
     """
 
     hull: HullOptions = field(default_factory=HullOptions)
@@ -134,7 +134,7 @@ class BlobOptions:
     walk_source: str = "fit"
     walk_upright: float = 0.0
     walk_dead_deg: float = 0.0
-    leg_velocity_gain: float = 0.0
+    leg_velocity_gain: float = 1.0
     leg_velocity_frames: int = 3
     leg_velocity_flexion_only: bool = True
     leg_velocity_antiphase: bool = True
