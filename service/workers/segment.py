@@ -135,7 +135,6 @@ class SegmentWorker:
             if not isinstance(msg, FrameMessage):
                 msg = FrameMessage.from_bytes(msg)
             if roi is not None and getattr(segment, "takes_roi", False):
-                self.count("roi")
                 return segment(msg, msg.image(), roi=roi)
             return segment(msg, msg.image())
         except MessageError as exc:
@@ -147,6 +146,7 @@ class SegmentWorker:
         """Count a demanded live frame as ``roi`` or ``whole`` (counters), add its thread CPU seconds
         ``cpu_s`` to ``roi_cpu_s`` or ``whole_cpu_s`` and an ROI's area to ``roi_px`` (pixels)."""
         if roi is not None and getattr(segment, "takes_roi", False):
+            self.count("roi")
             self.count("roi_cpu_s", cpu_s)
             self.count("roi_px", (roi[2] - roi[0]) * (roi[3] - roi[1]))
         else:

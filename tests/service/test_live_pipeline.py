@@ -172,4 +172,3 @@ def test_live_demo_publishes_complete_sets_in_order_with_latency(tmp_path):
             assert "effort" in p or p["reason"].startswith("searching")
     assert summary.latency_ms_p50 is not None
     assert summary.replay_ns[0] < summary.replay_ns[1]  # the replay window (bench/pipeline.py's CPU split)
-
