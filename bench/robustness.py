@@ -23,7 +23,9 @@ scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its do
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
 silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
 the IK floor (the height-sized model posed onto the true joints by ``tracker.synthetic.retarget``: the
-error a perfect tracker with that model would still have).
+error a perfect tracker with that model would still have), and ``error_parts`` (``error_parts``: per joint its IK
+floor, the mean offset in the truth's pelvis heading frame, the rest and the lost stretches; the torso's yaw, lean
+and height errors; the summary's ``error_parts`` is their mean over the clips).
 
 A tracker that has lost the body searches again on every bad frame (1–10 s each here), so a clip
 it cannot track would dominate the run: tracking a clip stops once it has used ``--clip-budget-s``
