@@ -23,7 +23,9 @@ scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its do
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
 silhouettes with the rendered ones (every 15th frame: how much of a failure is segmentation) and
 the IK floor (the height-sized model posed onto the true joints by ``tracker.synthetic.retarget``: the
-error a perfect tracker with that model would still have).
+error a perfect tracker with that model would still have), and ``error_parts`` (``error_parts``: per joint its IK
+floor, the mean offset in the truth's pelvis heading frame, the rest and the lost stretches; the torso's yaw, lean
+and height errors; the summary's ``error_parts`` is their mean over the clips).
 
 A tracker that has lost the body searches again on every bad frame (1–10 s each here), so a clip
 it cannot track would dominate the run: tracking a clip stops once it has used ``--clip-budget-s``
@@ -71,6 +73,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from capture.calibration import save_calibration  # noqa: E402
 from capture.session import load_session, write_session_toml  # noqa: E402
 from machine_ref import machine_ref_ms  # noqa: E402
+from subject_frame_offsets import decompose  # noqa: E402
 from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import SegmentationParams, segment_frame  # noqa: E402
 from tracker.synthetic.bvh import load_bvh  # noqa: E402
@@ -162,15 +165,15 @@ def _reason_keys(reason: str) -> list[str]:
     return keys or ["other"]
 
 
-def ik_floor_mm(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3,
-                model: str = "knossow40") -> float:
-    """Mean joint error (mm) of the height-sized knossow40 model posed by inverse kinematics onto
-    the true joints (``tracker.synthetic.retarget``) on every ``every``-th frame: what a perfect tracker with
-    that model could reach on this subject."""
+def ik_floor_joints_m(motion, subject_index: int, height_m: float, *, fps: float, every: int = 3,
+                      model: str = "knossow40") -> np.ndarray:
+    """Per-frame, per-joint error (m, shape (n, 16), columns ``JOINT_NAMES``) of the height-sized
+    model posed by inverse kinematics onto the true joints (``tracker.synthetic.retarget``) on every
+    ``every``-th frame: what a perfect tracker with that model could reach on this subject."""
     skel = subject_skeleton(motion, bench_subject(subject_index))
     n = (skel.n_frames - 1) // every + 1
     rt = retarget_bvh(skel, model=model, fps=fps / every, frames=n, height_m=height_m)
-    return float(1e3 * rt.residual_m.mean())
+    return rt.residual_m[:, [rt.joint_names.index(j) for j in JOINT_NAMES]]
 
 
 #: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``; the
@@ -201,13 +204,7 @@ def _track(session, backgrounds, *, method: str, budget_s: float, model=None) ->
 
 def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, dict]:
     """(``score_clip`` figures, per-joint mean error in mm, per-frame series) of ``records``."""
-    pred = np.full(truth.shape, np.nan)
-    ok = np.zeros(len(truth), bool)
-    for rec in records:
-        k = rec["frame"]
-        ok[k] = bool(rec.get("ok"))
-        if rec.get("joints"):
-            pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
+    pred, ok = _pred(records, truth)
     score = score_clip(pred, ok, truth, fps=fps)
     err = frame_errors(pred, truth)
     series = {"mpjpe_mm": [None if not np.isfinite(v) else round(1e3 * v, 1) for v in err["mpjpe"]],
@@ -222,6 +219,41 @@ def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, di
     joint_mm = {j: round(1e3 * float(per_joint[posed, i].mean()), 1) if posed.any() else None
                 for i, j in enumerate(JOINT_NAMES)}
     return score, joint_mm, series
+
+
+def _pred(records: list, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(joints (n, 16, 3) m, NaN without a pose; ok flags (n,)) of ``records`` on ``truth``'s frames."""
+    pred = np.full(truth.shape, np.nan)
+    ok = np.zeros(len(truth), bool)
+    for rec in records:
+        k = rec["frame"]
+        ok[k] = bool(rec.get("ok"))
+        if rec.get("joints"):
+            pred[k] = [rec["joints"][j] for j in JOINT_NAMES]
+    return pred, ok
+
+
+def error_parts(records: list, truth: np.ndarray, floor_m: np.ndarray | None) -> dict:
+    """``subject_frame_offsets.decompose`` of ``records`` against ``truth`` (per joint: constant offset
+    in the body's frame, the rest, the lost stretches; the torso's yaw, lean and height), with each
+    joint's IK floor (mm, ``ik_floor_joints_m``'s mean) beside it when ``floor_m`` is given."""
+    parts = decompose(_pred(records, truth)[0], truth, JOINT_NAMES)
+    if floor_m is not None:
+        for k, j in enumerate(JOINT_NAMES):
+            if j in parts["joints"]:
+                parts["joints"][j]["ik_floor"] = round(1e3 * float(floor_m[:, k].mean()), 1)
+    return parts
+
+
+def error_parts_means(clips: list[dict]) -> dict:
+    """Per joint and torso figure, the mean over ``clips`` of their ``error_parts`` (clips without one skipped)."""
+    parts = [c["error_parts"] for c in clips if c.get("error_parts", {}).get("frames")]
+    if not parts:
+        return {}
+    joints = {j: {key: round(float(np.mean([p["joints"][j][key] for p in parts if key in p["joints"][j]])), 1)
+                  for key in parts[0]["joints"][j]} for j in parts[0]["joints"]}
+    torso = {key: round(float(np.mean([p["torso"][key] for p in parts])), 2) for key in parts[0]["torso"]}
+    return {"joints": joints, "torso": torso, "clips": len(parts)}
 
 
 #: limb chains compared by ``_exchanged`` (their joints, left side; the right side's by name)
@@ -318,7 +350,8 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
     by_frame = {rec["frame"]: rec for rec in records}
     for key in ("iou", "rms_px", "inside_fraction", "coverage", "reason"):  # the quality figures, for gate studies
         series[key] = [by_frame.get(k, {}).get(key) for k in range(len(truth))]
-    floor_mm = ik_floor_mm(motion, subject_index, height, fps=fps, model=MODEL[0]) if ik_floor else None
+    floor_m = ik_floor_joints_m(motion, subject_index, height, fps=fps, model=MODEL[0]) if ik_floor else None
+    floor_mm = None if floor_m is None else float(1e3 * floor_m.mean())
     lat = [r["latency_ms"] for r in records]
     reasons: dict[str, int] = {}
     for r in records:
@@ -332,7 +365,9 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
            "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
            "wall_s": time.perf_counter() - t_clip,
            "latencies_ms": lat, "pipeline_ms": pipe_ms, "pipeline_cpu_ms": pipe_cpu_ms, "series": series}
+    out["error_parts"] = error_parts(records, truth, floor_m)
     if calibrated is not None:
+        calibrated["error_parts"] = error_parts(rec_c, truth, None)
         out["calibrated"] = calibrated
     return out
 
@@ -351,6 +386,9 @@ def summarise(per_clip: list[dict]) -> dict:
                    **{f"{k}_calibrated": v for k, v in cal_summary.items()},
                    "calibration_cpu_s_median": float(np.median([c["calibration"]["cpu_s"] for c in cal])),
                    "joint_mm_height_only": _joint_means(per_clip), "joint_mm_calibrated": _joint_means(cal)}
+    summary["error_parts"] = error_parts_means(per_clip)
+    if cal:
+        summary["error_parts_calibrated"] = error_parts_means(cal)
     return {"subjects": len({r["subject"] for r in per_clip}), "clips": len(per_clip), **summary,
             "ik_floor_mm_mean": float(np.mean(floors)) if floors else None,
             "unprocessed_percent": 100.0 * sum(r["unprocessed"] for r in per_clip) / summary["frames"],

@@ -26,13 +26,68 @@ from machine_ref import machine_ref_ms  # noqa: E402
 from real_reference import read_jsonl  # noqa: E402
 
 
+def heading_frames(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
+    """Rows (side, fwd, up) of the pelvis heading frames from the hip joints (..., 3), shape (..., 3, 3)."""
+    side = np.asarray(left_hip, float) - np.asarray(right_hip, float)
+    side[..., 2] = 0.0
+    side /= np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-9)
+    up = np.broadcast_to([0.0, 0.0, 1.0], side.shape)
+    return np.stack([side, np.cross(side, up), up], axis=-2)
+
+
 def heading_frame(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
     """Rows (side, fwd, up) of the pelvis heading frame from the hip joints, shape (3, 3)."""
-    side = np.asarray(left_hip, float) - np.asarray(right_hip, float)
-    side[2] = 0.0
-    side /= max(float(np.linalg.norm(side)), 1e-9)
-    up = np.array([0.0, 0.0, 1.0])
-    return np.stack([side, np.cross(side, up), up])
+    return heading_frames(left_hip, right_hip)
+
+
+#: a joint's error above this (m) counts as a stretch of the joint lost, not scatter (``decompose``)
+LOST_M = 0.15
+
+
+def decompose(pred: np.ndarray, truth: np.ndarray, names) -> dict:
+    """Per-joint error of ``pred`` against ``truth`` (both (n, J, 3), m; NaN rows without a pose) taken
+    apart in the truth's pelvis heading frame (side, fwd, up; ``names`` holds ``left_hip`` and
+    ``right_hip``), over the posed frames.
+
+    Returns ``{"joints": {name: {error, offset_side, offset_fwd, offset_up, offset, rest, lost}},
+    "torso": {...}, "frames": n_posed}`` in mm and degrees: ``offset*`` is the mean error vector (a
+    constant offset, i.e. two joint definitions that differ), ``rest`` the mean distance of the error
+    from it (what tracking adds), ``lost`` the part of the mean error from frames whose error exceeds
+    ``LOST_M``. ``torso``: the trunk's yaw (hip line), forward and sideways lean (pelvis -> neck) and
+    the pelvis height, fit minus truth, as ``*_mean`` (signed) and ``*_abs`` (mean magnitude)."""
+    names = list(names)
+    posed = np.isfinite(pred).all(axis=(1, 2))
+    if not posed.any():
+        return {"joints": {}, "torso": {}, "frames": 0}
+    p, t = np.asarray(pred, float)[posed], np.asarray(truth, float)[posed]
+    li, ri, pi, ni = (names.index(j) for j in ("left_hip", "right_hip", "pelvis", "neck"))
+    B = heading_frames(t[:, li], t[:, ri])  # (n, 3, 3)
+    local = np.einsum("nij,nkj->nki", B, p - t)  # (n, J, 3)
+    mean = local.mean(axis=0)
+    err = np.linalg.norm(local, axis=-1)
+    rest = np.linalg.norm(local - mean, axis=-1).mean(axis=0)
+    lost = np.where(err > LOST_M, err, 0.0).mean(axis=0)
+    joints = {j: {"error": round(1e3 * float(err[:, k].mean()), 1), "offset_side": round(1e3 * float(mean[k, 0]), 1),
+                  "offset_fwd": round(1e3 * float(mean[k, 1]), 1), "offset_up": round(1e3 * float(mean[k, 2]), 1),
+                  "offset": round(1e3 * float(np.linalg.norm(mean[k])), 1), "rest": round(1e3 * float(rest[k]), 1),
+                  "lost": round(1e3 * float(lost[k]), 1)} for k, j in enumerate(names)}
+
+    def yaw(left, right):
+        d = left - right
+        return np.arctan2(d[:, 1], d[:, 0])
+
+    def lean(x):  # pelvis -> neck in the truth's heading frame: (forward, sideways) lean, rad
+        a = np.einsum("nij,nj->ni", B, x[:, ni] - x[:, pi])
+        return np.arctan2(a[:, 1], a[:, 2]), np.arctan2(a[:, 0], a[:, 2])
+
+    d_yaw = np.angle(np.exp(1j * (yaw(p[:, li], p[:, ri]) - yaw(t[:, li], t[:, ri]))))
+    (fp, sp), (ft, st) = lean(p), lean(t)
+    torso = {}
+    for key, v, unit in (("yaw_deg", d_yaw, np.degrees(1.0)), ("lean_fwd_deg", fp - ft, np.degrees(1.0)),
+                         ("lean_side_deg", sp - st, np.degrees(1.0)), ("pelvis_up_mm", local[:, pi, 2], 1e3)):
+        torso[f"{key}_mean"] = round(float(unit * v.mean()), 2)
+        torso[f"{key}_abs"] = round(float(unit * np.abs(v).mean()), 2)
+    return {"joints": joints, "torso": torso, "frames": int(posed.sum())}
 
 
 def offsets(reference: list[dict], poses: list[dict]) -> dict:
