@@ -8,10 +8,12 @@ as the live fitter sets it (no limb check, no RMS-jump IoU, one of its effort le
 over the frames by gaps drawn (seeded) from ``--gaps``, twice round the clip.  A loss is a set that
 is not ok after an ok one; three sets later the tracker is put back on the ground truth (what a
 successful rejoin does), so each loss is counted on its own.  Per ``--velocity-damping`` value
-(``TrackerOptions.velocity_damping``) it prints the losses, the ok share, the mean joint error
-against the truth and the fit's CPU per set.
+(``TrackerOptions.velocity_damping``) and ``--restart-step`` value (``TrackerOptions.restart_step``;
+``none``: off) it prints the losses, the ok share, the mean joint error against the truth, the fit's
+CPU per set and the fits from the last pose (``restarts``, of them ``taken``).
 
-    python bench/live_gaps.py [--gaps 1,2,2,3] [--seeds 4] [--effort 0] [--velocity-damping 1,0.5] [--json]
+    python bench/live_gaps.py [--gaps 1,2,2,3] [--seeds 4] [--effort 0] [--velocity-damping 1,0.5]
+                              [--restart-step none,0.1] [--json]
 """
 
 from __future__ import annotations
@@ -53,14 +55,16 @@ def segmented(root: Path):
     return session, truth, frames
 
 
-def replay(model, cameras, truth, frames, *, gaps, seed: int, effort: int, damping: float) -> dict:
-    """One replay (module docstring): losses, ok sets, mean joint error (mm), fit CPU per set (ms)."""
+def replay(model, cameras, truth, frames, *, gaps, seed: int, effort: int, damping: float,
+           restart_step: float | None = None) -> dict:
+    """One replay (module docstring): losses, ok sets, mean joint error (mm), fit CPU per set (ms),
+    fits from the last pose and of those the ones kept."""
     rng = np.random.default_rng(seed)
     tr = Tracker(model, cameras, initial_params=np.asarray(truth[0]["params"]), clock=time.process_time)
     tr.recover = False
     level = EFFORT_LEVELS[effort]
     tr.options = replace(tr.options, iou_rms_jump=None, limb_every=0, velocity_damping=damping,
-                         n_samples=level.n_samples, max_iterations=level.max_iterations,
+                         restart_step=restart_step, n_samples=level.n_samples, max_iterations=level.max_iterations,
                          reverse_samples=level.reverse_samples)
     order = list(range(len(frames))) * 2
     pos, sets, ok_sets, cpu, errors, losses, reset_at, last_ok = 0, 0, 0, 0.0, [], [], None, True
@@ -87,7 +91,8 @@ def replay(model, cameras, truth, frames, *, gaps, seed: int, effort: int, dampi
         last_ok = ok
         pos += int(rng.choice(gaps))
     return {"sets": sets, "ok": ok_sets, "losses": len(losses), "loss_frames": losses,
-            "mean_joint_error_mm": 1e3 * float(np.mean(errors)), "fit_cpu_ms_per_set": 1e3 * cpu / sets}
+            "mean_joint_error_mm": 1e3 * float(np.mean(errors)), "fit_cpu_ms_per_set": 1e3 * cpu / sets,
+            "restarts": tr.n_restarts, "restarts_taken": tr.n_restarts_taken}
 
 
 def main(argv=None) -> int:
@@ -98,6 +103,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--effort", type=int, default=0, choices=range(len(EFFORT_LEVELS)))
     ap.add_argument("--velocity-damping", default="1,0.5", help="values compared")
+    ap.add_argument("--restart-step", default="none", help="TrackerOptions.restart_step values compared (none: off)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)
@@ -106,21 +112,24 @@ def main(argv=None) -> int:
     session, truth, frames = segmented(root)
     model, cameras = session_model(session, "knossow40"), list(session.calibration)
     gaps = [int(g) for g in args.gaps.split(",")]
+    restarts = [None if v.strip().lower() == "none" else float(v) for v in args.restart_step.split(",")]
     result = {"machine_ref_ms": ref, "session": str(root), "gaps": gaps, "seeds": args.seeds, "effort": args.effort,
               "reset_after_sets": RESET_AFTER, "damping": {}}
-    for d in (float(v) for v in args.velocity_damping.split(",")):
-        runs = [replay(model, cameras, truth, frames, gaps=gaps, seed=s, effort=args.effort, damping=d)
-                for s in range(args.seeds)]
-        tot = {k: sum(r[k] for r in runs) for k in ("sets", "ok", "losses")}
+    for d, step in ((float(v), r) for v in args.velocity_damping.split(",") for r in restarts):
+        runs = [replay(model, cameras, truth, frames, gaps=gaps, seed=s, effort=args.effort, damping=d,
+                       restart_step=step) for s in range(args.seeds)]
+        tot = {k: sum(r[k] for r in runs) for k in ("sets", "ok", "losses", "restarts", "restarts_taken")}
         tot["ok_percent"] = 100.0 * tot["ok"] / tot["sets"]
         tot["mean_joint_error_mm"] = float(np.mean([r["mean_joint_error_mm"] for r in runs]))
         tot["fit_cpu_ms_per_set"] = float(np.mean([r["fit_cpu_ms_per_set"] for r in runs]))
         tot["fit_cpu_per_set_over_machine_ref"] = tot["fit_cpu_ms_per_set"] / ref
         tot["loss_frames"] = [r["loss_frames"] for r in runs]
-        result["damping"][f"{d:g}"] = tot
+        key = f"{d:g}" if restarts == [None] else f"{d:g} restart {'none' if step is None else f'{step:g}'}"
+        result["damping"][key] = tot
         if not args.json:
-            print(f"damping {d:g}: losses {tot['losses']:3d}  ok {tot['ok_percent']:5.1f} %  "
-                  f"error {tot['mean_joint_error_mm']:5.1f} mm  fit CPU {tot['fit_cpu_ms_per_set']:5.1f} ms/set")
+            print(f"damping {key}: losses {tot['losses']:3d}  ok {tot['ok_percent']:5.1f} %  "
+                  f"error {tot['mean_joint_error_mm']:5.1f} mm  fit CPU {tot['fit_cpu_ms_per_set']:5.1f} ms/set  "
+                  f"restarts {tot['restarts']} ({tot['restarts_taken']} taken)")
     if args.json:
         print(json.dumps(result))
     else:

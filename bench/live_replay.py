@@ -11,7 +11,8 @@ frames.  ``--catch-up N`` sets how many sets a search's pose is brought forward 
 (``LiveTrackerFitter.catch_up_sets``; 0: none), ``--start`` the first frame id, ``--rejoin-headings`` the cheap rejoin's headings per seed.  The fitter's clock is the thread's CPU time, so
 ``rejoin_cpu_ms`` lists the CPU of each rejoin run in a set's time (``rejoin_ok``: how many of those
 sets ended ok).  ``--old-recovery`` turns off the cheap rejoin at once (``rejoin_spacing`` -1) for A/B
-runs on one tree.
+runs on one tree; ``--restart-step`` sets ``LiveTrackerFitter(restart_step=)`` (``none``: off; the fits from the
+last pose are counted in ``restarts`` / ``restarts_taken``).
 
     python bench/live_replay.py [--json] [--sets 180] [--gaps 1 2 3 2,1,3] [--search-sets default=15,rejoin=3]
 """
@@ -68,6 +69,8 @@ def main() -> None:
     ap.add_argument("--start", type=int, default=0, help="first frame id of the schedules")
     ap.add_argument("--rejoin-headings", type=int, default=None,
                     help="LiveTrackerFitter rejoin_headings (default: its own)")
+    ap.add_argument("--restart-step", default=None,
+                    help="LiveTrackerFitter restart_step, a fraction of height or 'none' (default: its own)")
     args = ap.parse_args()
     ref = machine_ref_ms()
     root = args.session or demo_session(DemoOptions(cache_dir=args.cache_dir), progress=lambda m: None)
@@ -81,6 +84,8 @@ def main() -> None:
             extra["catch_up_sets"] = args.catch_up
         if args.rejoin_headings is not None:
             extra["rejoin_headings"] = args.rejoin_headings
+        if args.restart_step is not None:
+            extra["restart_step"] = None if args.restart_step.lower() == "none" else float(args.restart_step)
         # the fitter's clock is the thread's CPU: a record's fit_ms / rejoin_ms are CPU, not wall
         fitter = LiveTrackerFitter.from_session(clip.session, search_runner=runner, clock=time.thread_time, **extra)
         c0 = time.process_time()
@@ -95,6 +100,7 @@ def main() -> None:
                "held_sets": [s for _, s in runner.held],
                "rejoin_cpu_ms": [round(r["rejoin_ms"], 1) for r in rep.records if "rejoin_ms" in r],
                "rejoin_ok": sum(bool(r.get("ok")) for r in rep.records if "rejoin_ms" in r),
+               "restarts": fitter.tracker.n_restarts, "restarts_taken": fitter.tracker.n_restarts_taken,
                "roi_sets": rep.roi_sets, "cpu_ms_per_set": 1e3 * cpu / max(1, len(rep.records)),
                "bad_clip_frames": [int(r["frame"]) % clip.n_frames for r in rep.records if not r.get("ok")]}
         runs.append(run)
@@ -106,7 +112,8 @@ def main() -> None:
                   f"({run['rejoin_ok']} ok, {sum(run['rejoin_cpu_ms']):.0f} ms CPU); bad clip frames {run['bad_clip_frames']}", flush=True)
     out = {"machine_ref_ms": ref, "search_sets": args.search_sets, "sets_per_cpu_s": args.sets_per_cpu_s,
            "old_recovery": args.old_recovery, "catch_up": args.catch_up, "start": args.start,
-           "rejoin_headings": args.rejoin_headings, "rois": not args.no_rois, "runs": runs}
+           "rejoin_headings": args.rejoin_headings, "restart_step": args.restart_step, "rois": not args.no_rois,
+           "runs": runs}
     if args.json:
         print(json.dumps(out, indent=1))
     else:

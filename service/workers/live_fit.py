@@ -69,6 +69,10 @@ LIVE_VELOCITY_DAMPING = 1.0
 """The live tracker's ``TrackerOptions.velocity_damping`` (1: the full constant-velocity step across
 the live frame gaps; why less was not adopted: docs/performance.md, "A damped prediction live")."""
 
+LIVE_RESTART_STEP = None
+"""The live tracker's ``TrackerOptions.restart_step`` (None: off; 0.1 measured on the replays, not on by
+default: docs/performance.md, "Round 12")."""
+
 REJOIN_ACCEPT_IOU = None
 """Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
 ``TrackerOptions.min_iou``; docs/performance.md compares stricter ones)."""
@@ -176,9 +180,9 @@ class LiveTrackerFitter(TrackerFitter):
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
         a search runs only on a set with silhouettes from this fraction of the cameras.
-    catch_up_sets, velocity_damping : int, float
+    catch_up_sets, velocity_damping, restart_step : int, float, float or None
         Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none);
-        the tracker's ``TrackerOptions.velocity_damping`` live (:data:`LIVE_VELOCITY_DAMPING`).
+        ``TrackerOptions`` fields live (:data:`LIVE_VELOCITY_DAMPING`, :data:`LIVE_RESTART_STEP`).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -187,7 +191,8 @@ class LiveTrackerFitter(TrackerFitter):
                  rejoin_spacing: int = 5, rejoin_accept_iou: float | None = REJOIN_ACCEPT_IOU,
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
                  initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8,
-                 velocity_damping: float = LIVE_VELOCITY_DAMPING) -> None:
+                 velocity_damping: float = LIVE_VELOCITY_DAMPING,
+                 restart_step: float | None = LIVE_RESTART_STEP) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -196,6 +201,7 @@ class LiveTrackerFitter(TrackerFitter):
         # doubled the demo's fitting CPU per set (docs/performance.md)
         opts = tracker.options
         tracker.options = replace(opts, iou_rms_jump=None, limb_every=0, velocity_damping=float(velocity_damping),
+                                  restart_step=None if restart_step is None else float(restart_step),
                                   initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
                                   recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
                                                          keep=int(recover_keep)))

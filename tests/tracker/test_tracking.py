@@ -142,6 +142,41 @@ def test_constant_velocity_prediction_and_bad_arguments(cameras):
         Tracker(model, cameras, initial_params=np.zeros(3))
 
 
+def test_an_overshooting_prediction_is_fitted_from_the_last_pose_too(cameras):
+    """The body stops dead while the constant-velocity prediction carries on by a large last step
+    (up to 25° per joint, 15 cm at the root): with ``restart_step`` the frame is fitted from the
+    last pose too and the fit of lower cost is kept (here the one from the last pose, on the truth);
+    a small step is not fitted twice."""
+    from tracker.fitting.tracking import fit_frame
+
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=1.0)
+    model, truth = rt.model, rt.params[0]
+    chamfer, sils = render_chamfer(model, truth, cameras)
+    jc_true = joint_centre_array(model, forward(model, truth))
+
+    def run(previous, step):
+        tr = Tracker(model, cameras, initial_params=truth, options=TrackerOptions(restart_step=step))
+        tr.previous, tr._frames = previous, (0, 1)
+        start = tr.predict(2)
+        rec = tr.step(2, 2, chamfer, silhouettes=sils)
+        mm = 1e3 * np.linalg.norm(joint_centre_array(model, forward(model, np.asarray(rec["params"]))) - jc_true,
+                                  axis=1).mean()
+        return tr, rec, mm, start
+
+    previous = perturb(model, truth, np.random.default_rng(5), deg=25.0, root_m=0.15)
+    off, rec_off, mm_off, start = run(previous, None)
+    on, rec_on, mm_on, _ = run(previous, 0.1)
+    assert off.n_restarts == 0 and (on.n_restarts, on.n_restarts_taken) == (1, 1)
+    # the kept fit is the cheaper of the two starts' fits, each as fit_frame gives it
+    costs = [fit_frame(model, cameras, chamfer, s, prediction=truth, options=on.options)[0].cost
+             for s in (start, truth)]
+    assert on.last_result.cost == pytest.approx(min(costs)) and costs[1] < costs[0]
+    assert off.last_result.cost == pytest.approx(costs[0])
+    assert rec_on["ok"] and mm_on < 5.0 and mm_off > 2 * mm_on, (mm_on, mm_off)
+    small, rec_small, mm_small, _ = run(perturb(model, truth, np.random.default_rng(6), deg=1.0, root_m=0.005), 0.1)
+    assert small.n_restarts == 0 and rec_small["ok"] and mm_small < 5.0
+
+
 def test_lost_track_recovers_from_the_silhouettes(cameras):
     """A jump the local fit cannot follow (the subject turned 90° and stepped 0.8 m between two
     frames): bad frames are reported ``ok: false`` and, after ``patience`` of them, the pose is

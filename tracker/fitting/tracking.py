@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from capture.camera import Camera
-from tracker.body.kinematics import joint_centre_array
+from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
 from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
@@ -62,8 +62,8 @@ class TrackerOptions:
         The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
     palm_length
         The hands' length of the body the tracker fits (``palm_model``; None: the model's).
-    constant_velocity, velocity_damping
-        Start each fit from the constant-velocity extrapolation, taking that fraction of its step.
+    constant_velocity, velocity_damping, restart_step
+        Start from the constant-velocity extrapolation (that fraction of its step), and the last pose.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
         Quality limits of a good frame (a worse frame is reported ``ok: false``).
     iou_every, iou_check_coverage, iou_rms_jump
@@ -122,6 +122,11 @@ class TrackerOptions:
     #: fraction of the constant-velocity step the prediction takes (1: all of it; the live fitter's is
     #: ``service.workers.live_fit.LIVE_VELOCITY_DAMPING``)
     velocity_damping: float = 1.0
+    #: a second start: when the prediction moves some joint centre more than ``restart_step`` × the
+    #: body's height from the last fitted pose, or the fit from it is suspect (``Tracker._suspect``), the
+    #: frame is fitted from the last fitted pose too and the fit of lower ``SolverResult.cost`` is kept
+    #: (None: off; the live fitter's is ``service.workers.live_fit.LIVE_RESTART_STEP``)
+    restart_step: float | None = None
     #: the RMS limit of a good frame is ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median
     #: RMS of the last rms_window good frames))``: the RMS level is set by the segmentation (shadows,
     #: missing edges), not by the pose, px
@@ -365,8 +370,8 @@ class Tracker:
     params : (n_params,) the last fitted pose (None before initialisation)
     last_good : (n_params,) the last pose of a good frame
     last_result : SolverResult of the last fit
-    n_initialisations, n_front_back_checks, n_turned, n_limb_checks, n_limb_switches : searches from
-        the silhouettes, front/back checks, mirrors taken, limb checks, limb hypotheses taken
+    n_initialisations, n_front_back_checks, n_turned, n_limb_checks, n_limb_switches, n_restarts, n_restarts_taken :
+        searches, front/back checks, mirrors and limbs taken, fits from the last pose too and those kept
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], *, sliding: bool = True, solver: str = "lm",
@@ -403,6 +408,7 @@ class Tracker:
         self.n_limb_checks = 0
         self.n_limb_switches = 0
         self.n_turned = 0
+        self.n_restarts = self.n_restarts_taken = 0
         self._last_bad = False
         self.params: np.ndarray | None = None
         self.previous: np.ndarray | None = None
@@ -468,6 +474,29 @@ class Tracker:
                               solver=self.solver, options=self.options, penalty=self.penalty)
         terms = cost.evaluate(np.asarray(res.params))
         return res, terms, terms.rms_px(), terms.inside_fraction()
+
+    def _restart_due(self, start: np.ndarray, terms) -> bool:
+        """Whether the frame is fitted from the last fitted pose too (``TrackerOptions.restart_step``):
+        ``start`` (the prediction) moves a joint centre more than ``restart_step`` × height from
+        ``params``, or the fit from it (``terms``) is suspect."""
+        step = self.options.restart_step
+        if step is None or self.params is None or start is self.params or np.array_equal(start, self.params):
+            return False
+        if self._suspect(terms):
+            return True
+        moved = (joint_centre_array(self.model, forward(self.model, np.asarray(start)))
+                 - joint_centre_array(self.model, forward(self.model, self.params)))
+        return bool(np.max(np.einsum("ij,ij->i", moved, moved)) > (step * self.model.height_m) ** 2)
+
+    def _restart(self, cams, chs, res, terms, rms, inside):
+        """The fit from the last fitted pose, when its cost is lower than ``res``'s (the fit from the
+        prediction): ``(res, terms, rms, inside)`` of the one kept."""
+        self.n_restarts += 1
+        res2, terms2, rms2, inside2 = self._fit(cams, chs, self.params)
+        if not res2.cost < res.cost:
+            return res, terms, rms, inside
+        self.n_restarts_taken += 1
+        return res2, terms2, rms2, inside2
 
     def rms_limit(self) -> float:
         """RMS (pixels) above which the current frame is bad (``TrackerOptions.max_rms_px``)."""
@@ -715,6 +744,8 @@ class Tracker:
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
         res, terms, rms, inside = self._fit(cams, chs, start)
+        if self._restart_due(start, terms):
+            res, terms, rms, inside = self._restart(cams, chs, res, terms, rms, inside)
         built: list = []
 
         def score_views() -> ScoreViews:
