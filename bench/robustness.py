@@ -262,6 +262,7 @@ def calibrate_clip(session, backgrounds, *, frames: int, samples: int) -> tuple:
     if res is not None:
         info.update({"held_out_iou": [res.iou_current, res.iou_calibrated], "frames_fitted": list(res.fit_frames),
                      "frames_held_out": list(res.held_out_frames), "fit_cpu_s": res.cpu_s,
+                     "held_out_ious": [list(v) for v in res.held_out_ious],
                      "segment_lengths_m": res.fit.segment_lengths, "widths_m": res.fit.widths,
                      "radius_scale": res.fit.radius_scale})
     info["cpu_s"] = time.process_time() - c0
