@@ -247,7 +247,7 @@ def _exchanged(pred: np.ndarray, truth: np.ndarray) -> list[str]:
 
 def calibrate_clip(session, backgrounds, *, frames: int, samples: int) -> tuple:
     """The subject calibrated as ``contourcap track --calibrate-subject 0:FRAMES --calibrate-samples
-    SAMPLES`` does (``service.commands.calibrate_subject.auto_calibrate``: the window cut to the
+    SAMPLES [--floor-test]`` does (``service.commands.calibrate_subject.auto_calibrate``: the window cut to the
     clip, its second half tracked by the scene tracker, ``samples`` trusted frame sets spread in time
     and pose, a third held out, the body adopted only when it explains those better), with the
     clip's learned background models.  Nothing of the truth is used.  Returns (the adopted BodyModel
@@ -257,7 +257,8 @@ def calibrate_clip(session, backgrounds, *, frames: int, samples: int) -> tuple:
     names = list(session.camera_names)
     window = within_take(session, names, range(0, frames))
     options = AutoSubjectOptions.for_sample(samples, span=len(window), offers_per_set=1)
-    res = auto_calibrate(session, names, window, session_model(session, MODEL[0]), options, backgrounds=backgrounds)
+    res = auto_calibrate(session, names, window, session_model(session, MODEL[0]), options, backgrounds=backgrounds,
+                         segmentation=TRACK_OPTIONS.get("segmentation"))
     info = {"window": [window.start, window.stop], "adopted": bool(res is not None and res.adopted)}
     if res is not None:
         info.update({"held_out_iou": [res.iou_current, res.iou_calibrated], "frames_fitted": list(res.fit_frames),

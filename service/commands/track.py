@@ -173,7 +173,8 @@ def _calibrated(session, args, model, cameras):
     if not 3 <= args.calibrate_samples <= 64:
         raise SessionError(f"--calibrate-samples: expected 3..64, got {args.calibrate_samples}")
     options = AutoSubjectOptions.for_sample(args.calibrate_samples, span=len(frames), offers_per_set=1)
-    res = auto_calibrate(session, names, frames, model, options, quiet=False)
+    res = auto_calibrate(session, names, frames, model, options, quiet=False,
+                         segmentation=SegmentationParams(floor_test=args.floor_test))
     cpu = time.process_time() - c0
     if res is None:
         print(f"contourcap track: subject not calibrated: no trusted fits in frames {args.calibrate_subject} "
