@@ -75,14 +75,15 @@ def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOpt
     a range past the take's end is cut to the take, so that its second half is the take's)
     sampled (``tracker.fitting.subject_auto.SubjectSample``, at most ``options.frames`` sets spread in
     time and pose), a subject fitted to them and judged on the held-out ones (``calibrate_sample``:
-    check ``adopted``); None when fewer than two sets could be sampled.  ``backgrounds``,
-    ``segmentation``: as :func:`track_range`'s."""
+    check ``adopted``); None when fewer than ``options.frames`` sets could be sampled (as the live
+    calibration, which starts only on a full sample: a body fitted to a few sets of nearly one pose
+    explains their pose errors too).  ``backgrounds``, ``segmentation``: as :func:`track_range`'s."""
     frames = within_take(session, names, frames)
     sample = SubjectSample(model, options.frames, options.min_gap)
     fitted = track_range(session, names, frames, model,
                          lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet,
                          backgrounds=backgrounds, segmentation=segmentation)
-    if len(sample) < 2:
+    if len(sample) < max(2, int(options.frames)):
         return None
     first, last = frames.start, frames.stop
     return calibrate_sample(fitted, [session.camera_model(n) for n in names], sample.sets(), options,
