@@ -39,13 +39,14 @@ machine); quote them as ratios to ``machine_ref_ms``.
 
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
-                               [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--calibrate 30]
+                               [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--calibrate 100]
                                [--out result.json]
 
-``--calibrate N``: per clip, the subject is also calibrated from the height-only track's first N
-frames (``calibrate_clip``: its ok fits and segmented silhouettes, never the truth) and the clip
-is tracked again with that body; the summary gives both (``mpjpe_mm_mean_height_only`` and the
-``*_calibrated`` figures, per-joint means ``joint_mm_height_only`` / ``joint_mm_calibrated``).
+``--calibrate N``: per clip, the subject is also calibrated as ``contourcap track --calibrate-subject
+0:N`` does (``calibrate_clip``: the product's sampling, fit and held-out check; never the truth); an
+adopted body tracks the clip again, a body not adopted leaves the height-only track standing; the
+summary gives both (``mpjpe_mm_mean_height_only`` and the ``*_calibrated`` figures, per-joint means
+``joint_mm_height_only`` / ``joint_mm_calibrated``, ``calibration_adopted_percent``).
 """
 
 from __future__ import annotations
@@ -77,10 +78,10 @@ from subject_frame_offsets import decompose  # noqa: E402
 from segmentation.background import BackgroundModel  # noqa: E402
 from segmentation.pipeline import SegmentationParams, segment_frame  # noqa: E402
 from tracker.synthetic.bvh import load_bvh  # noqa: E402
-from tracker.body.model import load_model  # noqa: E402
-from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths  # noqa: E402
+from service.commands.calibrate_subject import auto_calibrate, within_take  # noqa: E402
+from tracker.fitting.subject_auto import AutoSubjectOptions  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
-from service.offline import floor_test, track_session  # noqa: E402
+from service.offline import floor_test, session_model, track_session  # noqa: E402
 from tracker.fitting.tracking import TrackerOptions  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
@@ -276,58 +277,43 @@ def _exchanged(pred: np.ndarray, truth: np.ndarray) -> list[str]:
     return out
 
 
-def calibrate_clip(root: Path, session, backgrounds, records: list, *, frames: int, samples: int) -> tuple:
-    """The subject calibrated from the height-only track's first ``frames`` frames: up to ``samples``
-    ok fits spread over them (none ok: those with a silhouette IoU of at least
-    ``CALIBRATION_MIN_IOU``), with their segmented silhouettes (the same segmentation as the
-    tracker's), handed to ``tracker.fitting.subject_size.estimate_segment_lengths`` with every
-    width and radius group.  Nothing of the truth is used.  Returns (BodyModel or None, info dict)."""
+def calibrate_clip(session, backgrounds, *, frames: int, samples: int) -> tuple:
+    """The subject calibrated as ``contourcap track --calibrate-subject 0:FRAMES --calibrate-samples
+    SAMPLES [--floor-test]`` does (``service.commands.calibrate_subject.auto_calibrate``: the window cut to the
+    clip, its second half tracked by the scene tracker, ``samples`` trusted frame sets spread in time
+    and pose, a third held out, the body adopted only when it explains those better), with the
+    clip's learned background models.  Nothing of the truth is used.  Returns (the adopted BodyModel
+    or None, info dict: adopted, held-out IoU before/after, frames fitted/held out, CPU seconds of
+    the whole calibration and of the fit and judgement alone)."""
     c0 = time.process_time()
-    first = [r for r in records if r["frame"] < frames and r.get("params") is not None]
-    good = [r for r in first if r.get("ok")]
-    if not good:  # a body far from the model fails the gate everywhere: its best-explained fits
-        good = [r for r in first if (r.get("iou") or 0.0) >= CALIBRATION_MIN_IOU]
-    if not good:
-        return None, {"frames_used": 0, "cpu_s": time.process_time() - c0}
-    pick = [good[int(i)] for i in np.unique(np.linspace(0, len(good) - 1, samples).round().astype(int))]
     names = list(session.camera_names)
-    cams = [session.camera_model(n) for n in names]
-    floor = floor_test(cams, backgrounds, TRACK_OPTIONS.get("segmentation"))
-    sils = []
-    for rec in pick:
-        images = {n: cv2.imread(str(root / n / f"{rec['frame']:06d}.jpg"), cv2.IMREAD_COLOR) for n in names}
-        sils.append({n: segment_frame(backgrounds[n], img, params=TRACK_OPTIONS.get("segmentation"),
-                                      floor=None if floor is None else floor.for_camera(n, images)).silhouette > 0
-                     for n, img in images.items()})
-    model = load_model(MODEL[0], height_m=session.height_m)
-    fit = estimate_segment_lengths(model, cams, [np.asarray(r["params"], float) for r in pick], sils,
-                                   widths=WIDTH_ORDER, radii=RADIUS_ORDER, **CALIBRATION)
-    info = {"frames_used": len(pick), "iou_before": fit.iou_before, "iou_after": fit.iou_after,
-            "segment_lengths_m": fit.segment_lengths, "widths_m": fit.widths, "radius_scale": fit.radius_scale,
-            "cpu_s": time.process_time() - c0}
-    return fit.model, info
+    window = within_take(session, names, range(0, frames))
+    options = AutoSubjectOptions.for_sample(samples, span=len(window), offers_per_set=1)
+    res = auto_calibrate(session, names, window, session_model(session, MODEL[0]), options, backgrounds=backgrounds,
+                         segmentation=TRACK_OPTIONS.get("segmentation"))
+    info = {"window": [window.start, window.stop], "adopted": bool(res is not None and res.adopted)}
+    if res is not None:
+        info.update({"held_out_iou": [res.iou_current, res.iou_calibrated], "frames_fitted": list(res.fit_frames),
+                     "frames_held_out": list(res.held_out_frames), "fit_cpu_s": res.cpu_s,
+                     "held_out_ious": [list(v) for v in res.held_out_ious],
+                     "segment_lengths_m": res.fit.segment_lengths, "widths_m": res.fit.widths,
+                     "radius_scale": res.fit.radius_scale})
+    info["cpu_s"] = time.process_time() - c0
+    return (res.fit.model if info["adopted"] else None), info
 
 
 #: the body model tracked (``--model``: a bundled name or a model file)
 MODEL = ["knossow40"]
 
-#: the silhouette IoU a not-ok fit needs to be calibrated on when no fit of the first frames is ok
-CALIBRATION_MIN_IOU = 0.7
-
-#: ``estimate_segment_lengths`` settings of the benchmark's calibration (a coarser grid than the
-#: command's: 36 clips)
-CALIBRATION = {"rounds": 2, "step": 0.05, "polish_rounds": 3}
-
-
 def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
              ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours",
-             calibrate_frames: int = 0, calibrate_samples: int = 6) -> dict:
+             calibrate_frames: int = 0, calibrate_samples: int = 9) -> dict:
     """Render, track and score one clip; returns its per-clip record.
 
     ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
     much CPU time; the frames left are scored as not ok without a pose (``unprocessed``).
-    ``calibrate_frames`` > 0: also calibrate the subject from the first that many frames
-    (``calibrate_clip``) and track the whole clip again with the calibrated body (``"calibrated"``)."""
+    ``calibrate_frames`` > 0: also calibrate the subject on frames 0:that (``calibrate_clip``) and,
+    when adopted, track the whole clip again with the calibrated body (``"calibrated"``)."""
     t_clip = time.perf_counter()
     motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
     calibrated = None
@@ -337,11 +323,10 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         session = load_session(root)
         records, pipe_ms, pipe_cpu_ms, cpu_s = _track(session, backgrounds, method=method, budget_s=budget_s)
         if calibrate_frames > 0:
-            body, info = calibrate_clip(root, session, backgrounds, records, frames=calibrate_frames,
-                                        samples=calibrate_samples)
+            body, info = calibrate_clip(session, backgrounds, frames=calibrate_frames, samples=calibrate_samples)
             if body is not None:
                 rec_c, _, _, cpu_c = _track(session, backgrounds, method=method, budget_s=budget_s, model=body)
-            else:  # no ok fit to calibrate on: the height-only track stands
+            else:  # not adopted (or no trusted fit): the height-only track stands
                 rec_c, cpu_c = records, cpu_s
             score_c, joint_c, series_c = _score(rec_c, truth, fps)
             calibrated = {**score_c, "joint_mm": joint_c, "unprocessed": len(truth) - len(rec_c), "cpu_s": cpu_c,
@@ -385,6 +370,8 @@ def summarise(per_clip: list[dict]) -> dict:
         summary = {**summary, "mpjpe_mm_mean_height_only": summary["mpjpe_mm_mean"],
                    **{f"{k}_calibrated": v for k, v in cal_summary.items()},
                    "calibration_cpu_s_median": float(np.median([c["calibration"]["cpu_s"] for c in cal])),
+                   "calibration_adopted_percent": 100.0 * float(np.mean([bool(c["calibration"].get("adopted", True))
+                                                                         for c in cal])),
                    "joint_mm_height_only": _joint_means(per_clip), "joint_mm_calibrated": _joint_means(cal)}
     summary["error_parts"] = error_parts_means(per_clip)
     if cal:
@@ -450,13 +437,15 @@ def main(argv=None) -> int:
     ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
     ap.add_argument("--calibrate", type=int, default=0, metavar="FRAMES",
-                    help="also calibrate the subject (lengths, widths, radii) from the height-only track's first "
-                         "FRAMES frames and track each clip again with it: figures with the suffix _calibrated "
+                    help="also calibrate the subject (lengths, widths, radii) as contourcap track "
+                         "--calibrate-subject 0:FRAMES does (100: its default; cut to the clip) and track each "
+                         "clip again with it when adopted: figures with the suffix _calibrated "
                          "beside the height-only ones (0: off)")
     ap.add_argument("--model", default="knossow40",
                     help="body model: a bundled name or a model TOML file (sized by each clip's height; "
                          "--calibrate needs a bundled one)")
-    ap.add_argument("--calibrate-samples", type=int, default=6, help="frame sets the calibration fits (default 6)")
+    ap.add_argument("--calibrate-samples", type=int, default=9,
+                    help="frame sets the calibration samples, a third held out (default 9, as contourcap track's)")
     ap.add_argument("--blob-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a tracker.blobs.BlobOptions field for --method blobs (e.g. colour_weight=2); repeatable")
     ap.add_argument("--out", type=Path, default=None, help="also write the JSON result here")
@@ -523,12 +512,19 @@ def main(argv=None) -> int:
                       f"{rec['ms_per_frame_median']:.0f} ms/frame  {rec['cpu_s']:.0f} s CPU  unprocessed "
                       f"{rec['unprocessed']}" + (f"  calibrated: MPJPE {rec['calibrated']['mpjpe_mm'] or float('nan'):7.1f} mm "
                                                  f"ok {rec['calibrated']['ok']:3d}  calibration "
-                                                 f"{rec['calibrated']['calibration']['cpu_s']:.0f} s CPU"
+                                                 f"{_calibration_text(rec['calibrated']['calibration'])}"
                                                  if "calibrated" in rec else ""),
                       flush=True, file=sys.stderr if args.json else sys.stdout)
     result = {"method": args.method, "subject_ids": subjects, **summarise(per_clip), **header, "wall_s": time.perf_counter() - t_start,
               "per_clip": per_clip}
     return _emit(result, args)
+
+
+def _calibration_text(info: dict) -> str:
+    """One line of a clip's calibration (``calibrate_clip``'s info): adopted or not, held-out IoU, CPU s."""
+    iou = info.get("held_out_iou")
+    held = "no trusted fits" if iou is None else f"held-out IoU {iou[0]:.3f} -> {iou[1]:.3f}"
+    return f"{'adopted' if info.get('adopted') else 'not adopted'} ({held}), {info['cpu_s']:.0f} s CPU"
 
 
 def _tracker_options(pairs, ap, base, flag: str = "--tracker-option"):

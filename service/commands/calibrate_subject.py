@@ -18,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.replay import iter_frame_sets, parse_frame_range
-from capture.session import SessionError, load_session
-from service.offline import background_models, session_model, session_props
+from capture.replay import count_frames, iter_frame_sets, parse_frame_range
+from capture.session import SessionError, image_frame_ids, load_session
+from segmentation.pipeline import SegmentationParams
+from service.offline import background_models, floor_test, session_model, session_props
 from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
 from tracker.fitting.scene import SceneOptions, SceneTracker
@@ -40,15 +41,21 @@ def add_subject_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress")
 
 
-def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = True):
+def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = True, backgrounds=None,
+                segmentation: SegmentationParams | None = None):
     """Track ``frames`` as ``contourcap track`` does (``SceneTracker``: clutter learned, the session's
     props, seated or standing start) and call ``on_fit(frame_id, record, silhouettes)`` for every
     fit of the range's second half (after the clutter is learned) the scene tracker trusts, with its
-    clutter-cut silhouettes (camera -> mask); returns the tracker's model (the start may resize it)."""
-    backgrounds, _ = background_models(session, names, frames=frames)
-    tracker = Tracker(model, [session.camera_model(n) for n in names])
+    clutter-cut silhouettes (camera -> mask); returns the tracker's model (the start may resize it).
+    ``backgrounds``: camera name -> BackgroundModel (None: ``service.offline.background_models``);
+    ``segmentation``: as the track's (its ``floor_test`` too: the silhouettes fitted are the track's)."""
+    if backgrounds is None:
+        backgrounds, _ = background_models(session, names, frames=frames)
+    cams = [session.camera_model(n) for n in names]
+    tracker = Tracker(model, cams)
     props = session_props(session)
-    st = SceneTracker(tracker, backgrounds, props=props)
+    st = SceneTracker(tracker, backgrounds, props=props, segmentation=segmentation,
+                      floor=floor_test(cams, backgrounds, segmentation))
     half = frames.start + len(frames) // 2
     for fid, group in iter_frame_sets(session, cameras=names, frames=frames):
         rec = st.step(fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
@@ -62,19 +69,39 @@ def track_range(session, names, frames: range, model, on_fit, *, quiet: bool = T
 
 
 def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOptions, *,
-                   quiet: bool = True) -> SampleCalibration | None:
-    """``contourcap track --calibrate-subject``: the trusted fits of ``frames`` (:func:`track_range`)
+                   quiet: bool = True, backgrounds=None,
+                   segmentation: SegmentationParams | None = None) -> SampleCalibration | None:
+    """``contourcap track --calibrate-subject``: the trusted fits of ``frames`` (:func:`track_range`;
+    a range past the take's end is cut to the take, so that its second half is the take's)
     sampled (``tracker.fitting.subject_auto.SubjectSample``, at most ``options.frames`` sets spread in
     time and pose), a subject fitted to them and judged on the held-out ones (``calibrate_sample``:
-    check ``adopted``); None when fewer than two sets could be sampled."""
+    check ``adopted``); None when fewer than ``options.frames`` sets could be sampled (as the live
+    calibration, which starts only on a full sample: a body fitted to a few sets of nearly one pose
+    explains their pose errors too).  ``backgrounds``, ``segmentation``: as :func:`track_range`'s."""
+    frames = within_take(session, names, frames)
     sample = SubjectSample(model, options.frames, options.min_gap)
     fitted = track_range(session, names, frames, model,
-                         lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet)
-    if len(sample) < 2:
+                         lambda fid, rec, sils: sample.offer(fid, rec["params"], sils), quiet=quiet,
+                         backgrounds=backgrounds, segmentation=segmentation)
+    if len(sample) < max(2, int(options.frames)):
         return None
     first, last = frames.start, frames.stop
     return calibrate_sample(fitted, [session.camera_model(n) for n in names], sample.sets(), options,
                             where=f"contourcap track --calibrate-subject, frames {first}:{last}")
+
+
+def within_take(session, names, frames: range) -> range:
+    """``frames`` cut to end after the last frame id of the take's first camera (image files present,
+    or a video's frame count); unchanged when that is unknown or the range holds none of the take."""
+    if not names:
+        return frames
+    cam = session.camera(names[0])
+    if cam.images is not None:
+        ids = image_frame_ids(cam.images)
+        end = int(ids.max()) + 1 if ids.size else None
+    else:
+        end = count_frames(session, names[0])
+    return frames if end is None or frames.stop <= end or frames.start >= end else range(frames.start, end)
 
 
 def run_subject(args: argparse.Namespace) -> int:

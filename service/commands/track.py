@@ -173,11 +173,12 @@ def _calibrated(session, args, model, cameras):
     if not 3 <= args.calibrate_samples <= 64:
         raise SessionError(f"--calibrate-samples: expected 3..64, got {args.calibrate_samples}")
     options = AutoSubjectOptions.for_sample(args.calibrate_samples, span=len(frames), offers_per_set=1)
-    res = auto_calibrate(session, names, frames, model, options, quiet=False)
+    res = auto_calibrate(session, names, frames, model, options, quiet=False,
+                         segmentation=SegmentationParams(floor_test=args.floor_test))
     cpu = time.process_time() - c0
     if res is None:
-        print(f"contourcap track: subject not calibrated: no trusted fits in frames {args.calibrate_subject} "
-              f"({cpu:.0f} s CPU); tracking with the model's proportions", file=sys.stderr)
+        print(f"contourcap track: subject not calibrated: fewer than {options.frames} trusted frame sets in frames "
+              f"{args.calibrate_subject} ({cpu:.0f} s CPU); tracking with the model's proportions", file=sys.stderr)
         return model, None
     info = {"adopted": res.adopted, "held_out_iou": [round(res.iou_current, 4), round(res.iou_calibrated, 4)],
             "frames_fitted": list(res.fit_frames), "frames_held_out": list(res.held_out_frames), "cpu_s": round(cpu, 1)}

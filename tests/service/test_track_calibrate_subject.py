@@ -41,3 +41,19 @@ def test_track_calibrates_the_subject_first(tmp_path, capsys):
                  str(tmp_path / "cal.subject.toml"), "--calibrate-subject"]) == 0
     assert "subject calibrated" not in capsys.readouterr().err
     assert all(r["subject"] == "cal.subject.toml" for r in read_jsonl(again))
+
+
+def test_calibration_window_is_cut_to_the_take(tmp_path):
+    """``--calibrate-subject``'s default 0:100 on a shorter take samples the take's second half."""
+    from capture.session import load_session
+    from service.commands.calibrate_subject import within_take
+    from service.synthetic_session import make_synthetic_session
+    from tracker.synthetic.synth import bundled_motion
+
+    make_synthetic_session(bundled_motion("scaled_131_03"), tmp_path / "s", cameras=2, size=(160, 120), frames=5,
+                           codec="png", n_background=1)
+    session = load_session(tmp_path / "s")
+    names = list(session.camera_names)
+    assert within_take(session, names, range(0, 100)) == range(0, 5)
+    assert within_take(session, names, range(2, 4)) == range(2, 4)
+    assert within_take(session, names, range(7, 9)) == range(7, 9)  # none of the take: left for the caller's error

@@ -7,7 +7,8 @@ import pytest
 
 from tracker.body.kinematics import forward
 from tracker.body.model import load_model
-from tracker.fitting.subject_auto import AutoSubjectOptions, SubjectSample, calibrate_sample, usable_record
+from tracker.fitting.subject_auto import (AutoSubjectOptions, SubjectSample, calibrate_sample, held_out_iou, held_out_ious,
+                                         usable_record)
 from tracker.fitting.subject_size import nominal_segment_lengths
 from tracker.imaging.render import render_silhouettes
 from tracker.synthetic.scene import ring_cameras
@@ -88,9 +89,22 @@ def test_a_better_body_is_adopted_and_the_right_one_kept():
     assert res.adopted and res.iou_calibrated > res.iou_current, res
     assert err < before, (err, before)  # measured (seed 5): 2.15 -> 1.70 cm
     assert len(res.held_out_frames) == 2 and not set(res.held_out_frames) & set(res.fit_frames)
+    per_set = np.array(res.held_out_ious)
+    assert per_set.shape == (2, 2) and np.allclose(per_set.mean(axis=0), [res.iou_current, res.iou_calibrated])
     # the tracker's body is the subject's: a calibration must not replace it with another
     same = calibrate_sample(model, cams, _rendered(model, rng, 5, cams), opts)
     assert not same.adopted, same
+
+
+def test_held_out_ious_per_set_average_to_the_mean():
+    rng = np.random.default_rng(3)
+    model = load_model("knossow40")
+    other = load_model("knossow40", segment_lengths={k: 1.1 * v for k, v in nominal_segment_lengths(model).items()})
+    cams = ring_cameras(3, size=(160, 120))
+    sets = _rendered(other, rng, 2, cams)
+    per_set = held_out_ious([model, other], cams, sets, scale=0.5, rounds=0)
+    assert per_set.shape == (2, 2) and np.all((per_set > 0) & (per_set <= 1))
+    assert np.allclose(per_set.mean(axis=0), held_out_iou([model, other], cams, sets, scale=0.5, rounds=0))
 
 
 def test_tracker_resize_keeps_the_pose_and_refuses_other_parameters():

@@ -30,12 +30,14 @@ def test_summary_gives_both_models_side_by_side():
         score_c, joints_c = _clip(rng, after, True)
         clips.append({**score, "subject": s, "joint_mm": joints, "ik_floor_mm": None, "unprocessed": 0,
                       "latencies_ms": [1.0], "pipeline_ms": [1.0],
-                      "calibrated": {**score_c, "joint_mm": joints_c, "calibration": {"cpu_s": 10.0 + s}}})
+                      "calibrated": {**score_c, "joint_mm": joints_c,
+                                     "calibration": {"cpu_s": 10.0 + s, "adopted": s == 1}}})
     out = summarise(clips)
     assert out["mpjpe_mm_mean_height_only"] == out["mpjpe_mm_mean"]
     assert np.isclose(out["mpjpe_mm_mean_height_only"], 80.0) and np.isclose(out["mpjpe_mm_mean_calibrated"], 40.0)
     assert np.isclose(out["mpjpe_mm_worst_clip_calibrated"], 50.0)
     assert out["joint_mm_height_only"]["left_knee"] == 80.0 and out["joint_mm_calibrated"]["head"] == 40.0
     assert out["calibration_cpu_s_median"] == 10.5
+    assert out["calibration_adopted_percent"] == 50.0
     assert "mpjpe_mm_mean_calibrated" not in summarise([{k: v for k, v in c.items() if k != "calibrated"}
                                                        for c in clips])

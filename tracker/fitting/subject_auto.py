@@ -30,7 +30,7 @@ from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
 __all__ = ["AutoSubjectOptions", "usable_record", "SubjectSample", "SampleCalibration", "calibrate_sample",
-           "held_out_iou"]
+           "held_out_iou", "held_out_ious"]
 
 
 @dataclass(frozen=True)
@@ -192,6 +192,8 @@ class SampleCalibration:
     fit_frames, held_out_frames : tuple of int
     cpu_s : float
         CPU seconds of the calling thread.
+    held_out_ious : tuple of (float, float)
+        Per held-out set (``held_out_frames`` order), its IoU with the current and the calibrated body.
     """
 
     subject: Subject
@@ -202,6 +204,7 @@ class SampleCalibration:
     fit_frames: tuple
     held_out_frames: tuple
     cpu_s: float
+    held_out_ious: tuple = ()
 
 
 def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
@@ -209,6 +212,12 @@ def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *
     """Mean silhouette IoU of each of ``models`` (same parameters, other sizes) over ``sets``
     (``(frame id, params, camera -> mask)``), each pose first polished to the model by ``rounds`` of
     ``polish_iou``; one list entry per model."""
+    return [float(v) for v in held_out_ious(models, cameras, sets, scale=scale, rounds=rounds).mean(axis=0)]
+
+
+def held_out_ious(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
+                  rounds: int) -> np.ndarray:
+    """:func:`held_out_iou` per set: ndarray ``(len(sets), len(models))``."""
     names = [c.name for c in cameras]
     ious = np.zeros((len(sets), len(models)))
     for i, (_, p, sils) in enumerate(sets):
@@ -217,7 +226,7 @@ def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *
             views = base if j == 0 else base.with_model(model)
             ious[i, j] = (polish_iou(model, views, p, steps=pose_steps(model, 0.5), rounds=rounds)[1] if rounds
                           else views.score(p))
-    return [float(v) for v in ious.mean(axis=0)]
+    return ious
 
 
 def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options: AutoSubjectOptions,
@@ -247,10 +256,12 @@ def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options:
     more = {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER} if options.widths_and_radii else {}
     fit = estimate_segment_lengths(model, cameras, [s[1] for s in fit_sets], [s[2] for s in fit_sets],
                                    rounds=int(options.rounds), scale=float(options.scale), **more)
-    before, after = held_out_iou([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds)
+    per_set = held_out_ious([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds)
+    before, after = (float(v) for v in per_set.mean(axis=0))
     adopted = after >= before + float(options.min_gain)
     subject = Subject(model.name, model.height_m, fit.segment_lengths,
                       f"{where}: {len(fit_sets)} frame sets fitted, held-out IoU {before:.3f} -> {after:.3f} "
                       f"on {len(held)}", fit.widths, fit.radius_scale)
     return SampleCalibration(subject, adopted, before, after, fit, tuple(s[0] for s in fit_sets),
-                             tuple(s[0] for s in held), time.thread_time() - c0)
+                             tuple(s[0] for s in held), time.thread_time() - c0,
+                             tuple((float(a), float(b)) for a, b in per_set))
