@@ -35,12 +35,10 @@ from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
 __all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
-           "WIDTH_ORDER", "RADIUS_ORDER", "HIP_HEIGHT", "hip_height_lengths", "knee_ankle_ratio"]
+           "WIDTH_ORDER", "RADIUS_ORDER"]
 
-#: The coupled candidate (not a model segment): see :func:`hip_height_lengths`.
-HIP_HEIGHT = "hip_height"
 #: Search order, trunk first.
-SEGMENT_ORDER = ("abdomen", "torso", "thigh", HIP_HEIGHT, "upper_arm", "shank", "forearm")
+SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
 #: Widths and radius groups, searched after the lengths in this order.
 WIDTH_ORDER = ("hip_width", "shoulder_width")
 RADIUS_ORDER = ("trunk_width", "trunk_depth", "thigh", "upper_arm", "shank", "forearm")
@@ -90,35 +88,6 @@ def nominal_widths(model: BodyModel) -> dict[str, float]:
             for name, parts in plain.width_parts.items()}
 
 
-def hip_height_lengths(lengths: Mapping[str, float], nominal: Mapping[str, float], a: float, *,
-                       shank_ratio: float = 1.0) -> dict[str, float]:
-    """The ``hip_height`` candidate: ``lengths`` with the thigh lengthened by d = (a - 1) × its nominal
-    length (metres) and d taken off the knee-to-ankle drop and the trunk (abdomen + torso, each in
-    proportion to its nominal length), the shank's share being nominal shank / (nominal shank +
-    nominal trunk).  ``shank_ratio`` is the model's knee-to-ankle distance per metre of shank length
-    (the shank length changes by its share / ``shank_ratio``).
-
-    Kept fixed: a standing body's sole-to-head height; the hip rises by the trunk's share of d, the
-    knee drops by the shank's.  ``lengths`` holds the current values (those missing taken from
-    ``nominal``); returns the four changed ones.
-    """
-    cur = {k: float(lengths.get(k, nominal[k])) for k in ("thigh", "shank", "abdomen", "torso")}
-    d = (float(a) - 1.0) * nominal["thigh"]
-    trunk = nominal["abdomen"] + nominal["torso"]
-    w_shank = nominal["shank"] / (nominal["shank"] + trunk)
-    return {"thigh": cur["thigh"] + d, "shank": cur["shank"] - w_shank * d / shank_ratio,
-            "abdomen": cur["abdomen"] - (1.0 - w_shank) * d * nominal["abdomen"] / trunk,
-            "torso": cur["torso"] - (1.0 - w_shank) * d * nominal["torso"] / trunk}
-
-
-def knee_ankle_ratio(name: str, height_m: float, shank_m: float) -> float:
-    """Knee-to-ankle height drop per metre of shank length at the reference pose (the first shank part)."""
-    plain = load_model(name, height_m=height_m)
-    longer = load_model(name, height_m=height_m, segment_lengths={"shank": 1.1 * shank_m})
-    z0, z1 = forward(plain, plain.zero()).translation[:, 2], forward(longer, longer.zero()).translation[:, 2]
-    return float(np.max(z0 - z1) / (0.1 * shank_m))
-
-
 def pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
     """Parameter name -> ``polish_iou`` step: ``factor`` × 0.03 m (root translation), 0.08 rad (root
     rotation), 0.12 rad (joints)."""
@@ -158,8 +127,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     scale : float
         Image scale of the scoring views.
     segments, widths, radii : sequence of str
-        Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model
-        has); ``segments`` may hold ``HIP_HEIGHT``, the coupled factor of :func:`hip_height_lengths`.
+        Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
 
     Returns
     -------
@@ -169,30 +137,17 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
         raise ValueError("estimate_segment_lengths: need one silhouette set per pose, at least one")
     names = [c.name for c in cameras]
     views = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale) for s in silhouettes]
-    seg_nominal = nominal_segment_lengths(model)
-    nominal = {("length", k): v for k, v in seg_nominal.items()}
-    coupled = HIP_HEIGHT in segments and all(k in seg_nominal for k in ("thigh", "shank", "abdomen", "torso"))
-    if coupled:
-        nominal[("length", HIP_HEIGHT)] = 1.0
-        shank_ratio = knee_ankle_ratio(model.name, model.height_m, seg_nominal["shank"])
+    nominal = {("length", k): v for k, v in nominal_segment_lengths(model).items()}
     nominal.update({("width", k): v for k, v in nominal_widths(model).items()})
     nominal.update({("radius", k): 1.0 for k in model.radius_groups})
     sigma = {"length": prior_sigma, "width": width_sigma, "radius": radius_sigma}
-    dims = [("length", s) for s in segments if s in model.segments or (coupled and s == HIP_HEIGHT)]
-    dims += [("width", w) for w in widths]
+    dims = [("length", s) for s in segments if s in model.segments] + [("width", w) for w in widths]
     dims += [("radius", r) for r in radii]
     dims = [d for d in dims if d in nominal]
     values = {d: nominal[d] for d in dims}
 
     def by_kind(vals) -> dict[str, dict[str, float]]:
-        out = {kind: {n: v for (k, n), v in vals.items() if k == kind} for kind in sigma}
-        a = out["length"].pop(HIP_HEIGHT, None)
-        if a is not None:
-            out["length"].update(hip_height_lengths(out["length"], seg_nominal, a, shank_ratio=shank_ratio))
-        return out
-
-    def in_bounds(vals) -> bool:
-        return all(0.5 * seg_nominal[k] < v < 1.8 * seg_nominal[k] for k, v in by_kind(vals)["length"].items())
+        return {kind: {n: v for (k, n), v in vals.items() if k == kind} for kind in sigma}
 
     def build(vals) -> BodyModel:
         parts = by_kind(vals)
@@ -225,8 +180,6 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
         for dim in dims:
             cands = values[dim] * (1.0 + grid)
             ok = (cands > 0.5 * nominal[dim]) & (cands < 1.8 * nominal[dim])
-            if dim == ("length", HIP_HEIGHT):
-                ok &= np.array([in_bounds({**values, dim: c}) for c in cands])
             cands = cands[ok]
             scores = np.array([total(build({**values, dim: c}), dim) for c in cands])
             # Gaussian prior on log(value / nominal), in units of the IoU summed over frames
