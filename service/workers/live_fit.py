@@ -69,9 +69,10 @@ LIVE_VELOCITY_DAMPING = 1.0
 """The live tracker's ``TrackerOptions.velocity_damping`` (1: the full constant-velocity step across
 the live frame gaps; why less was not adopted: docs/performance.md, "A damped prediction live")."""
 
-LIVE_RESTART_STEP = None
-"""The live tracker's ``TrackerOptions.restart_step`` (None: off; 0.1 measured on the replays, not on by
-default: docs/performance.md, "Round 12")."""
+LIVE_RESTART_STEP = 0.1
+"""The live tracker's ``TrackerOptions.restart_step``: a set whose prediction moves a joint centre more than
+this × the body's height from the last fit (or whose fit is suspect) is fitted from the last fit too, the fit
+of lower cost kept (None: off; why 0.1: docs/performance.md, "Round 12")."""
 
 REJOIN_ACCEPT_IOU = None
 """Least silhouette IoU of a pose the cheap recovery returns (None: the tracker's own gate,
