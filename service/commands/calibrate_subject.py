@@ -24,7 +24,7 @@ from segmentation.pipeline import SegmentationParams
 from service.offline import background_models, floor_test, session_model, session_props
 from tracker.body.model import ModelError, available_models
 from tracker.body.subject import Subject, write_subject
-from tracker.fitting.scene import SceneOptions, SceneTracker
+from tracker.fitting.scene import SceneTracker
 from tracker.fitting.subject_auto import AutoSubjectOptions, SampleCalibration, SubjectSample, calibrate_sample
 from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, estimate_segment_lengths
 from tracker.fitting.tracking import Tracker

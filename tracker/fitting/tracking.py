@@ -565,7 +565,7 @@ class Tracker:
                 why.append(f"silhouette IoU {iou:.2f} < {o.min_iou:g}")
                 failed.append("iou")
                 explained = self._iou_explained(iou, unexplained)
-            if not why and iou >= o.min_iou:
+            if not why:
                 self._good_unexplained = (self._good_unexplained + [unexplained])[-o.iou_window:]
             if not why or (failed == ["iou"] and iou >= self.lost_iou_limit()):
                 self._good_iou = (self._good_iou + [iou])[-o.iou_window:]

@@ -163,12 +163,16 @@ class ScoreViews:
             chunk = poses[start:start + max(1, int(batch))]
             for i, r in enumerate(self._draw(chunk, parts, base)):
                 j, k = divmod(i, n_cams)
-                inter = np.count_nonzero(r & self._masks_u8[k])
-                union = np.count_nonzero(r) + self._areas[k] - inter
+                inter, union = self._overlap(r, k)
                 if union:
                     out[start + j, k] = inter / union
         self.n_scored += len(poses)
         return out
+
+    def _overlap(self, drawn: np.ndarray, k: int) -> tuple[int, int]:
+        """(intersection, union) pixel counts of a drawn model silhouette with camera ``k``'s observed one."""
+        inter = np.count_nonzero(drawn & self._masks_u8[k])
+        return inter, np.count_nonzero(drawn) + self._areas[k] - inter
 
     def ious_unexplained(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-camera IoU (as ``ious``) and share of the observed silhouette the model leaves uncovered.
@@ -187,8 +191,7 @@ class ScoreViews:
         """
         ious, unexplained = np.ones(len(self.masks)), np.zeros(len(self.masks))
         for k, r in enumerate(self._draw([params], None, None)):
-            inter = np.count_nonzero(r & self._masks_u8[k])
-            union = np.count_nonzero(r) + self._areas[k] - inter
+            inter, union = self._overlap(r, k)
             if union:
                 ious[k] = inter / union
             if self._areas[k]:
