@@ -193,15 +193,3 @@ def test_track_cli_takes_props_and_names_a_bad_one(tmp_path, capsys):
                                                                                    "box = [5, 5, 0, 5.5, 5.5, 0.5]"))
     assert main(["track", str(root), "--out", str(out), "--initial-pose", gt, "--prop=-6,-6,0,-5.5,-5.5,0.4"]) == 0
     assert len(out.read_text().splitlines()) == 3
-
-
-def test_thigh_hip_clearance_ramps_along_the_thighs_only():
-    model = load_model("knossow40")
-    base = PropPenalty([], samples=5)
-    ramp = PropPenalty([], samples=5, thigh_hip_clearance=0.25)
-    part, _, clear0 = base._model_points(model)
-    _, _, clear1 = ramp._model_points(model)
-    thigh = np.isin(part, [model.part_index("left_thigh"), model.part_index("right_thigh")])
-    np.testing.assert_allclose(clear1[~thigh], clear0[~thigh])
-    ratio = (clear1[thigh] / clear0[thigh]).reshape(2, 5)
-    np.testing.assert_allclose(ratio, np.tile(np.linspace(0.25, 1.0, 5), (2, 1)))

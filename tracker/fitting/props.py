@@ -125,14 +125,10 @@ class PropPenalty:
     samples : points per part along its cone's axis (ends included)
     clearance : the axis keeps this many times the part's smaller radius from a box
     root_clearance : the same for the root part (the pelvis: it rests on a seat)
-    thigh_hip_clearance : None, or the clearance factor at the hip end of the parts named
-        ``*_thigh`` (a thigh rests on a seat and its flesh sinks in), rising linearly along the
-        axis to ``clearance`` at the knee end
     """
 
     def __init__(self, props: Sequence[PropBox], *, weight: float = 2000.0, samples: int = 5,
-                 clearance: float = 1.0, root_clearance: float = 0.0,
-                 thigh_hip_clearance: float | None = None) -> None:
+                 clearance: float = 1.0, root_clearance: float = 0.0) -> None:
         if samples < 2:
             raise PropError(f"samples: expected >= 2, got {samples!r}")
         self.props = list(props)
@@ -140,7 +136,6 @@ class PropPenalty:
         self.samples = int(samples)
         self.clearance = float(clearance)
         self.root_clearance = float(root_clearance)
-        self.thigh_hip_clearance = None if thigh_hip_clearance is None else float(thigh_hip_clearance)
         self._points: dict[int, tuple] = {}
 
     def _model_points(self, model: BodyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -154,13 +149,8 @@ class PropPenalty:
             part = np.repeat(np.arange(model.n_parts), self.samples)
             pts = np.zeros((part.size, 3))
             pts[:, 2] = z.ravel()
-            factor = np.repeat(np.where(model.parent < 0, self.root_clearance, self.clearance)[:, None],
-                               self.samples, axis=1)
-            if self.thigh_hip_clearance is not None:
-                thigh = np.array([n.endswith("_thigh") for n in model.part_names])
-                ramp = self.thigh_hip_clearance + (self.clearance - self.thigh_hip_clearance) * t
-                factor[thigh] = ramp[None, :]
-            self._points = {key: (model, part, pts, (factor * radius).ravel())}
+            factor = np.where(model.parent < 0, self.root_clearance, self.clearance)
+            self._points = {key: (model, part, pts, (factor[:, None] * radius).ravel())}
         return self._points[key][1:]
 
     def residuals(self, model: BodyModel, params: np.ndarray, *, jacobian: bool = False, pose=None):

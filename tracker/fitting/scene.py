@@ -86,8 +86,6 @@ class SceneOptions:
     #: ``PropPenalty``'s weight (pixels per metre of intrusion) and clearance (× a part's radius)
     prop_weight: float = 2000.0
     prop_clearance: float = 1.0
-    #: None, or the clearance at a thigh's hip end (``PropPenalty.thigh_hip_clearance``)
-    prop_thigh_hip_clearance: float | None = None
     #: a prop's pixels are body where the body's projection grown by this covers them (metres;
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
@@ -180,9 +178,7 @@ class SceneTracker:
         self.props = list(props)
         self.prop_masks = prop_masks(self.tracker.cameras.values(), self.props) if self.props else {}
         self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
-                                            clearance=self.options.prop_clearance,
-                                            thigh_hip_clearance=self.options.prop_thigh_hip_clearance)
-                               if self.props else None)
+                                            clearance=self.options.prop_clearance) if self.props else None)
 
     def _learn_seat(self, params: np.ndarray, raws: Mapping[str, np.ndarray]) -> None:
         """``SceneOptions.auto_seat``: once, from the first fit, the seat under a seated subject."""
