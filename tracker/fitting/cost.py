@@ -49,7 +49,8 @@ import numpy as np
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours, extremal_contours
 from tracker.imaging.jacobian import contour_image_motion
-from tracker.kernels import assemble, reverse_terms, sample_chamfer
+from tracker.fitting.screw_jacobian import ScrewJacobian
+from tracker.kernels import assemble, reverse_terms, sample_chamfer, screw_rows
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
 from tracker.imaging.visibility import hidden_points
@@ -58,7 +59,7 @@ __all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
 
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 # placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
-_NO_MOTION, _NO_SCREWS = np.zeros((0, 2, 6)), np.zeros((6, 0))
+_NO_MOTION = np.zeros((0, 2, 6))
 _NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
 _RAY_RANGE_M = 50.0  # boundary-sample rays are followed this far (tracker.visibility.covered_rays)
 
@@ -166,7 +167,7 @@ class CostTerms:
         Truncated distances, pixels (0 where not used).
     residuals : ndarray, shape (2 N + K,)
         Or fewer when compact (module docstring; K reverse residuals).
-    jacobian : ndarray, shape (len(residuals), n_params), or None
+    jacobian : ndarray, shape (len(residuals), n_params), ScrewJacobian (``structured``), or None
     boundary_dist : ndarray, shape (K,), or None
         Distance in pixels from each observed boundary sample to the nearest used contour point of
         its camera (0 on the predicted silhouette, inf where that camera has no contour point);
@@ -179,7 +180,7 @@ class CostTerms:
     d_sil: np.ndarray
     d_edge: np.ndarray
     residuals: np.ndarray
-    jacobian: np.ndarray | None
+    jacobian: np.ndarray | ScrewJacobian | None
     boundary_dist: np.ndarray | None = None
 
     @property
@@ -348,7 +349,8 @@ class ChamferCost:
                              self._focal, self.model.cones, pose.rotation, pose.translation, st.rotation,
                              st.translation, _RAY_RANGE_M)
 
-    def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False) -> CostTerms:
+    def evaluate(self, params: np.ndarray, *, jacobian: bool = False, compact: bool = False,
+                 structured: bool = False) -> CostTerms:
         """Residuals (and Jacobian) at a pose; see the module docstring for the layout.
 
         Parameters
@@ -358,6 +360,9 @@ class ChamferCost:
             Also the Jacobian (a new linearisation point: occlusion recomputed with ``"step"``).
         compact : bool
             Keep only the residuals that can be non-zero (what the LM solver takes).
+        structured : bool
+            The Jacobian as a ``ScrewJacobian`` (per-row screw motion; what the LM solver takes)
+            instead of the dense array.
 
         Returns
         -------
@@ -408,21 +413,24 @@ class ChamferCost:
         # directions are applied there, then the parts' screws (tracker.kernels.assemble)
         if jacobian:
             Mx = contour_image_motion(self.model, pose, self.cameras, contours, sliding=self.sliding, rows=urows)
-            screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
         else:
-            Mx, screws = _NO_MOTION, _NO_SCREWS
+            Mx = _NO_MOTION
         rev_r, match, unit = (rev[0], rev[1], rev[2]) if rev is not None else (_NO_REV, _NO_MATCH, _NO_UNIT)
-        r, J = assemble(d, grad, urows, rev_r, bool(compact), bool(jacobian), Mx, contours.part, match, unit,
-                        self.reverse_weight, screws, self.model.affects)
-        if not jacobian:
-            J = None
+        r, motion, part = assemble(d, grad, urows, rev_r, bool(compact), bool(jacobian), Mx, contours.part, match,
+                                   unit, self.reverse_weight)
+        J = None
+        if jacobian:
+            screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
+            J = (ScrewJacobian(motion, part, screws, self.model.affects) if structured
+                 else screw_rows(motion, part, screws, self.model.affects))
         return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
 
-    def residual_fn(self, *, compact: bool = True):
-        """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` as ``evaluate``."""
+    def residual_fn(self, *, compact: bool = True, structured: bool = False):
+        """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` and
+        ``structured`` as ``evaluate``."""
 
         def fun(x, jacobian):
-            t = self.evaluate(x, jacobian=jacobian, compact=compact)
+            t = self.evaluate(x, jacobian=jacobian, compact=compact, structured=structured)
             return t.residuals, t.jacobian
 
         return fun

@@ -17,6 +17,9 @@ ratio ρ > 0 the step is taken and ``μ *= max(1/3, 1 − (2ρ − 1)³)``, else
 the step (removed from the linear system), and the trial point is projected onto the box.
 
 A non-finite residual at a trial point counts as a rejected step (more damping), never a NaN result.
+
+**Jacobians** are dense arrays, or objects that form the products themselves (``normal_equations(w, r)
+-> (JᵀWJ, JᵀWr)``, ``matvec(x) -> J x``, ``all_finite()``; e.g. ``tracker.fitting.screw_jacobian``).
 """
 
 from __future__ import annotations
@@ -159,7 +162,8 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
     Parameters
     ----------
     fun : callable
-        ``fun(x, jacobian) -> (r (m,), J (m, n) or None)``; ``m`` may change with ``x``.
+        ``fun(x, jacobian) -> (r (m,), J (m, n) or None)``; ``m`` may change with ``x``; J an array or
+        an object with the products (module docstring).
     x0 : ndarray, shape (n,)
         The start (projected onto the bounds).
     lower, upper : ndarray, shape (n,), or None
@@ -192,7 +196,7 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
 
     r, J = fun(x, True)
     n_eval += 1
-    if not np.all(np.isfinite(r)) or J is None or not np.all(np.isfinite(J)):
+    if not np.all(np.isfinite(r)) or not _finite_jacobian(J):
         r = np.nan_to_num(r, nan=0.0, posinf=0.0, neginf=0.0)
         return _result(x, float("inf"), r, 0, STALLED, "non-finite residuals or Jacobian at the start", n_eval)
     cost = total_cost(r, x)
@@ -200,11 +204,9 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
     status = MAX_ITERATIONS
     it = 0
     while it < max_iterations:
-        sw = np.sqrt(robust_weights(r, loss=loss, f_scale=f_scale))  # IRLS weights are >= 0
-        Js = J * sw[:, None]
-        A = Js.T @ Js  # a product with its own transpose: one symmetric rank-k update (syrk)
+        A, g = _normal_equations(J, robust_weights(r, loss=loss, f_scale=f_scale), r)  # IRLS weights >= 0
         A.flat[::x.size + 1] += pw
-        g = Js.T @ (sw * r) + pw * (x - xp)
+        g += pw * (x - xp)
         # freeze parameters at a bound that the gradient pushes outward
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
         all_free = bool(free.all())
@@ -243,7 +245,7 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
             if ok and cost_new < cost:
                 accepted = True
                 rel = (cost - cost_new) / max(cost, 1e-300)
-                moved = float(np.max(np.abs(J @ step), initial=0.0))
+                moved = float(np.max(np.abs(_matvec(J, step)), initial=0.0)) if rtol > 0 else np.inf
                 x, cost = x_new, cost_new
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * max(gain, 0.0) - 1.0) ** 3)
                 nu = 2.0
@@ -265,7 +267,7 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
             break
         r_lin, J_lin = fun(x, True)
         n_eval += 1
-        if not np.all(np.isfinite(r_lin)) or J_lin is None or not np.all(np.isfinite(J_lin)):
+        if not np.all(np.isfinite(r_lin)) or not _finite_jacobian(J_lin):
             r = r_new
             status = STALLED
             break
@@ -278,6 +280,25 @@ def levenberg_marquardt(fun: ResidualFn, x0, *, lower=None, upper=None, prior=No
         # damping exhausted at a point no step improves: a (possibly bound-constrained) minimum
         status = CONVERGED_STEP
     return _result(x, cost, r, it, status, _MESSAGES[status], n_eval)
+
+
+def _finite_jacobian(J) -> bool:
+    if J is None:
+        return False
+    return J.all_finite() if hasattr(J, "all_finite") else bool(np.all(np.isfinite(J)))
+
+
+def _normal_equations(J, w, r):
+    """``(JᵀWJ, JᵀWr)`` for the row weights ``w`` (m,) >= 0 of a dense or structured ``J``."""
+    if hasattr(J, "normal_equations"):
+        return J.normal_equations(w, r)
+    sw = np.sqrt(w)
+    Js = J * sw[:, None]
+    return Js.T @ Js, Js.T @ (sw * r)  # a product with its own transpose: one symmetric rank-k update (syrk)
+
+
+def _matvec(J, x):
+    return J.matvec(x) if hasattr(J, "matvec") else J @ x
 
 
 def _result(x, cost, r, it, status, message, n_eval) -> SolverResult:

@@ -283,7 +283,8 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
               max_iterations=options.max_iterations, ftol=options.ftol, xtol=options.xtol)
     lm_only = dict(damping=options.damping, diagonal_floor=options.diagonal_floor, rtol=options.rtol)
     if solver == "lm":
-        res = levenberg_marquardt(_with_penalty(cost, model, penalty, compact=True), start, **lm_only, **kw)
+        res = levenberg_marquardt(_with_penalty(cost, model, penalty, compact=True, structured=True), start,
+                                  **lm_only, **kw)
     elif solver == "lsq":
         res = least_squares_fd(_with_penalty(cost, model, penalty, compact=False), start, **kw)
     else:
@@ -291,15 +292,19 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
     return res, cost
 
 
-def _with_penalty(cost: ChamferCost, model: BodyModel, penalty, *, compact: bool):
-    """``cost.residual_fn(compact=...)`` with ``penalty``'s residuals stacked under (None: as is)."""
+def _with_penalty(cost: ChamferCost, model: BodyModel, penalty, *, compact: bool, structured: bool = False):
+    """``cost.residual_fn(compact=..., structured=...)`` with ``penalty``'s residuals stacked under (None:
+    as is)."""
     if penalty is None:
-        return cost.residual_fn(compact=compact)
+        return cost.residual_fn(compact=compact, structured=structured)
 
     def fun(x, jacobian):
-        t = cost.evaluate(x, jacobian=jacobian, compact=compact)
+        t = cost.evaluate(x, jacobian=jacobian, compact=compact, structured=structured)
         r, J = penalty.residuals(model, x, jacobian=jacobian, pose=t.pose)
-        return np.concatenate([t.residuals, r]), (np.vstack([t.jacobian, J]) if jacobian else None)
+        if not jacobian:
+            return np.concatenate([t.residuals, r]), None
+        return (np.concatenate([t.residuals, r]),
+                t.jacobian.with_rows(J) if structured else np.vstack([t.jacobian, J]))
 
     return fun
 

@@ -18,11 +18,12 @@ from __future__ import annotations
 import numpy as np
 
 from tracker.kernels.kinematics import forward_kinematics
+from tracker.kernels.normal import screw_matvec, screw_normal_equations
 from tracker.kernels.occlusion import covered_mask, hidden_mask, part_boxes
 from tracker.kernels.projection import contour_points, image_motion, projection_jacobians, ruling_angles
 from tracker.kernels.residuals import assemble, nearest_rows, reverse_terms, sample_chamfer, screw_rows
 
 __all__ = ["part_boxes", "hidden_mask", "covered_mask", "nearest_rows", "sample_chamfer", "forward_kinematics",
            "screw_rows", "image_motion", "contour_points", "ruling_angles", "projection_jacobians", "assemble",
-           "reverse_terms"]
+           "reverse_terms", "screw_normal_equations", "screw_matvec"]
 

@@ -123,25 +123,19 @@ def sample_chamfer(sil, edge, offset_x, offset_y, fill, resolution, uv, rows, tr
             grad[o, img, 1] = gy * wgt
 
 
-@njit(cache=True, inline="always")
-def _screw_row(motion, p, screws, affects, J, out):
-    """``J[out, k] = motion · screws[:, k]`` for the parameters k that move part p."""
-    for k in range(screws.shape[1]):
-        if affects[p, k]:
-            J[out, k] = (motion[0] * screws[0, k] + motion[1] * screws[1, k] + motion[2] * screws[2, k]
-                         + motion[3] * screws[3, k] + motion[4] * screws[4, k] + motion[5] * screws[5, k])
-
-
 @njit(cache=True)
 def screw_rows(motion, part, screws, affects):
     """Rows of per-screw motion times the parameters' screws of their parts (``tracker.imaging.jacobian.
-    apply_screws``): ``J[i, k] = motion[i] · screws[:, k]`` where ``affects[part[i], k]``, else 0.
+    apply_screws``): ``J[i, k] = motion[i] · screws[:, k]`` where ``affects[part[i], k]``, else 0 (a row
+    whose ``part[i]`` is negative is zero).
 
     motion (n, 6), part (n,), screws (6, n_params), affects (n_parts, n_params) bool."""
     n, n_params = motion.shape[0], screws.shape[1]
     J = np.zeros((n, n_params))
     for i in range(n):
         p = part[i]
+        if p < 0:
+            continue
         m0, m1, m2, m3, m4, m5 = motion[i, 0], motion[i, 1], motion[i, 2], motion[i, 3], motion[i, 4], motion[i, 5]
         for k in range(n_params):
             if affects[p, k]:
@@ -151,19 +145,19 @@ def screw_rows(motion, part, screws, affects):
 
 
 @njit(cache=True)
-def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, weight, screws, affects):
-    """Residual vector and Jacobian of ``tracker.fitting.cost.ChamferCost.evaluate`` (its module docstring
-    gives the layout).
+def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, weight):
+    """Residual vector and Jacobian rows of ``tracker.fitting.cost.ChamferCost.evaluate`` (its module
+    docstring gives the layout).
 
     d (N, 2), grad (N, 2, 2) sampled distances and gradients of the contour rows; urows (n,)
     the used rows (sorted); rev_r (K,) reverse residuals; ``compact``: keep only used rows' and
     reverse samples' residuals that are non-zero or have a non-zero gradient (else the fixed
     layout, 2 N + K).  With ``jacobian``: Mx (n, 2, 6) image motion of the used rows, part (N,),
     match (K,) matched contour row (-1: none), unit (K, 2) directions, ``weight`` the reverse
-    weight, screws (6, n_params), affects (n_parts, n_params) bool; each row is its per-screw
-    motion (gradient · Mx, or -weight · unit · Mx) times its part's parameter screws."""
+    weight.  Returns r (m,), and with ``jacobian`` each row's motion per unit screw of its part
+    (gradient · Mx, or -weight · unit · Mx) (m, 6) and that part (m,) (-1: a zero row): the
+    Jacobian row is that motion times the part's parameter screws (``screw_rows``)."""
     N, n, K = d.shape[0], urows.size, rev_r.size
-    n_params = screws.shape[1]
     keep = np.ones((n, 2), dtype=np.bool_)
     n_fwd = 0
     for j in range(n):
@@ -178,8 +172,8 @@ def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, we
             n_rev += 1
     m_rows = (n_fwd if compact else 2 * N) + n_rev
     r = np.zeros(m_rows)
-    J = np.zeros((m_rows if jacobian else 0, n_params))
-    motion = np.empty(6)
+    M = np.zeros((m_rows if jacobian else 0, 6))
+    P = np.full(m_rows if jacobian else 0, -1, dtype=np.intp)
     row = 0
     for j in range(n):
         i = urows[j]
@@ -190,8 +184,8 @@ def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, we
             r[out] = d[i, s]
             if jacobian:
                 for q in range(6):
-                    motion[q] = grad[i, s, 0] * Mx[j, 0, q] + grad[i, s, 1] * Mx[j, 1, q]
-                _screw_row(motion, part[i], screws, affects, J, out)
+                    M[out, q] = grad[i, s, 0] * Mx[j, 0, q] + grad[i, s, 1] * Mx[j, 1, q]
+                P[out] = part[i]
             row += 1
     if not compact:
         for i in range(N):  # unused rows: their residuals (0), no gradient
@@ -210,10 +204,10 @@ def assemble(d, grad, urows, rev_r, compact, jacobian, Mx, part, match, unit, we
         if jacobian and match[k] >= 0:
             jm = pos[match[k]]  # matched rows are used rows
             for q in range(6):
-                motion[q] = -weight * (unit[k, 0] * Mx[jm, 0, q] + unit[k, 1] * Mx[jm, 1, q])
-            _screw_row(motion, part[match[k]], screws, affects, J, out)
+                M[out, q] = -weight * (unit[k, 0] * Mx[jm, 0, q] + unit[k, 1] * Mx[jm, 1, q])
+            P[out] = part[match[k]]
         row += 1
-    return r, J
+    return r, M, P
 
 
 @njit(cache=True)
