@@ -67,6 +67,15 @@ def test_products_equal_the_dense_jacobians(name, scene, rng):
         np.testing.assert_allclose(g2, D.T @ (w2 * r2), rtol=1e-10, atol=1e-9 * np.abs(g2).max())
         np.testing.assert_allclose(Jx.matvec(x), D @ x, rtol=1e-10, atol=1e-10 * np.abs(D @ x).max())
         assert Jx.shape == D.shape and Jx.all_finite()
+        # a subset of the parameters (tracker.search.refine's stages)
+        idx = np.sort(rng.choice(model.n_params, size=model.n_params // 2, replace=False))
+        Jc = Jx.columns(idx)
+        np.testing.assert_allclose(Jc.toarray(), D[:, idx], rtol=0, atol=1e-12 * np.abs(D).max())
+        A3, g3 = Jc.normal_equations(w2, r2)
+        np.testing.assert_allclose(A3, A2[np.ix_(idx, idx)], rtol=1e-10, atol=1e-9 * np.abs(A2).max())
+        np.testing.assert_allclose(g3, g2[idx], rtol=1e-10, atol=1e-9 * np.abs(g2).max())
+        np.testing.assert_allclose(Jc.matvec(x[idx]), D[:, idx] @ x[idx], rtol=1e-10,
+                                   atol=1e-10 * np.abs(D[:, idx] @ x[idx]).max())
     bad = ScrewJacobian(Js.motion.copy(), Js.part, Js.screws, Js.affects)
     bad.motion[0, 0] = np.nan
     assert not bad.all_finite()

@@ -48,6 +48,12 @@ class ScrewJacobian:
         return ScrewJacobian(self.motion, self.part, self.screws, self.affects,
                              np.concatenate([self.extra, np.asarray(rows, dtype=float).reshape(-1, self.shape[1])]))
 
+    def columns(self, idx: np.ndarray) -> "ScrewJacobian":
+        """The Jacobian of the parameters ``idx`` only (its columns ``idx``)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        return ScrewJacobian(self.motion, self.part, np.ascontiguousarray(self.screws[:, idx]),
+                             np.ascontiguousarray(self.affects[:, idx]), self.extra[:, idx])
+
     def all_finite(self) -> bool:
         return bool(np.isfinite(self.motion).all() and np.isfinite(self.screws).all()
                     and np.isfinite(self.extra).all())

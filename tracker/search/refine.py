@@ -88,7 +88,9 @@ def _subset_fun(fun, x_full: np.ndarray, idx: np.ndarray):
         x = x_full.copy()
         x[idx] = xs
         r, J = fun(x, jacobian)
-        return r, (None if J is None else J[:, idx])
+        if J is None:
+            return r, None
+        return r, (J.columns(idx) if hasattr(J, "columns") else J[:, idx])
 
     return f
 
@@ -135,7 +137,7 @@ def refine(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, p
     cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), n_samples=n_samples,
                        truncate_px=truncate_px, reverse_weight=reverse_weight, reverse_samples=150,
                        reverse_min_px=4.0)
-    fun = cost.residual_fn(compact=True)
+    fun = cost.residual_fn(compact=True, structured=True)
     x = model.clamp(np.asarray(params, dtype=float))
     x0 = x.copy()
     weight = np.where(model.param_kind == JOINT_ROTATION, float(prior_rad), 0.0)
