@@ -124,6 +124,7 @@ def test_cmu_left_knee_frame0_by_hand(cmu):
         (lambda s: s.replace("    OFFSET 0 2 0\n", ""), "no OFFSET"),
         (lambda s: s.replace("OFFSET 0 2 0", "OFFSET 0 nan 0"), "OFFSET needs three"),
         (lambda s: s.rsplit("}", 1)[0], "unclosed|MOTION"),
+        (lambda s: s.replace("  JOINT arm\n", "  JOINT arm\n  JOINT hand\n"), "'arm' has no '{'"),
     ],
 )
 def test_malformed_files_name_file_and_line(mutate, match):

@@ -166,6 +166,8 @@ def parse_bvh(text: str, *, source: str = "<string>") -> Bvh:
             i += 1
             continue
         key = tok[0]
+        if key in ("ROOT", "JOINT", "End") and pending is not None:
+            fail(f"joint {names[pending]!r} has no '{{'", i)
         if key in ("ROOT", "JOINT"):
             if len(tok) < 2:
                 fail(f"{key} without a name", i)
