@@ -216,7 +216,7 @@ def test_compact_drops_only_rows_that_add_nothing(scene, rng):
 def test_covered_rays_agree_with_the_rendered_silhouette(name, rng):
     """A pixel's ray meets the body exactly where the renderer fills the pixel (pixel centre inside
     the projected outline), up to the renderer's polygonal outline on the silhouette's rim."""
-    from tracker.fitting.cost import _pixel_rays
+    from tracker.fitting.boundary import pixel_rays as _pixel_rays
     from tracker.imaging.visibility import covered_rays
 
     model = load_model(name)

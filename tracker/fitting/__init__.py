@@ -6,7 +6,9 @@ from __future__ import annotations
 from tracker.lazy import lazy_face
 
 _EXPORTS = {
-    "tracker.fitting.cost": ('ChamferCost', 'CostTerms', 'boundary_samples'),
+    "tracker.fitting.boundary": ('boundary_samples', 'boundary_rays', 'pixel_rays'),
+    "tracker.fitting.cost": ('ChamferCost', 'CostTerms'),
+    "tracker.fitting.screw_jacobian": ('ScrewJacobian',),
     "tracker.fitting.solver": ('SolverResult', 'levenberg_marquardt', 'least_squares_fd', 'robust_cost', 'robust_weights'),
     "tracker.fitting.tracking": ('Tracker', 'TrackerOptions', 'fit_frame', 'prior_weights'),
 }

@@ -43,53 +43,24 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Sequence
 
-import cv2
 import numpy as np
 
 from capture.camera import Camera, stack_cameras
 from tracker.imaging.contours import Contours, extremal_contours
 from tracker.imaging.jacobian import contour_image_motion
+from tracker.fitting.boundary import boundary_rays
 from tracker.fitting.screw_jacobian import ScrewJacobian
 from tracker.kernels import assemble, reverse_terms, sample_chamfer, screw_rows
 from tracker.body.kinematics import Pose, forward
 from tracker.body.model import BodyModel
 from tracker.imaging.visibility import hidden_points
 
-__all__ = ["ChamferCost", "CostTerms", "boundary_samples"]
+__all__ = ["ChamferCost", "CostTerms"]
 
-_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 # placeholders of tracker.kernels.assemble's arguments when there is no Jacobian or no reverse term
 _NO_MOTION = np.zeros((0, 2, 6))
 _NO_REV, _NO_MATCH, _NO_UNIT = np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
 _RAY_RANGE_M = 50.0  # boundary-sample rays are followed this far (tracker.visibility.covered_rays)
-
-
-def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
-    """Up to ``max_points`` pixels ``(k, 2)`` (u, v) on the inner boundary of the silhouette held by
-    a ``ChamferImages`` (its zero-distance region), evenly spread in raster order; ``(0, 2)`` when
-    the object holds no silhouette array or the silhouette is empty."""
-    q = getattr(chamfer, "silhouette_q", None)
-    if q is None or q.size == 0 or max_points < 1:
-        return np.zeros((0, 2))
-    inside = cv2.compare(q, 0, cv2.CMP_EQ)  # uint8, 255 inside
-    border = cv2.subtract(inside, cv2.erode(inside, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=0))
-    xy = cv2.findNonZero(border)  # (k, 1, 2) (x, y) in raster order, None when empty
-    if xy is None:
-        return np.zeros((0, 2))
-    xy = xy.reshape(-1, 2)
-    pick = np.unique(np.linspace(0, len(xy) - 1, min(max_points, len(xy))).round().astype(np.intp))
-    return (xy[pick] + np.asarray(chamfer.offset_xy)).astype(float)
-
-
-def _pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
-    """World rays through pixels (lens distortion removed): unit directions (K, 3) and camera
-    index (K,) of the pixels ``pixels[c]`` (k_c, 2) of every camera c (origins: the centres)."""
-    dirs, cam = [np.zeros((0, 3))], [np.zeros(0, dtype=np.intp)]
-    for c, (camera, uv) in enumerate(zip(cameras, pixels)):
-        if len(uv):
-            dirs.append(camera.rays(uv))
-            cam.append(np.full(len(uv), c, dtype=np.intp))
-    return np.concatenate(dirs), np.concatenate(cam)
 
 
 class _StackedChamfer:
@@ -277,16 +248,19 @@ class ChamferCost:
         self.edge_weight = float(edge_weight)
         self.reverse_weight = float(reverse_weight)
         self.reverse_min_px = float(reverse_min_px)
+        self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
+        want_rays = self.reverse_weight > 0 and self.reverse_cover_px is not None
         if self.reverse_weight > 0:
-            self.boundary = [boundary_samples(ch, max_points=reverse_samples) for ch in chamfer]
+            got = [boundary_rays(ch, cam, max_points=reverse_samples, rays=want_rays)
+                   for ch, cam in zip(chamfer, cameras)]
         else:
-            self.boundary = [np.zeros((0, 2)) for _ in chamfer]
+            got = [(np.zeros((0, 2)), np.zeros((0, 3))) for _ in chamfer]
+        self.boundary = [b for b, _ in got]
         self.n_reverse = sum(len(b) for b in self.boundary)
         self._boundary_all = np.concatenate(self.boundary) if self.n_reverse else np.zeros((0, 2))
         self._boundary_cam = np.repeat(np.arange(len(self.boundary)), [len(b) for b in self.boundary])
-        self.reverse_cover_px = None if reverse_cover_px is None else float(reverse_cover_px)
-        self._rays = _pixel_rays(cameras, self.boundary) if self.reverse_cover_px is not None else None
-        self._ray_dirs = self._rays[0] if self._rays is not None else np.zeros((self.n_reverse, 3))
+        self._ray_dirs = (np.concatenate([r for _, r in got]) if want_rays and self.n_reverse
+                          else np.zeros((self.n_reverse, 3)))
         self._focal = np.array([c.matrix[0, 0] for c in cameras], dtype=float)
         self._stacked = _StackedChamfer.build(chamfer)
         self._cache: tuple | None = None
