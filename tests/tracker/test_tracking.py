@@ -257,3 +257,38 @@ def test_a_track_started_mirrored_is_turned_round(cameras):
     assert on.n_front_back_checks == 2 and on.n_turned == 1, (on.n_front_back_checks, on.n_turned)
     assert min(errs_on[:3]) > 100.0 and max(errs_on[3:]) < 25.0, errs_on  # measured 17-18 mm
     assert all(oks[3:]), oks
+
+
+def test_the_second_start_takes_a_limb_from_the_other_fit(cameras):
+    """Two fits each with one limb wrong (the right arm folded in front of the torso in one, the left
+    leg off in the other): the kept fit's wrong limb is exchanged for the other fit's, refitted, and
+    the result is cheaper and on the truth (``TrackerOptions.restart_exchange``)."""
+    from tracker.fitting.tracking import fit_frame
+
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=1.0)
+    model, truth = rt.model, rt.params[0]
+    chamfer, sils = render_chamfer(model, truth, cameras)
+    jc_true = joint_centre_array(model, forward(model, truth))
+    arm_off, leg_off = truth.copy(), truth.copy()
+    arm_off[model.param_index("right_upper_arm.flexion")] += 1.2
+    arm_off[model.param_index("right_forearm.flexion")] += 1.5
+    leg_off[model.param_index("left_thigh.flexion")] += 0.9
+    arm_off, leg_off = model.clamp(arm_off), model.clamp(leg_off)
+    short = TrackerOptions(max_iterations=2, restart_step=0.1)
+
+    def errors(params):
+        return np.linalg.norm(joint_centre_array(model, forward(model, np.asarray(params))) - jc_true, axis=1)
+
+    wrist, ankle = model.joint_names.index("right_wrist"), model.joint_names.index("left_ankle")
+    tr = Tracker(model, cameras, initial_params=truth, options=TrackerOptions(restart_step=0.1))
+    kept_res, cost = fit_frame(model, cameras, chamfer, arm_off, prediction=truth, options=short)
+    other_res, _ = fit_frame(model, cameras, chamfer, leg_off, prediction=truth, options=short)
+    assert errors(kept_res.params)[wrist] > 0.15 and errors(other_res.params)[ankle] > 0.15
+    terms = cost.evaluate(np.asarray(kept_res.params))
+    got = tr._exchange_limb(cameras, chamfer, (kept_res, terms, terms.rms_px(), terms.inside_fraction()), other_res)
+    assert tr.n_restart_exchanges == 1 and got[0].cost < kept_res.cost
+    e = errors(got[0].params)
+    assert e[wrist] < 0.03 and e[ankle] < 0.03, (e[wrist], e[ankle])
+    # a limb both fits agree on is not tried: the kept fit with itself as the other is returned as it is
+    same = tr._exchange_limb(cameras, chamfer, got, got[0])
+    assert same is got and tr.n_restart_exchanges == 1

@@ -30,10 +30,10 @@ from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
 from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
-from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt
+from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
 from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_separation, arm_candidates,
-                                  chain_joint_distance, exchange_verdict, leg_candidates)
+                                  chain_joint_distance, exchange_verdict, leg_candidates, side_chains)
 from tracker.search.appearance import view_colours
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
@@ -43,6 +43,8 @@ __all__ = ["Tracker", "TrackerOptions", "Verdict", "fit_frame", "prior_weights",
 
 MAX_EXTRAPOLATION = 3.0
 """The constant-velocity prediction extrapolates at most this many times the last step."""
+
+_SAME_CHAIN_RAD = 0.05  # a limb whose angles two fits agree on within this (rad) is not exchanged between them
 
 
 @dataclass(frozen=True)
@@ -62,8 +64,8 @@ class TrackerOptions:
         The silhouette -> model term of ``tracker.fitting.cost`` (weight 0: off).
     palm_length
         The hands' length of the body the tracker fits (``palm_model``; None: the model's).
-    constant_velocity, velocity_damping, restart_step
-        Start from the constant-velocity extrapolation (that fraction of its step), and the last pose.
+    constant_velocity, velocity_damping, restart_step, restart_exchange
+        Start from the constant-velocity extrapolation (that fraction of its step), the last pose, and limbs of both.
     max_rms_px, rms_ratio, rms_window, max_rms_ceiling_px, min_inside_fraction, min_iou
         Quality limits of a good frame (a worse frame is reported ``ok: false``).
     iou_every, iou_check_coverage, iou_rms_jump
@@ -127,6 +129,11 @@ class TrackerOptions:
     #: frame is fitted from the last fitted pose too and the fit of lower ``SolverResult.cost`` is kept
     #: (None: off; the live fitter's is ``service.workers.live_fit.LIVE_RESTART_STEP``)
     restart_step: float | None = None
+    #: with a second start, also try the kept fit with one limb (a side's arm or leg) from the other fit: the
+    #: one of lowest data cost, when lower than the kept fit's, is fitted and kept if its fit costs less (the
+    #: two starts often get different limbs right: after a frame gap, the prediction an arm in a fast swing,
+    #: the last pose the rest)
+    restart_exchange: bool = True
     #: the RMS limit of a good frame is ``min(max_rms_ceiling_px, max(max_rms_px, rms_ratio × median
     #: RMS of the last rms_window good frames))``: the RMS level is set by the segmentation (shadows,
     #: missing edges), not by the pose, px
@@ -413,7 +420,7 @@ class Tracker:
         self.n_limb_checks = 0
         self.n_limb_switches = 0
         self.n_turned = 0
-        self.n_restarts = self.n_restarts_taken = 0
+        self.n_restarts = self.n_restarts_taken = self.n_restart_exchanges = 0
         self._last_bad = False
         self.params: np.ndarray | None = None
         self.previous: np.ndarray | None = None
@@ -498,10 +505,44 @@ class Tracker:
         prediction): ``(res, terms, rms, inside)`` of the one kept."""
         self.n_restarts += 1
         res2, terms2, rms2, inside2 = self._fit(cams, chs, self.params)
-        if not res2.cost < res.cost:
-            return res, terms, rms, inside
-        self.n_restarts_taken += 1
-        return res2, terms2, rms2, inside2
+        first = (res, terms, rms, inside)
+        kept, other = ((res2, terms2, rms2, inside2), first) if res2.cost < res.cost else (first, (res2, terms2, rms2, inside2))
+        if self.options.restart_exchange:
+            kept = self._exchange_limb(cams, chs, kept, other[0])
+        self.n_restarts_taken += int(kept[0] is not res)
+        return kept
+
+    def _exchange_limb(self, cams, chs, kept, other):
+        """``kept`` ``(res, terms, rms, inside)``, or the fit from ``kept``'s pose with one side's arm or leg
+        taken from ``other`` (a ``SolverResult``) when that start's data cost is the lowest of the
+        exchanges and below ``kept``'s, and its fit's ``SolverResult.cost`` is below ``kept``'s
+        (``TrackerOptions.restart_exchange``)."""
+        o, model = self.options, self.model
+        p, q = np.asarray(kept[0].params), np.asarray(other.params)
+        starts = []
+        for _, dofs in side_chains(model):
+            if np.max(np.abs(p[dofs] - q[dofs])) > _SAME_CHAIN_RAD:
+                x = p.copy()
+                x[dofs] = q[dofs]
+                starts.append(x)
+        if not starts:
+            return kept
+        cost = ChamferCost(model, cams, in_camera_order(chs, cams), n_samples=o.n_samples, visibility="frame",
+                           truncate_px=o.truncate_px, reverse_weight=o.reverse_weight,
+                           reverse_samples=o.reverse_samples, reverse_min_px=o.reverse_min_px,
+                           reverse_cover_px=o.reverse_cover_px)
+
+        def data_cost(x):
+            return robust_cost(cost.evaluate(x, compact=True).residuals, loss=o.loss, f_scale=o.f_scale)
+
+        c0 = data_cost(p)  # first: the occlusion of the kept pose is the one every start is scored with
+        costs = [data_cost(x) for x in starts]
+        best = int(np.argmin(costs))
+        if not costs[best] < c0:
+            return kept
+        self.n_restart_exchanges += 1
+        got = self._fit(cams, chs, starts[best])
+        return got if got[0].cost < kept[0].cost else kept
 
     def rms_limit(self) -> float:
         """RMS (pixels) above which the current frame is bad (``TrackerOptions.max_rms_px``)."""

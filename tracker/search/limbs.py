@@ -29,7 +29,7 @@ from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, BodyModel
 from tracker.search.mirror import exchange_sides, mirror_map, pelvis_heading
 
-__all__ = ["LEGS", "ARMS", "exchange_limbs", "limb_dofs", "leg_candidates", "ankle_separation", "StrideWatch",
+__all__ = ["LEGS", "ARMS", "exchange_limbs", "limb_dofs", "side_chains", "leg_candidates", "ankle_separation", "StrideWatch",
            "ExchangeVerdict", "arm_candidates", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
 
 #: the chains' part names without their ``left_``/``right_`` prefix
@@ -127,6 +127,19 @@ def arm_candidates(model: BodyModel, params: np.ndarray, previous: np.ndarray | 
             q = p.copy()
             q[dofs] = np.asarray(previous, dtype=float)[dofs]
             out.append((f"{side}_previous", model.clamp(q)))
+    return out
+
+
+def side_chains(model: BodyModel) -> list[tuple[str, np.ndarray]]:
+    """Each side's arm and leg: ``[(name, joint DOF indices), ...]`` ("left arm", "right arm", "left leg",
+    "right leg"; a chain the model has no DOF for is left out)."""
+    out = []
+    for chain, label in ((ARMS, "arm"), (LEGS, "leg")):
+        for side in ("left", "right"):
+            dofs = np.array([i for i in limb_dofs(model, chain) if model.param_names[i].startswith(side + "_")],
+                            dtype=int)
+            if dofs.size:
+                out.append((f"{side} {label}", dofs))
     return out
 
 
