@@ -169,25 +169,31 @@ def rays_meet_capsules(origin: np.ndarray, directions: np.ndarray, length: np.nd
                        ends_b: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Whether each ray segment ``origin + t d``, 0 <= t <= ``length`` (metres; (n,), non-positive:
     empty) comes within ``radius`` (m,) of a capsule axis ``ends_a``–``ends_b`` ((m, 3) each):
-    (n,) bool.  The segments' closest points, clamped to both segments (Ericson's method)."""
-    d1 = np.asarray(directions, dtype=float)[:, None, :]           # (n, 1, 3) unit
-    L = np.asarray(length, dtype=float)[:, None]                    # (n, 1)
-    p2 = np.asarray(ends_a, dtype=float)[None]                      # (1, m, 3)
-    d2 = np.asarray(ends_b, dtype=float)[None] - p2                 # (1, m, 3)
-    r = p2 - np.asarray(origin, dtype=float)                        # (1, m, 3): from the ray's origin
-    e = np.maximum(np.sum(d2 * d2, axis=2), 1e-12)                  # (1, m)
-    b = np.sum(d1 * d2, axis=2)                                     # (n, m)
-    c = np.sum(d1 * r, axis=2)                                      # (n, m): d1 . (p2 - o)
-    f = np.sum(d2 * r, axis=2)                                      # (1, m): d2 . (p2 - o)
-    denom = np.maximum(e - b * b, 1e-12)                            # |d1| = 1
-    # s on the ray, t on the axis: minimise |o + s d1 - p2 - t d2|
-    s = np.clip((c * e - b * f) / denom, 0.0, np.maximum(L, 0.0))
-    t = (b * s - f) / e
-    t = np.clip(t, 0.0, 1.0)
-    s = np.clip(c + b * t, 0.0, np.maximum(L, 0.0))
-    gap = s[..., None] * d1 - r - t[..., None] * d2                 # (n, m, 3)
-    near = np.sum(gap * gap, axis=2) <= np.asarray(radius, dtype=float)[None] ** 2
-    return np.any(near & (L > 0), axis=1)
+    (n,) bool.  The segments' closest points, clamped to both segments (Ericson's method); capsule
+    after capsule, only the rays not yet met."""
+    d1 = np.asarray(directions, dtype=float).reshape(-1, 3)
+    L = np.maximum(np.asarray(length, dtype=float).reshape(-1), 0.0)
+    o = np.asarray(origin, dtype=float)
+    met = np.zeros(len(d1), bool)
+    todo = np.flatnonzero(L > 0)
+    for p2, q2, rad in zip(np.asarray(ends_a, float), np.asarray(ends_b, float), np.asarray(radius, float)):
+        if not todo.size:
+            break
+        d2, r = q2 - p2, p2 - o
+        e = max(float(d2 @ d2), 1e-12)
+        f = float(d2 @ r)
+        dd, ll = d1[todo], L[todo]
+        b = dd @ d2
+        c = dd @ r
+        # s on the ray, t on the axis: minimise |o + s d1 - p2 - t d2| (|d1| = 1)
+        s = np.clip((c * e - b * f) / np.maximum(e - b * b, 1e-12), 0.0, ll)
+        t = np.clip((b * s - f) / e, 0.0, 1.0)
+        s = np.clip(c + b * t, 0.0, ll)
+        gap = s[:, None] * dd - r - t[:, None] * d2
+        hit = np.einsum("ij,ij->i", gap, gap) <= rad * rad
+        met[todo[hit]] = True
+        todo = todo[~hit]
+    return met
 
 
 class PropPenalty:

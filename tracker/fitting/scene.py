@@ -20,8 +20,9 @@ and the clutter of ``segmentation.clutter``:
 5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``);
    an offline caller may fit the warm-up's frames again, backwards from the settled state
    (``retrack``: the reverse term on, the clutter learned and the props cut);
-6. operator props (``tracker.fitting.props``: world boxes such as the chair) are clutter where the
-   body's projection does not cover them, and the fit may not put the body inside them.
+6. operator props (``tracker.fitting.props``: world boxes such as the chair) are cut where the
+   body's grown projection does not cover them and where a pixel's ray enters a prop before it
+   meets the body (``SceneOptions.prop_depth_tol_m``), and the fit may not put the body inside them.
 
 The bound on the unexplained share is the only guard against a wrong fit teaching the learner
 the real body as clutter; a fit that starts on the prop and stays there can learn the person.
