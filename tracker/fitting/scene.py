@@ -21,8 +21,9 @@ and the clutter of ``segmentation.clutter``:
    an offline caller may fit the warm-up's frames again, backwards from the settled state
    (``retrack``: the reverse term on, the clutter learned and the props cut);
 6. operator props (``tracker.fitting.props``: world boxes such as the chair) are cut where the
-   body's grown projection does not cover them and where a pixel's ray enters a prop before it
-   meets the body (``SceneOptions.prop_depth_tol_m``), and the fit may not put the body inside them.
+   body's grown projection does not cover them (optionally also where a pixel's ray enters a prop
+   before it meets the body: ``SceneOptions.prop_depth_tol_m``), and the fit may not put the body
+   inside them.
 
 The bound on the unexplained share is the only guard against a wrong fit teaching the learner
 the real body as clutter; a fit that starts on the prop and stays there can learn the person.
@@ -93,8 +94,12 @@ class SceneOptions:
     prop_margin_m: float | None = None
     #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
     #: enters the prop, passes within a part's radius grown by this (metres) of the part's axis
-    #: (None: no ray test, the grown projection alone decides)
-    prop_depth_tol_m: float | None = 0.02
+    #: (None, the default: no ray test, the grown projection alone decides; off by default: a box
+    #: is a bounding box, hollow under a seat, and the body seen through it is cut: docs/real_floor.md)
+    prop_depth_tol_m: float | None = None
+    #: with ``prop_depth_tol_m``: the ray test only on the grown projection's band (the prop pixels
+    #: outside the body's own projection)
+    prop_ray_band: bool = False
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -262,9 +267,14 @@ class SceneTracker:
         if tol is None:
             return keep
         a, b, radius = self.body_capsules(params)
+        band = self.options.prop_ray_band
+        drawn = self.explained(params, 0.0) if band else None
         for name, rays in self.prop_rays.items():
             v, u = rays.pixels[:, 0], rays.pixels[:, 1]
-            sel = np.flatnonzero(keep[name][v, u] & np.isfinite(rays.entry))
+            test = keep[name][v, u] & np.isfinite(rays.entry)
+            if band:
+                test &= ~drawn[name][v, u]
+            sel = np.flatnonzero(test)
             if not sel.size:
                 continue
             meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))
