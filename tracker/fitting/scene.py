@@ -100,9 +100,6 @@ class SceneOptions:
     #: with ``prop_depth_tol_m``: the ray test only on the grown projection's band (the prop pixels
     #: outside the body's own projection)
     prop_ray_band: bool = False
-    #: with ``prop_depth_tol_m``: the ray test takes only each box's top this many metres as solid
-    #: (a seat's slab; None: the whole box)
-    prop_ray_top_m: float | None = None
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -191,11 +188,7 @@ class SceneTracker:
         """Use ``props`` from the next frame on (their masks and the fit's limit)."""
         self.props = list(props)
         self.prop_masks = prop_masks(self.tracker.cameras.values(), self.props) if self.props else {}
-        top = self.options.prop_ray_top_m
-        solid = self.props if top is None else [
-            PropBox.from_values(list(b.lo[:2]) + [max(float(b.lo[2]), float(b.hi[2]) - float(top))] + list(b.hi),
-                                where="prop_ray_top_m") for b in self.props]
-        self.prop_rays = (prop_rays(self.tracker.cameras.values(), solid, self.prop_masks)
+        self.prop_rays = (prop_rays(self.tracker.cameras.values(), self.props, self.prop_masks)
                           if self.props and self.options.prop_depth_tol_m is not None else {})
         self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
                                             clearance=self.options.prop_clearance) if self.props else None)
