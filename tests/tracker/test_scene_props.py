@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from tracker.body.kinematics import forward
 from tracker.body.model import load_model
-from tracker.fitting.props import PropBox, PropError, PropPenalty, parse_prop, prop_masks
+from tracker.fitting.props import PropBox, PropError, PropPenalty, parse_prop, prop_masks, prop_rays, rays_meet_capsules
 from tracker.synthetic.scene import ring_cameras
 
 
@@ -193,3 +194,87 @@ def test_track_cli_takes_props_and_names_a_bad_one(tmp_path, capsys):
                                                                                    "box = [5, 5, 0, 5.5, 5.5, 0.5]"))
     assert main(["track", str(root), "--out", str(out), "--initial-pose", gt, "--prop=-6,-6,0,-5.5,-5.5,0.4"]) == 0
     assert len(out.read_text().splitlines()) == 3
+
+
+def test_prop_rays_enter_the_box_where_brute_force_does():
+    cams = ring_cameras(3, size=(80, 60))
+    boxes = [PropBox.from_values([-0.2, -0.2, 0.0, 0.2, 0.2, 0.45]),
+             PropBox.from_values([-0.25, 0.1, 0.45, -0.15, 0.2, 0.9])]
+    rays = prop_rays(cams, boxes, prop_masks(cams, boxes))
+    steps = np.linspace(0.0, 10.0, 20001)  # 0.5 mm along each ray
+    for cam in cams:
+        r = rays[cam.name]
+        assert len(r.pixels) > 50 and np.allclose(r.origin, cam.center)
+        # each ray's direction goes through its pixel
+        assert np.allclose(cam.project(r.origin + r.directions), r.pixels[:, ::-1], atol=1e-6)
+        pick = np.random.default_rng(0).choice(len(r.pixels), 60, replace=False)
+        for i in pick:
+            X = r.origin + steps[:, None] * r.directions[i]
+            inside = np.zeros(len(steps), bool)
+            for box in boxes:
+                inside |= np.all((X >= box.lo) & (X <= box.hi), axis=1)
+            if inside.any():
+                assert abs(steps[np.argmax(inside)] - r.entry[i]) < 1e-3
+            else:
+                assert not np.isfinite(r.entry[i]) or r.entry[i] == pytest.approx(steps[-1], abs=1e-3)
+
+
+def test_rays_meet_capsules_matches_sampled_distance():
+    rng = np.random.default_rng(5)
+    n, m = 300, 4
+    origin = rng.normal(scale=0.2, size=3)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    length = rng.uniform(-0.5, 3.0, size=n)
+    a, b = rng.uniform(-1.0, 1.0, size=(m, 3)), rng.uniform(-1.0, 1.0, size=(m, 3))
+    b[0] = a[0]  # a degenerate axis: a sphere
+    radius = rng.uniform(0.1, 0.6, size=m)
+    got = rays_meet_capsules(origin, d, length, a, b, radius)
+    s = np.linspace(0.0, 1.0, 1501)
+    t = np.linspace(0.0, 1.0, 301)
+    decided = 0
+    for i in range(n):
+        if length[i] <= 0:
+            assert not got[i]
+            continue
+        P = origin + (s * length[i])[:, None] * d[i]                   # (S, 3)
+        Q = a[:, None] + t[None, :, None] * (b - a)[:, None]            # (m, T, 3)
+        gap = np.linalg.norm(P[None, :, None] - Q[:, None], axis=3).min(axis=(1, 2)) - radius
+        if np.all(np.abs(gap) > 0.01):  # away from the threshold, the sampled answer is exact
+            assert got[i] == np.any(gap < 0), i
+            decided += 1
+    assert decided > 150 and 0.1 < got.mean() < 0.9
+
+
+def test_prop_keep_cuts_a_box_in_front_of_the_body_and_keeps_the_body_in_front_of_one():
+    from tracker.fitting.scene import SceneOptions, SceneTracker
+    from tracker.fitting.tracking import Tracker
+
+    model = load_model("knossow40")
+    cams = ring_cameras(3, size=(320, 240))
+    p = model.zero()
+    pelvis = forward(model, p).translation[0]
+    towards = cams[0].center - pelvis
+    towards[2] = 0.0
+    towards /= np.linalg.norm(towards)
+    front = PropBox.from_values(list(pelvis + 0.6 * towards - 0.15) + list(pelvis + 0.6 * towards + 0.15))
+    back = PropBox.from_values(list(pelvis - 0.6 * towards - 0.3) + list(pelvis - 0.6 * towards + 0.3))
+    opts = SceneOptions(prop_depth_tol_m=0.02)
+    st = SceneTracker(Tracker(model, cams), {}, options=opts, props=[front, back])
+    keep, grown, body = st.prop_keep(p)[cams[0].name], st.explained(p)[cams[0].name], st.explained(p, 0.0)[cams[0].name]
+    seen_front = prop_masks(cams[:1], [front])[cams[0].name]
+    seen_back = prop_masks(cams[:1], [back])[cams[0].name] & ~seen_front
+    # the masks' outline pixels, whose centres' rays can pass beside the box, left out
+    inner = {k: cv2.erode(m.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+             for k, m in (("front", seen_front), ("back", seen_back))}
+    # the box between the camera and the body hides it: none of its pixels is body
+    assert np.count_nonzero(inner["front"] & grown) > 50 and not np.any(inner["front"] & keep)
+    # the body in front of the other box: its pixels there stay body
+    assert np.count_nonzero(seen_back & body) > 50
+    assert np.count_nonzero(seen_back & body & keep) >= 0.98 * np.count_nonzero(seen_back & body)
+    # outside the props' projections the keep is the grown projection
+    outside = ~(seen_front | seen_back)
+    assert np.array_equal(keep[outside], grown[outside])
+    # without the ray test the grown projection keeps the box in front too (the old cut)
+    st0 = SceneTracker(Tracker(model, cams), {}, options=SceneOptions(prop_margin_m=0.04), props=[front, back])
+    assert np.any(seen_front & st0.prop_keep(p)[cams[0].name])

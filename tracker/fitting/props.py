@@ -14,6 +14,11 @@ the floor), ``--prop x0,y0,z0,x1,y1,z1`` or ``[[prop]] box = [x0, y0, z0, x1, y1
   point to the box (negative inside); its Jacobian is the box's outward direction times the
   point's Jacobian (``tracker.body.kinematics.point_jacobian``).  A limb can then not be fitted
   into the chair, whatever the chair's pixels say.
+
+``prop_rays`` gives, per pixel of a prop's projection, where its ray enters the nearest box, and
+``rays_meet_capsules`` whether a ray segment passes within a radius of segments: a pixel whose
+ray meets a box before it meets the body shows the prop, not the body
+(``SceneOptions.prop_depth_tol_m``).
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from tracker.body.kinematics import forward, point_jacobian
 from tracker.body.model import BodyModel
 from tracker.errors import TrackerError
 
-__all__ = ["PropBox", "PropPenalty", "parse_prop", "prop_masks", "seat_box"]
+__all__ = ["PropBox", "PropPenalty", "parse_prop", "PropRays", "prop_rays", "rays_meet_capsules", "prop_masks", "seat_box"]
 
 _NUMBER = r"\s*(-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 _PROP = re.compile(r"^" + ",".join([_NUMBER] * 6) + r"$")
@@ -113,6 +118,82 @@ def prop_masks(cameras: Iterable, props: Sequence[PropBox]) -> dict[str, np.ndar
             cv2.fillConvexPoly(mask, hull, 1, shift=4)
         out[cam.name] = mask.astype(bool)
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class PropRays:
+    """The rays of one camera's prop pixels.
+
+    Attributes
+    ----------
+    pixels : ndarray of int, shape (n, 2)
+        (row, column) of every pixel of the props' projection.
+    origin : ndarray, shape (3,)
+        The camera's centre, world metres.
+    directions : ndarray, shape (n, 3)
+        Unit world direction of each pixel's ray.
+    entry : ndarray, shape (n,)
+        Distance (metres along the ray) at which it first enters a box (0: the centre is inside
+        one), inf where it meets none.
+    """
+
+    pixels: np.ndarray
+    origin: np.ndarray
+    directions: np.ndarray
+    entry: np.ndarray
+
+
+def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, np.ndarray]) -> dict[str, PropRays]:
+    """Per camera name, the ``PropRays`` of the pixels of ``masks[name]`` (the props'
+    projections, ``prop_masks``) against ``props``."""
+    out = {}
+    for cam in cameras:
+        mask = masks.get(cam.name)
+        v, u = np.nonzero(mask) if mask is not None else (np.zeros(0, int), np.zeros(0, int))
+        d = cam.rays(np.stack([u, v], axis=1).astype(float)) if len(v) else np.zeros((0, 3))
+        c = np.asarray(cam.center, dtype=float)
+        best = np.full(len(d), np.inf)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+            for box in props:
+                t1, t2 = (box.lo - c) * inv, (box.hi - c) * inv
+                t_near = np.nanmax(np.minimum(t1, t2), axis=1)
+                t_far = np.nanmin(np.maximum(t1, t2), axis=1)
+                hit = (t_near <= t_far) & (t_far > 0)
+                best = np.where(hit, np.minimum(best, np.maximum(t_near, 0.0)), best)
+        out[cam.name] = PropRays(np.stack([v, u], axis=1), c, d, best)
+    return out
+
+
+def rays_meet_capsules(origin: np.ndarray, directions: np.ndarray, length: np.ndarray, ends_a: np.ndarray,
+                       ends_b: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Whether each ray segment ``origin + t d``, 0 <= t <= ``length`` (metres; (n,), non-positive:
+    empty) comes within ``radius`` (m,) of a capsule axis ``ends_a``–``ends_b`` ((m, 3) each):
+    (n,) bool.  The segments' closest points, clamped to both segments (Ericson's method); capsule
+    after capsule, only the rays not yet met."""
+    d1 = np.asarray(directions, dtype=float).reshape(-1, 3)
+    L = np.maximum(np.asarray(length, dtype=float).reshape(-1), 0.0)
+    o = np.asarray(origin, dtype=float)
+    met = np.zeros(len(d1), bool)
+    todo = np.flatnonzero(L > 0)
+    for p2, q2, rad in zip(np.asarray(ends_a, float), np.asarray(ends_b, float), np.asarray(radius, float)):
+        if not todo.size:
+            break
+        d2, r = q2 - p2, p2 - o
+        e = max(float(d2 @ d2), 1e-12)
+        f = float(d2 @ r)
+        dd, ll = d1[todo], L[todo]
+        b = dd @ d2
+        c = dd @ r
+        # s on the ray, t on the axis: minimise |o + s d1 - p2 - t d2| (|d1| = 1)
+        s = np.clip((c * e - b * f) / np.maximum(e - b * b, 1e-12), 0.0, ll)
+        t = np.clip((b * s - f) / e, 0.0, 1.0)
+        s = np.clip(c + b * t, 0.0, ll)
+        gap = s[:, None] * dd - r - t[:, None] * d2
+        hit = np.einsum("ij,ij->i", gap, gap) <= rad * rad
+        met[todo[hit]] = True
+        todo = todo[~hit]
+    return met
 
 
 class PropPenalty:

@@ -20,8 +20,10 @@ and the clutter of ``segmentation.clutter``:
 5. the first pose is searched standing (T/A-pose) and seated (``tracker.search.seated``);
    an offline caller may fit the warm-up's frames again, backwards from the settled state
    (``retrack``: the reverse term on, the clutter learned and the props cut);
-6. operator props (``tracker.fitting.props``: world boxes such as the chair) are clutter where the
-   body's projection does not cover them, and the fit may not put the body inside them.
+6. operator props (``tracker.fitting.props``: world boxes such as the chair) are cut where the
+   body's grown projection does not cover them (optionally also where a pixel's ray enters a prop
+   before it meets the body: ``SceneOptions.prop_depth_tol_m``), and the fit may not put the body
+   inside them.
 
 The bound on the unexplained share is the only guard against a wrong fit teaching the learner
 the real body as clutter; a fit that starts on the prop and stays there can learn the person.
@@ -41,12 +43,13 @@ from segmentation.background import BackgroundModel
 from segmentation.clutter import StaticClutter, segment_without_clutter
 from segmentation.pipeline import SegmentationParams
 from tracker.body.kinematics import forward, joint_centres
-from tracker.fitting.props import PropBox, PropPenalty, prop_masks, seat_box
+from tracker.fitting.props import PropBox, PropPenalty, prop_masks, prop_rays, rays_meet_capsules, seat_box
 from tracker.fitting.tracking import Tracker
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import initialise_any
 
 __all__ = ["RecoveryBudget", "SceneOptions", "SceneTracker"]
+
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,14 @@ class SceneOptions:
     #: a prop's pixels are body where the body's projection grown by this covers them (metres;
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
+    #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
+    #: enters the prop, passes within a part's radius grown by this (metres) of the part's axis
+    #: (None, the default: no ray test, the grown projection alone decides; off by default: a box
+    #: is a bounding box, hollow under a seat, and the body seen through it is cut: docs/real_floor.md)
+    prop_depth_tol_m: float | None = None
+    #: with ``prop_depth_tol_m``: the ray test only on the grown projection's band (the prop pixels
+    #: outside the body's own projection)
+    prop_ray_band: bool = False
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -177,6 +188,8 @@ class SceneTracker:
         """Use ``props`` from the next frame on (their masks and the fit's limit)."""
         self.props = list(props)
         self.prop_masks = prop_masks(self.tracker.cameras.values(), self.props) if self.props else {}
+        self.prop_rays = (prop_rays(self.tracker.cameras.values(), self.props, self.prop_masks)
+                          if self.props and self.options.prop_depth_tol_m is not None else {})
         self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
                                             clearance=self.options.prop_clearance) if self.props else None)
 
@@ -207,13 +220,18 @@ class SceneTracker:
         learner = self.learners.get(name)
         learned = None if learner is None else learner.mask
         prop = self.prop_masks.get(name) if name in self._explained else None
-        if prop is None or self.options.prop_margin_m is not None:
+        if prop is None or self._prop_cut_apart():
             return learned
         return prop if learned is None else (learned | prop)
 
+    def _prop_cut_apart(self) -> bool:
+        """Whether the props' pixels are cut by the ignore path (``prop_margin_m`` or
+        ``prop_depth_tol_m`` set) rather than as clutter."""
+        return self.options.prop_margin_m is not None or self.options.prop_depth_tol_m is not None
+
     def _ignore(self, name: str) -> np.ndarray | None:
         """The pixels cut whatever the body covers: the operator's ignore regions, and with
-        ``prop_margin_m`` the props' pixels the body's projection grown by it does not cover."""
+        ``prop_margin_m`` or ``prop_depth_tol_m`` the props' pixels not kept as body."""
         ignore = self.ignore.get(name)
         keep = self._prop_keep.get(name)
         if keep is None:
@@ -236,6 +254,47 @@ class SceneTracker:
                 full = cv2.dilate(full, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
             out[name] = full.astype(bool)
         return out
+
+    def prop_keep(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        """Per camera, (h, w) bool: the pixels where a prop's projection is kept as body at
+        ``params``: the body's projection grown by ``prop_margin_m`` (None: ``margin_m``), and with
+        ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a prop, passes within
+        a part's radius grown by ``prop_depth_tol_m`` of the part's axis (``body_capsules``;
+        ``props.rays_meet_capsules``): a ray that meets the prop first shows the prop.  Pixels whose ray meets no prop are kept as by the projection alone."""
+        margin = self.options.margin_m if self.options.prop_margin_m is None else self.options.prop_margin_m
+        keep = self.explained(params, margin)
+        tol = self.options.prop_depth_tol_m
+        if tol is None:
+            return keep
+        a, b, radius = self.body_capsules(params)
+        band = self.options.prop_ray_band
+        drawn = self.explained(params, 0.0) if band else None
+        for name, rays in self.prop_rays.items():
+            v, u = rays.pixels[:, 0], rays.pixels[:, 1]
+            test = keep[name][v, u] & np.isfinite(rays.entry)
+            if band:
+                test &= ~drawn[name][v, u]
+            sel = np.flatnonzero(test)
+            if not sel.size:
+                continue
+            meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))
+            keep[name][v[sel[~meets]], u[sel[~meets]]] = False
+        return keep
+
+    def body_capsules(self, params: np.ndarray, pieces: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every part as ``pieces`` capsules along its axis at ``params``: their axes' ends
+        (n_parts × pieces, 3) and (n_parts × pieces, 3), world metres, and radii (n_parts × pieces,),
+        each the larger semi-axis of the part's cone at the capsule's wider end."""
+        model = self.tracker.model
+        pose = forward(model, np.asarray(params, dtype=float))
+        a, b, k, z1, z2 = (model.cones[:, i] for i in range(5))
+        f = np.linspace(0.0, 1.0, pieces + 1)
+        z = z1[:, None] + (z2 - z1)[:, None] * f[None, :]  # (n_parts, pieces + 1)
+        r = np.maximum(a, b)[:, None] * np.maximum(1.0 + k[:, None] * z, 0.0)
+        parts = np.repeat(np.arange(model.n_parts), pieces)
+        ends = [pose.to_world(parts, np.stack([np.zeros(zz.size), np.zeros(zz.size), zz.ravel()], axis=1))
+                for zz in (z[:, :-1], z[:, 1:])]
+        return ends[0], ends[1], np.maximum(r[:, :-1], r[:, 1:]).ravel()
 
     def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
         """Segment ``images`` (camera name -> BGR uint8 (h, w, 3)), fit, learn; the pose record."""
@@ -272,8 +331,8 @@ class SceneTracker:
         self._explained = self.explained(params)
         if not self._seat_tried:
             self._learn_seat(params, raws)
-        if self.props and self.options.prop_margin_m is not None:
-            self._prop_keep = self.explained(params, self.options.prop_margin_m)
+        if self.props and self._prop_cut_apart():
+            self._prop_keep = self.prop_keep(params)
         if self.learners and self._trusted(rec):
             fg = {n: raws[n] > 0 for n in images}
             n_fg = sum(int(np.count_nonzero(m)) for m in fg.values())
