@@ -501,12 +501,13 @@ class Tracker:
         return bool(np.max(np.einsum("ij,ij->i", moved, moved)) > (step * self.model.height_m) ** 2)
 
     def _restart(self, cams, chs, res, terms, rms, inside):
-        """The fit from the last fitted pose, when its cost is lower than ``res``'s (the fit from the
-        prediction): ``(res, terms, rms, inside)`` of the one kept."""
+        """The second start: the frame fitted from the last fitted pose too; ``(res, terms, rms, inside)`` of
+        the cheaper of the two fits (``res`` is the fit from the prediction), or of the fit with a limb of
+        the other (``_exchange_limb``)."""
         self.n_restarts += 1
         res2, terms2, rms2, inside2 = self._fit(cams, chs, self.params)
-        first = (res, terms, rms, inside)
-        kept, other = ((res2, terms2, rms2, inside2), first) if res2.cost < res.cost else (first, (res2, terms2, rms2, inside2))
+        first, second = (res, terms, rms, inside), (res2, terms2, rms2, inside2)
+        kept, other = (second, first) if res2.cost < res.cost else (first, second)
         if self.options.restart_exchange:
             kept = self._exchange_limb(cams, chs, kept, other[0])
         self.n_restarts_taken += int(kept[0] is not res)
