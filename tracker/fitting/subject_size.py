@@ -173,9 +173,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
         Image scale of the scoring views.
     segments, widths, radii : sequence of str
         Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
-    props, prop_cost, prop_clearance : sequence of PropBox, float, float
-        The operator's props; every polish scores by ``PropLimitedViews`` (IoU − ``prop_cost`` ×
-        intrusion in metres; ``prop_clearance`` as the scene tracker's ``PropPenalty``).
+    props, prop_cost, prop_clearance : PropBoxes; every polish scores ``PropLimitedViews(cost, clearance)``
 
     Returns
     -------
