@@ -4,8 +4,7 @@ The frames are tracked as ``contourcap track`` does (clutter learned, seated or 
 ``--samples`` frame sets spread over the range's second half (after the clutter has been learned),
 whose fits the scene tracker trusts, are handed with their body silhouettes to
 ``tracker.fitting.subject_size.estimate_segment_lengths`` (segment lengths, and unless
-``--lengths-only`` the hip and shoulder widths and the limb and trunk radii), every pose polish kept out of the
-session's props as the track's fit is; the result is written as a subject
+``--lengths-only`` the hip and shoulder widths and the limb and trunk radii); the result is written as a subject
 file (``tracker.body.subject``), which ``contourcap track --subject`` and session.toml's
 ``[subject] file`` use.  Exit status 0 when written, 1 when no frame could be used, 2 on bad input.
 """
@@ -88,8 +87,7 @@ def auto_calibrate(session, names, frames: range, model, options: AutoSubjectOpt
         return None
     first, last = frames.start, frames.stop
     return calibrate_sample(fitted, [session.camera_model(n) for n in names], sample.sets(), options,
-                            where=f"contourcap track --calibrate-subject, frames {first}:{last}",
-                            props=session_props(session))
+                            where=f"contourcap track --calibrate-subject, frames {first}:{last}")
 
 
 def within_take(session, names, frames: range) -> range:
@@ -131,8 +129,7 @@ def run_subject(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 1
         more = {} if args.lengths_only else {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER}
-        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils,
-                                       props=session_props(session), **more)
+        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils, **more)
         subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,
                           f"contourcap calibrate subject, frames {args.frames}, {len(poses)} frame sets, "
                           f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}", fit.widths, fit.radius_scale)

@@ -8,12 +8,8 @@ import pytest
 from tracker.body.kinematics import forward
 from tracker.body.model import ModelError, load_model
 from tracker.body.subject import Subject, read_subject, write_subject
-from tracker.fitting.props import PropBox, PropPenalty
-from tracker.fitting.subject_size import (WIDTH_ORDER, PropLimitedViews, estimate_segment_lengths, nominal_segment_lengths,
-                                          nominal_widths)
+from tracker.fitting.subject_size import WIDTH_ORDER, estimate_segment_lengths, nominal_segment_lengths, nominal_widths
 from tracker.imaging.render import render_silhouettes
-from tracker.search.scoring import ScoreViews
-from tracker.search.seated import polish_iou
 from tracker.synthetic.scene import ring_cameras
 
 
@@ -106,52 +102,3 @@ def test_widths_and_radii_recovered():
     for k, v in radii.items():
         assert abs(fit.radius_scale[k] - v) <= 0.5 * abs(1.0 - v), (k, fit.radius_scale, radii)
     assert fit.iou_after > fit.iou_before
-
-
-def _leg_in_a_box():
-    """Silhouettes of a body with its left thigh flexed 80 deg (4 cameras) and a box around that
-    leg's front part, as a chair's pixels left in a silhouette and the chair's box; a start pose
-    with the thigh at 45 deg, clear of the box."""
-    model = load_model("knossow40")
-    names = list(model.param_names)
-    seen, start = model.zero(), model.zero()
-    seen[names.index("left_thigh.flexion")] = np.radians(80.0)
-    start[names.index("left_thigh.flexion")] = np.radians(45.0)
-    pose = forward(model, seen)
-    part, pts, _ = PropPenalty([], weight=1.0)._model_points(model)
-    X = pose.to_world(part, pts)
-    leg = X[np.isin(part, [model.part_names.index(n) for n in ("left_thigh", "left_shank")])]
-    leg = leg[leg[:, 0] > 0.25]
-    box = PropBox.from_values(list(leg.min(axis=0) - 0.03) + list(leg.max(axis=0) + 0.03))
-    cams = ring_cameras(4, size=(320, 240))
-    return model, cams, render_silhouettes(model, pose, cams), start, box
-
-
-def test_prop_limited_polish_keeps_the_joints_out_of_the_box():
-    """A polish of the legs' joints follows the box's pixels into the box on the
-    plain IoU and stays out of it on the prop-limited score."""
-    model, cams, sils, start, box = _leg_in_a_box()
-    views = ScoreViews(model, cams, sils, scale=0.5)
-    limited = PropLimitedViews(views, [box])
-    assert limited.intrusion(start) == 0.0
-    legs = [model.part_names.index(n) for n in ("left_thigh", "left_shank", "right_thigh", "right_shank")]
-    steps = {model.param_names[k]: 0.1 for k in np.flatnonzero(np.isin(model.param_part, legs))}
-    plain, _ = polish_iou(model, views, start, steps=steps, rounds=8)
-    kept, score = polish_iou(model, limited, start, steps=steps, rounds=8)
-    assert limited.intrusion(plain) > 0.05  # the plain IoU does take the leg into the box
-    assert limited.intrusion(kept) == 0.0
-    assert score == pytest.approx(views.score(kept))
-    longer = load_model("knossow40", segment_lengths={"thigh": 0.5})
-    other = limited.with_model(longer)
-    assert other.props == [box] and other.model is longer and other.views.model is longer
-
-
-def test_segment_lengths_with_props_keep_the_poses_out():
-    """``estimate_segment_lengths(props=...)``: its polished poses stay out of the box (without the
-    props, the same fit takes the leg into it)."""
-    model, cams, sils, start, box = _leg_in_a_box()
-    sets = [{c.name: s for c, s in zip(cams, sils)}]
-    for props in ((), (box,)):
-        fit = estimate_segment_lengths(model, cams, [start], sets, rounds=1, segments=("thigh",), props=props)
-        intrusion = PropLimitedViews(ScoreViews(fit.model, cams, sils, scale=0.5), [box]).intrusion(fit.params[0])
-        assert (intrusion == 0.0) if props else (intrusion > 0.01), (props, intrusion)

@@ -11,9 +11,7 @@ each pose polished to its body the same way (``polish_iou``): the calibrated bod
 when it explains the held-out silhouettes better by ``min_gain``.  Never a worse body.
 
 The silhouettes should hold the body only: a prop in them is covered better by a bigger body, and the
-held-out IoU would reward it too (``tracker.fitting.scene`` cuts clutter offline).  With the
-operator's ``props`` both the fit and the judge score a pose by its IoU minus its intrusion into them
-(``tracker.fitting.subject_size.PropLimitedViews``): a body is not judged better for sinking into a chair.
+held-out IoU would reward it too (``tracker.fitting.scene`` cuts clutter offline).
 """
 
 from __future__ import annotations
@@ -27,8 +25,7 @@ import numpy as np
 from capture.camera import Camera
 from tracker.body.model import JOINT_ROTATION, BodyModel
 from tracker.body.subject import Subject
-from tracker.fitting.subject_size import (RADIUS_ORDER, WIDTH_ORDER, PropLimitedViews, SubjectFit,
-                                          estimate_segment_lengths, pose_steps)
+from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, SubjectFit, estimate_segment_lengths, pose_steps
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
@@ -211,23 +208,20 @@ class SampleCalibration:
 
 
 def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                 rounds: int, props=()) -> list[float]:
+                 rounds: int) -> list[float]:
     """Mean silhouette IoU of each of ``models`` (same parameters, other sizes) over ``sets``
     (``(frame id, params, camera -> mask)``), each pose first polished to the model by ``rounds`` of
-    ``polish_iou``; one list entry per model.  ``props``: PropBoxes, the score's intrusion term
-    (``PropLimitedViews``; the IoU less the pose's intrusion into them)."""
-    return [float(v) for v in held_out_ious(models, cameras, sets, scale=scale, rounds=rounds,
-                                            props=props).mean(axis=0)]
+    ``polish_iou``; one list entry per model."""
+    return [float(v) for v in held_out_ious(models, cameras, sets, scale=scale, rounds=rounds).mean(axis=0)]
 
 
 def held_out_ious(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                  rounds: int, props=()) -> np.ndarray:
+                  rounds: int) -> np.ndarray:
     """:func:`held_out_iou` per set: ndarray ``(len(sets), len(models))``."""
     names = [c.name for c in cameras]
     ious = np.zeros((len(sets), len(models)))
     for i, (_, p, sils) in enumerate(sets):
         base = ScoreViews(models[0], cameras, [np.asarray(sils[n]) for n in names], scale=scale)
-        base = PropLimitedViews(base, props) if props else base
         for j, model in enumerate(models):
             views = base if j == 0 else base.with_model(model)
             ious[i, j] = (polish_iou(model, views, p, steps=pose_steps(model, 0.5), rounds=rounds)[1] if rounds
@@ -236,7 +230,7 @@ def held_out_ious(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, 
 
 
 def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options: AutoSubjectOptions,
-                     *, where: str = "auto", props=()) -> SampleCalibration:
+                     *, where: str = "auto") -> SampleCalibration:
     """Fit a subject to ``sets`` minus the held-out ones and judge it on those (module docstring).
 
     Parameters
@@ -250,8 +244,6 @@ def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options:
     options : AutoSubjectOptions
     where : str
         Provenance for the subject's ``fitted`` text.
-    props : sequence of ``tracker.fitting.props.PropBox``
-        The operator's props: kept out of by every polish of the fit and the judge.
     """
     c0 = time.thread_time()
     sets = list(sets)
@@ -263,9 +255,8 @@ def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options:
     held = [s for i, s in enumerate(sets) if i in held_idx]
     more = {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER} if options.widths_and_radii else {}
     fit = estimate_segment_lengths(model, cameras, [s[1] for s in fit_sets], [s[2] for s in fit_sets],
-                                   rounds=int(options.rounds), scale=float(options.scale), props=props, **more)
-    per_set = held_out_ious([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds,
-                            props=props)
+                                   rounds=int(options.rounds), scale=float(options.scale), **more)
+    per_set = held_out_ious([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds)
     before, after = (float(v) for v in per_set.mean(axis=0))
     adopted = after >= before + float(options.min_gain)
     subject = Subject(model.name, model.height_m, fit.segment_lengths,

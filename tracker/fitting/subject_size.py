@@ -18,10 +18,6 @@ proportions) and each camera's silhouette, :func:`estimate_segment_lengths` alte
 Segments are searched from the trunk outwards (a thigh's length moves the shank's silhouette, not
 the reverse).  The silhouettes should hold the body only (clutter cut, ``tracker.fitting.scene``):
 the IoU counts a prop the body does not cover, and a limb lengthened onto it would score.
-With ``props`` (the operator's boxes, ``tracker.fitting.props``), every polish (each frame's and each
-candidate's) scores a pose by its IoU minus ``prop_cost`` × its intrusion into them (``PropLimitedViews``:
-the scene tracker's ``PropPenalty``, in metres): a re-polished joint cannot sink into the chair to
-explain the chair's pixels left in the silhouette.
 """
 
 from __future__ import annotations
@@ -35,12 +31,11 @@ from capture.camera import Camera
 from capture.tomlio import load_file
 from tracker.body.kinematics import forward
 from tracker.body.model import MODELS_DIR, BodyModel, load_model
-from tracker.fitting.props import PropBox, PropPenalty
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
 __all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
-           "WIDTH_ORDER", "RADIUS_ORDER", "PropLimitedViews"]
+           "WIDTH_ORDER", "RADIUS_ORDER"]
 
 #: Search order, trunk first.
 SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
@@ -102,53 +97,13 @@ def pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
     return steps
 
 
-class PropLimitedViews:
-    """Scoring views whose ``score`` is the silhouette IoU minus the pose's intrusion into props.
-
-    ``score(params) = views.score(params) − cost × Σ max(0, clearance × r − s(X))`` over the
-    ``PropPenalty`` axis points (metres; ``s`` the signed distance to a box, ``r`` the part's radius);
-    ``polish_iou`` takes it where it takes a ``ScoreViews``.
-
-    Parameters
-    ----------
-    views : ScoreViews
-    props : sequence of PropBox
-    cost : float
-        IoU lost per metre of summed intrusion.
-    clearance : float
-        As ``PropPenalty``'s (× a part's smaller radius; the root part 0).
-    """
-
-    def __init__(self, views: ScoreViews, props: Sequence[PropBox], *, cost: float = 5.0,
-                 clearance: float = 1.0, _penalty: PropPenalty | None = None) -> None:
-        self.views, self.props, self.cost, self.clearance = views, list(props), float(cost), float(clearance)
-        self.model = views.model
-        self.penalty = _penalty if _penalty is not None else PropPenalty(self.props, weight=1.0, clearance=clearance)
-
-    def intrusion(self, params: np.ndarray) -> float:
-        """Summed intrusion of the pose's axis points into the props (metres, >= 0)."""
-        if not self.props:
-            return 0.0
-        return float(self.penalty.residuals(self.model, params)[0].sum())
-
-    def score(self, params: np.ndarray) -> float:
-        """The IoU (``ScoreViews.score``) minus ``cost`` × :meth:`intrusion`."""
-        return self.views.score(params) - self.cost * self.intrusion(params)
-
-    def with_model(self, model: BodyModel) -> "PropLimitedViews":
-        """The same views and props scoring another model (e.g. resized)."""
-        return PropLimitedViews(self.views.with_model(model), self.props, cost=self.cost,
-                                clearance=self.clearance, _penalty=self.penalty)
-
-
 def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses: Sequence[np.ndarray],
                              silhouettes: Sequence[Mapping[str, np.ndarray]], *, rounds: int = 3,
                              span: float = 0.25, step: float = 0.025, prior_sigma: float = 0.3,
                              polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
                              segments: Sequence[str] = SEGMENT_ORDER, widths: Sequence[str] = (),
                              radii: Sequence[str] = (), width_sigma: float = 0.2,
-                             radius_sigma: float = 0.2, props: Sequence[PropBox] = (), prop_cost: float = 5.0,
-                             prop_clearance: float = 1.0) -> SubjectFit:
+                             radius_sigma: float = 0.2) -> SubjectFit:
     """Fit segment lengths (and optionally widths and radii) to silhouettes, jointly with the frames' poses.
 
     Parameters
@@ -173,7 +128,6 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
         Image scale of the scoring views.
     segments, widths, radii : sequence of str
         Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
-    props, prop_cost, prop_clearance : PropBoxes; every polish scores ``PropLimitedViews(cost, clearance)``
 
     Returns
     -------
@@ -182,9 +136,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     if len(poses) != len(silhouettes) or not poses:
         raise ValueError("estimate_segment_lengths: need one silhouette set per pose, at least one")
     names = [c.name for c in cameras]
-    plain = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale) for s in silhouettes]
-    views = ([PropLimitedViews(v, props, cost=prop_cost, clearance=prop_clearance) for v in plain] if props
-             else plain)
+    views = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale) for s in silhouettes]
     nominal = {("length", k): v for k, v in nominal_segment_lengths(model).items()}
     nominal.update({("width", k): v for k, v in nominal_widths(model).items()})
     nominal.update({("radius", k): 1.0 for k in model.radius_groups})
@@ -204,7 +156,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
 
     params = [model.clamp(np.asarray(p, dtype=float)) for p in poses]
     current = model
-    iou_before = float(np.mean([v.score(p) for v, p in zip(plain, params)]))
+    iou_before = float(np.mean([v.score(p) for v, p in zip(views, params)]))
     steps = pose_steps(model, pose_step)
 
     root = {n: 0.01 for n, k in zip(model.param_names, model.param_kind) if k == 0}
@@ -241,6 +193,6 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
                     best += 0.5 * (y0 - y2) / den * float(cands[i + 1] - cands[i])
             values[dim] = best
             current = build(values)
-    iou_after = float(np.mean([v.with_model(current).score(p) for v, p in zip(plain, params)]))
+    iou_after = float(np.mean([v.with_model(current).score(p) for v, p in zip(views, params)]))
     fitted = by_kind(values)
     return SubjectFit(fitted["length"], current, params, iou_before, iou_after, fitted["width"], fitted["radius"])
