@@ -51,7 +51,6 @@ from tracker.search.seated import initialise_any
 __all__ = ["RecoveryBudget", "SceneOptions", "SceneTracker"]
 
 
-
 @dataclass(frozen=True)
 class SceneOptions:
     """Options of :class:`SceneTracker`.
@@ -97,9 +96,6 @@ class SceneOptions:
     #: (None, the default: no ray test, the grown projection alone decides; off by default: a box
     #: is a bounding box, hollow under a seat, and the body seen through it is cut: docs/real_floor.md)
     prop_depth_tol_m: float | None = None
-    #: with ``prop_depth_tol_m``: the ray test only on the grown projection's band (the prop pixels
-    #: outside the body's own projection)
-    prop_ray_band: bool = False
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -267,34 +263,26 @@ class SceneTracker:
         if tol is None:
             return keep
         a, b, radius = self.body_capsules(params)
-        band = self.options.prop_ray_band
-        drawn = self.explained(params, 0.0) if band else None
         for name, rays in self.prop_rays.items():
             v, u = rays.pixels[:, 0], rays.pixels[:, 1]
-            test = keep[name][v, u] & np.isfinite(rays.entry)
-            if band:
-                test &= ~drawn[name][v, u]
-            sel = np.flatnonzero(test)
+            sel = np.flatnonzero(keep[name][v, u] & np.isfinite(rays.entry))
             if not sel.size:
                 continue
             meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))
             keep[name][v[sel[~meets]], u[sel[~meets]]] = False
         return keep
 
-    def body_capsules(self, params: np.ndarray, pieces: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every part as ``pieces`` capsules along its axis at ``params``: their axes' ends
-        (n_parts × pieces, 3) and (n_parts × pieces, 3), world metres, and radii (n_parts × pieces,),
-        each the larger semi-axis of the part's cone at the capsule's wider end."""
+    def body_capsules(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every part as a capsule along its axis at ``params``: the axis' ends (n_parts, 3) and
+        (n_parts, 3), world metres, and radii (n_parts,), the larger semi-axis of the part's cone at
+        its wider end."""
         model = self.tracker.model
         pose = forward(model, np.asarray(params, dtype=float))
         a, b, k, z1, z2 = (model.cones[:, i] for i in range(5))
-        f = np.linspace(0.0, 1.0, pieces + 1)
-        z = z1[:, None] + (z2 - z1)[:, None] * f[None, :]  # (n_parts, pieces + 1)
-        r = np.maximum(a, b)[:, None] * np.maximum(1.0 + k[:, None] * z, 0.0)
-        parts = np.repeat(np.arange(model.n_parts), pieces)
-        ends = [pose.to_world(parts, np.stack([np.zeros(zz.size), np.zeros(zz.size), zz.ravel()], axis=1))
-                for zz in (z[:, :-1], z[:, 1:])]
-        return ends[0], ends[1], np.maximum(r[:, :-1], r[:, 1:]).ravel()
+        parts = np.arange(model.n_parts)
+        ends = [pose.to_world(parts, np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1)) for z in (z1, z2)]
+        r = np.maximum(a, b) * np.maximum(np.maximum(1.0 + k * z1, 1.0 + k * z2), 0.0)
+        return ends[0], ends[1], r
 
     def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
         """Segment ``images`` (camera name -> BGR uint8 (h, w, 3)), fit, learn; the pose record."""

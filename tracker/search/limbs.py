@@ -117,8 +117,9 @@ def arm_candidates(model: BodyModel, params: np.ndarray, previous: np.ndarray | 
     index, sign = mirror_map(model)
     k, down = _hanging(model)
     out = []
+    arms = dict(side_chains(model))
     for side in ("left", "right"):
-        dofs = [i for i in limb_dofs(model, ARMS) if model.param_names[i].startswith(side + "_")]
+        dofs = arms.get(f"{side} arm", np.zeros(0, dtype=int))
         q = p.copy()
         q[dofs] = 0.0
         q[k if side == "left" else index[k]] = down if side == "left" else sign[k] * down
