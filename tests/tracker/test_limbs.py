@@ -10,8 +10,8 @@ from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, load_model
 from tracker.fitting.tracking import Tracker, TrackerOptions
 from tracker.imaging.render import internal_edges, render_label_images
-from tracker.search.limbs import (ARMS, EXCHANGED, KEPT, LEGS, SAME, UNSURE, StrideWatch, ankle_separation,
-                                  arm_candidates, exchange_limbs, exchange_verdict, leg_candidates, limb_dofs)
+from tracker.search.limbs import (ARMS, EXCHANGED, KEPT, LEGS, SAME, UNSURE, StrideWatch, ankle_crossing,
+                                  ankle_separation, arm_candidates, exchange_limbs, exchange_verdict, leg_candidates, limb_dofs)
 from tracker.synthetic.scene import ring_cameras
 from tracker.body.kinematics import so3_exp
 
@@ -163,3 +163,63 @@ def test_limb_check_off():
                  options=TrackerOptions(limb_every=0))
     tr.step(0, 0, *_render(truth, cams))
     assert tr.n_limb_checks == 0
+
+
+def _crossed(params) -> np.ndarray:
+    """``params`` with the legs exchanged and each thigh drawn 20° across the midline: each foot on the
+    other side of the body (what a fit carried through a turn leaves)."""
+    q = exchange_limbs(MODEL, params).copy()
+    for side in ("left", "right"):
+        q[MODEL.param_index(f"{side}_thigh.abduction")] = np.radians(-20.0)
+    return MODEL.clamp(q)
+
+
+def test_ankle_crossing_is_the_ankles_apart_across_the_hip_line():
+    """Standing or striding (the thighs only flexed), the ankles are the thighs' pivots apart across the
+    hip line (positive), crossed legs negative; the figure does not depend on where the body stands or
+    which way it faces."""
+    rng = np.random.default_rng(3)
+    ankles = _pelvis_frame(MODEL.zero(), ["left_ankle", "right_ankle"])
+    apart = float(ankles[0, 1] - ankles[1, 1])
+    assert apart > 0.2 and ankle_crossing(MODEL, MODEL.zero()) == pytest.approx(apart, abs=1e-9)
+    for seed in range(5):
+        p = _stride(seed)
+        assert ankle_crossing(MODEL, p) == pytest.approx(apart, abs=0.01)
+        assert ankle_crossing(MODEL, _crossed(p)) < -0.05
+        q = p.copy()
+        q[:2] += rng.uniform(-1, 1, 2)
+        q[5] += rng.uniform(-np.pi, np.pi)
+        assert ankle_crossing(MODEL, q) == pytest.approx(ankle_crossing(MODEL, p), abs=1e-9)
+
+
+def test_uncrossed_start_puts_each_foot_on_its_side_at_the_other_legs_place():
+    for seed in range(5):
+        crossed = _crossed(_stride(seed))
+        cands = dict(leg_candidates(MODEL, crossed, crossed=True))
+        assert "uncrossed" in cands and "uncrossed" not in dict(leg_candidates(MODEL, crossed))
+        u = cands["uncrossed"]
+        assert ankle_crossing(MODEL, u) > 0.1
+        # fore-aft: the left ankle goes where the right one was along the heading, and back
+        assert np.sign(ankle_separation(MODEL, u)) == -np.sign(ankle_separation(MODEL, crossed))
+        assert set(np.flatnonzero(u != crossed)) <= set(limb_dofs(MODEL, LEGS))
+
+
+@pytest.mark.parametrize("crossed_limit", [0.03, None])
+def test_crossed_legs_are_uncrossed(crossed_limit):
+    """Five seeded mid-stride poses tracked from the legs crossed (each foot reaching to the other's
+    place): with ``limb_crossed`` the limb check runs on the first frame and at least three end within
+    5 cm of the truth's knees and ankles, none reported ok further off than 8 cm; without it no check
+    runs and every track keeps the legs crossed (more than 0.3 m off)."""
+    cams = ring_cameras(4, size=(320, 240))
+    corrected = 0
+    for seed in range(5):
+        truth = _stride(seed)
+        tr = Tracker(MODEL, cams, initial_params=_crossed(truth), recover=False, front_back=None,
+                     options=TrackerOptions(limb_crossed=crossed_limit))
+        rec = tr.step(0, 0, *_render(truth, cams))
+        err = _leg_error_m(rec, truth)
+        assert not (rec["ok"] and err > 0.08), (seed, err, rec.get("reason"))
+        if crossed_limit is None:
+            assert tr.n_limb_checks == 0 and err > 0.3
+        corrected += err < 0.05
+    assert corrected >= 3 if crossed_limit is not None else corrected == 0

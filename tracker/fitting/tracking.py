@@ -32,8 +32,8 @@ from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptio
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
-from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_separation, arm_candidates,
-                                  chain_joint_distance, exchange_verdict, leg_candidates, side_chains)
+from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing, ankle_separation,
+                                  arm_candidates, chain_joint_distance, exchange_verdict, leg_candidates, side_chains)
 from tracker.search.appearance import view_colours
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
@@ -74,8 +74,8 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same,
-    limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : lost or exchanged limbs; colour
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin,
+    limb_same, limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : limbs; colour
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
@@ -203,6 +203,10 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
+    #: crossed legs (``tracker.search.limbs.ankle_crossing``: the left ankle more than ``limb_crossed`` ×
+    #: height on the right ankle's side) make the limb check due, lost or not, at most every
+    #: ``limb_every`` frames, with the ``"uncrossed"`` start among its legs' (None: off)
+    limb_crossed: float | None = 0.03
     #: a limb lost inside the silhouette (its fit as good as a right one's): with the frame's colour
     #: images and the front/back guard's learned colours, each forearm and hand is sampled per camera
     #: (``tracker.search.appearance.view_colours``); in a camera it looks lost when its samples are
@@ -416,6 +420,7 @@ class Tracker:
         self.n_front_back_checks = 0
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
+        self._legs_crossed = False
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -655,7 +660,10 @@ class Tracker:
         crossed = o.limb_dead_band > 0 and self.stride.update(
             ankle_separation(self.model, np.asarray(terms.pose.params), terms.pose))
         cov = terms.coverage()
-        return crossed or (not lost and np.isfinite(cov) and cov < limit and self._since_limbs >= o.limb_every)
+        self._legs_crossed = o.limb_crossed is not None and ankle_crossing(
+            self.model, np.asarray(terms.pose.params), terms.pose) < -o.limb_crossed * self.model.height_m
+        return crossed or (self._since_limbs >= o.limb_every
+                           and (self._legs_crossed or (not lost and np.isfinite(cov) and cov < limit)))
 
     def _limbs(self, cams, chs, res, terms, views):
         """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``, the best limb
@@ -669,7 +677,8 @@ class Tracker:
                                self._last_iou if self._last_iou is not None else float(v.score(p)))
         opts = replace(o, max_iterations=o.limb_iterations)
         best = None
-        for name, start in leg_candidates(self.model, p) + arm_candidates(self.model, p, self.last_good):
+        legs = leg_candidates(self.model, p, crossed=self._legs_crossed)
+        for name, start in legs + arm_candidates(self.model, p, self.last_good):
             r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=opts,
                                 penalty=self.penalty)
             q = np.asarray(r.params)

@@ -7,6 +7,12 @@ joint angles swapped through the pelvis's sagittal plane (``exchange_limbs``: th
 ``tracker.search.mirror.mirror_map`` applied to one pair of chains only, the root and the trunk
 unchanged), so that each leg takes the other's place in the pelvis frame.
 
+The legs can also end *crossed*: after a turn or an exchange the left ankle on the right ankle's side of
+the pelvis (``ankle_crossing`` negative), each leg reaching across to the other's silhouette.  The
+exchanged hypothesis of a crossed pair is crossed as well; ``leg_candidates``' ``"uncrossed"`` start
+is the exchange with both legs' abduction and twist at zero, each foot under its own hip on the other
+leg's fore-aft place.
+
 ``StrideWatch`` says when to try it: the legs have crossed since the last check (the ankles'
 fore-aft separation along the pelvis heading changed sign, each time beyond a dead band), which is
 where an exchange happens and after which it shows (the legs apart again, each on the other's
@@ -30,7 +36,7 @@ from tracker.body.model import JOINT_ROTATION, BodyModel
 from tracker.search.mirror import exchange_sides, mirror_map, pelvis_heading
 
 __all__ = ["LEGS", "ARMS", "exchange_limbs", "limb_dofs", "side_chains", "leg_candidates", "ankle_separation", "StrideWatch",
-           "ExchangeVerdict", "arm_candidates", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
+           "ExchangeVerdict", "arm_candidates", "ankle_crossing", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
 
 #: the chains' part names without their ``left_``/``right_`` prefix
 LEGS = ("thigh", "shank", "foot")
@@ -75,13 +81,19 @@ def exchange_limbs(model: BodyModel, params: np.ndarray, chain: tuple = LEGS) ->
     return exchange_sides(model, params, np.asarray(limb_dofs(model, chain), dtype=int))
 
 
-def leg_candidates(model: BodyModel, params: np.ndarray) -> list[tuple[str, np.ndarray]]:
+def leg_candidates(model: BodyModel, params: np.ndarray, crossed: bool = False) -> list[tuple[str, np.ndarray]]:
     """The starts a leg check fits besides the pose: the legs exchanged (``exchange_limbs``) and each
     leg alone put straight (its DOF zero: hanging from the hip, the start for a leg that followed the
-    other leg's silhouette).  List of (name, params), names ``"exchanged"``, ``"left_straight"``,
-    ``"right_straight"``."""
+    other leg's silhouette) and, with ``crossed``, the exchange with both legs' abduction and twist at zero
+    (module docstring).  List of (name, params), names ``"exchanged"``, ``"left_straight"``,
+    ``"right_straight"`` and ``"uncrossed"``."""
     p = np.asarray(params, dtype=float)
-    out = [("exchanged", model.clamp(exchange_limbs(model, p, LEGS)))]
+    exchanged = exchange_limbs(model, p, LEGS)
+    out = [("exchanged", model.clamp(exchanged))]
+    if crossed:
+        q = exchanged.copy()
+        q[[k for k in limb_dofs(model, LEGS) if model.param_names[k].split(".")[-1] in ("abduction", "twist")]] = 0.0
+        out.append(("uncrossed", model.clamp(q)))
     for side in ("left", "right"):
         q = p.copy()
         q[[k for k in limb_dofs(model, LEGS) if model.param_names[k].startswith(side + "_")]] = 0.0
@@ -157,6 +169,23 @@ def ankle_separation(model: BodyModel, params: np.ndarray, pose=None) -> float:
     j = joint_centre_array(model, forward(model, params) if pose is None else pose)
     d = j[names.index("left_ankle")] - j[names.index("right_ankle")]
     return float(d[:2] @ h)
+
+
+def ankle_crossing(model: BodyModel, params: np.ndarray, pose=None) -> float:
+    """Left ankle minus right ankle along the pelvis's left axis (its hip line in the horizontal
+    plane), metres: negative when the legs are crossed; NaN when the model has no ankles or hips.
+    ``pose``: ``forward(model, params)`` if already computed."""
+    names = list(model.joint_names)
+    want = ("left_ankle", "right_ankle", "left_hip", "right_hip")
+    if not all(n in names for n in want):
+        return float("nan")
+    j = joint_centre_array(model, forward(model, params) if pose is None else pose)
+    la, ra, lh, rh = (j[names.index(n)] for n in want)
+    side = (lh - rh)[:2]
+    norm = float(np.linalg.norm(side))
+    if norm < 1e-9:
+        return float("nan")
+    return float((la - ra)[:2] @ side / norm)
 
 
 class StrideWatch:
