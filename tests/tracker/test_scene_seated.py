@@ -16,7 +16,7 @@ import pytest
 
 from capture.session import load_session
 from service.backgrounds import background_models
-from service.offline import track_session
+from service.offline import session_props, track_session
 from tracker.fitting.props import PropBox
 from tracker.fitting.scene import SceneOptions
 from tracker.synthetic.people import JOINT_NAMES
@@ -26,13 +26,14 @@ JUDGED = ("left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_
           "left_knee", "right_knee", "left_ankle", "right_ankle")
 
 
-def render_seated_session(root: Path, *, seed: int, frames: int, size=(320, 240)):
+def render_seated_session(root: Path, *, seed: int, frames: int, size=(320, 240), props: str = "parts"):
     """Render the seated scene into a session at ``root`` (``write_seated_session``, a ring of four
-    cameras); returns (truth (n, 16, 3), background models, the chair's operator boxes)."""
-    truth, _, props = write_seated_session(root, seed=seed, frames=frames, size=size)
+    cameras, its ``props``); returns (truth (n, 16, 3), background models, the session's props as
+    ``PropBox``)."""
+    truth, _, _ = write_seated_session(root, seed=seed, frames=frames, size=size, props=props)
     session = load_session(root)
     backgrounds, _ = background_models(session, list(session.camera_names))
-    return truth, backgrounds, props
+    return truth, backgrounds, session_props(session)
 
 
 def judged_errors_mm(records: list[dict], truth: np.ndarray) -> dict[str, float]:
@@ -54,9 +55,10 @@ def frame_errors_mm(records: list[dict], truth: np.ndarray) -> np.ndarray:
 
 
 def track(root: Path, backgrounds, props, **scene) -> list[dict]:
+    """The scene tracker's records of the session at ``root`` with ``props`` (PropBox list or None)
+    and ``SceneOptions(**scene)``."""
     session = load_session(root)
-    return list(track_session(session, backgrounds=backgrounds, scene=SceneOptions(**scene),
-                              props=[PropBox.from_values(p) for p in props] if props else None))
+    return list(track_session(session, backgrounds=backgrounds, scene=SceneOptions(**scene), props=props or None))
 
 
 if __name__ == "__main__":  # a measurement run: python -m tests.tracker.test_scene_seated SEED FRAMES
@@ -93,7 +95,7 @@ def seated_scene(tmp_path_factory):
 def test_chair_props_keep_the_legs_off_the_chair(seated_scene):
     root, truth, backgrounds, props = seated_scene
     # the operator's boxes hold the chair: the seat's top under the hips, the legs in front of it
-    seat = PropBox.from_values(props[0])
+    seat = props[0]
     hips = truth[:, [JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip")]].reshape(-1, 3)
     assert np.all(hips[:, 2] > seat.hi[2]) and np.all(seat.signed_distance(hips)[0] > 0)
     plain = track(root, backgrounds, None, auto_seat=False)

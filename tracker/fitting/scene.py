@@ -88,14 +88,17 @@ class SceneOptions:
     #: ``PropPenalty``'s weight (pixels per metre of intrusion) and clearance (× a part's radius)
     prop_weight: float = 2000.0
     prop_clearance: float = 1.0
+    #: the thighs' clearance from ``PropPenalty``'s root (pelvis) factor at the hip to
+    #: ``prop_clearance`` at the knee (``PropPenalty.thigh_taper``)
+    prop_thigh_taper: bool = False
     #: a prop's pixels are body where the body's projection grown by this covers them (metres;
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
     #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
-    #: enters the prop, passes within a part's radius grown by this (metres) of the part's axis
-    #: (None, the default: no ray test, the grown projection alone decides; off by default: a box
-    #: is a bounding box, hollow under a seat, and the body seen through it is cut: docs/real_floor.md)
-    prop_depth_tol_m: float | None = None
+    #: enters a solid prop, passes within a part's radius grown by this (metres) of the part's axis
+    #: (None: no ray test, the grown projection alone decides; a hollow prop, a chair's outline, is
+    #: seen through: docs/real_floor.md)
+    prop_depth_tol_m: float | None = 0.02
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -187,7 +190,8 @@ class SceneTracker:
         self.prop_rays = (prop_rays(self.tracker.cameras.values(), self.props, self.prop_masks)
                           if self.props and self.options.prop_depth_tol_m is not None else {})
         self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
-                                            clearance=self.options.prop_clearance) if self.props else None)
+                                            clearance=self.options.prop_clearance,
+                                            thigh_taper=self.options.prop_thigh_taper) if self.props else None)
 
     def _learn_seat(self, params: np.ndarray, raws: Mapping[str, np.ndarray]) -> None:
         """``SceneOptions.auto_seat``: once, from the first fit, the seat under a seated subject."""
@@ -265,7 +269,7 @@ class SceneTracker:
         a, b, radius = self.body_capsules(params)
         for name, rays in self.prop_rays.items():
             v, u = rays.pixels[:, 0], rays.pixels[:, 1]
-            sel = np.flatnonzero(keep[name][v, u] & np.isfinite(rays.entry))
+            sel = np.flatnonzero(keep[name][v, u])
             if not sel.size:
                 continue
             meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))
