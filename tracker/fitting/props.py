@@ -15,10 +15,12 @@ the floor), ``--prop x0,y0,z0,x1,y1,z1`` or ``[[prop]] box = [x0, y0, z0, x1, y1
   point's Jacobian (``tracker.body.kinematics.point_jacobian``).  A limb can then not be fitted
   into the chair, whatever the chair's pixels say.
 
-``prop_rays`` gives, per pixel of a prop's projection, where its ray enters the nearest box, and
-``rays_meet_capsules`` whether a ray segment passes within a radius of segments: a pixel whose
-ray meets a box before it meets the body shows the prop, not the body
-(``SceneOptions.prop_depth_tol_m``).
+``prop_rays`` gives, per pixel of a prop's projection, where its ray enters the nearest solid box,
+and ``rays_meet_capsules`` whether a ray segment passes within a radius of segments: a pixel whose
+ray meets a solid box before it meets the body shows the prop, not the body
+(``SceneOptions.prop_depth_tol_m``).  A box marked hollow (``solid`` False, ``[[prop]] hollow =
+true``: a chair's bounding box around its solid seat and legs) is cut and limits the fit as any, but
+the rays pass through it: what is seen through it is body only where the ray meets the body.
 """
 
 from __future__ import annotations

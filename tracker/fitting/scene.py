@@ -95,10 +95,12 @@ class SceneOptions:
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
     #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
-    #: enters a solid prop, passes within a part's radius grown by this (metres) of the part's axis
-    #: (None: no ray test, the grown projection alone decides; a hollow prop, a chair's outline, is
-    #: seen through: docs/real_floor.md)
-    prop_depth_tol_m: float | None = 0.02
+    #: enters a solid prop (the whole ray when it enters none: a hollow prop, a chair's outline, is
+    #: seen through), passes within a part's radius grown by this (metres) of the part's axis
+    #: (None, the default: no ray test, the grown projection alone decides; off by default: with the
+    #: chair's parts the knees come forward but the hips and the rendered scenes' ok do not follow:
+    #: docs/real_floor.md)
+    prop_depth_tol_m: float | None = None
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
     auto_seat: bool = False
@@ -258,9 +260,10 @@ class SceneTracker:
     def prop_keep(self, params: np.ndarray) -> dict[str, np.ndarray]:
         """Per camera, (h, w) bool: the pixels where a prop's projection is kept as body at
         ``params``: the body's projection grown by ``prop_margin_m`` (None: ``margin_m``), and with
-        ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a prop, passes within
-        a part's radius grown by ``prop_depth_tol_m`` of the part's axis (``body_capsules``;
-        ``props.rays_meet_capsules``): a ray that meets the prop first shows the prop.  Pixels whose ray meets no prop are kept as by the projection alone."""
+        ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a solid prop (the whole
+        ray when it enters none), passes within a part's radius grown by ``prop_depth_tol_m`` of the
+        part's axis (``body_capsules``; ``props.rays_meet_capsules``): a ray that meets a solid prop
+        first shows the prop, one through a hollow prop that meets no body shows what is behind it."""
         margin = self.options.margin_m if self.options.prop_margin_m is None else self.options.prop_margin_m
         keep = self.explained(params, margin)
         tol = self.options.prop_depth_tol_m

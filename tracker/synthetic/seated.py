@@ -8,8 +8,8 @@ backrest, each an axis-aligned world box for ``Studio.render(boxes=...)``.  The 
 in the frames only, never in the background: it is in every silhouette, as the chair of a real
 take recorded after its empty-room plate.  ``chair_props`` are the boxes an operator would
 measure for ``--prop``: the seat with its legs (footprint × seat height) and the backrest;
-``chair_parts`` the chair part by part (what is solid).  ``write_seated_session`` writes by default
-the seat's bounding box as a ``hollow`` outline and the parts as solid boxes.
+``chair_parts`` the chair part by part (what is solid); ``write_seated_session(props="parts")``
+writes the seat's bounding box as a ``hollow`` outline and the parts as solid boxes.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def studio_cameras(points: np.ndarray, layout=STUDIO_FRONT_SIDE, *, size=(320, 2
 
 
 def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320, 240), n_background: int = 8,
-                         seat_sink_m: float = 0.0, props: str = "parts"):
+                         seat_sink_m: float = 0.0, props: str = "bounding"):
     """Render ``seated_track`` on ``make_subject(seed)`` sitting on ``chair_boxes``' chair into a session
     directory at ``root`` (JPEG frames ``camK/%06d.jpg``, an empty-room MJPG video per camera without the
     chair, calibration.toml, session.toml with the subject's height and the chair's ``[[prop]]`` boxes).
