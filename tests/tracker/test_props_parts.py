@@ -44,6 +44,9 @@ def test_prop_rays_enter_solid_boxes_only():
     alone = prop_rays(cams, [slab], prop_masks(cams, [hollow]))
     for cam in cams:
         assert len(only_hollow[cam.name].pixels) > 50 and not np.any(np.isfinite(only_hollow[cam.name].entry))
+        # the hollow box is still met (the ray test runs along those rays); a solid entry is a meeting
+        assert np.array_equal(only_hollow[cam.name].through, np.isfinite(solid[cam.name].entry))
+        assert np.all(both[cam.name].through[np.isfinite(both[cam.name].entry)])
         # the same pixels (the outline's projection), entering the slab where the slab alone is entered
         assert np.array_equal(both[cam.name].pixels, alone[cam.name].pixels)
         assert np.array_equal(both[cam.name].entry, alone[cam.name].entry)

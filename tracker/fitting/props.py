@@ -142,12 +142,16 @@ class PropRays:
     entry : ndarray, shape (n,)
         Distance (metres along the ray) at which it first enters a solid box (0: the centre is
         inside one), inf where it meets none.
+    through : ndarray of bool, shape (n,)
+        The ray meets a box, solid or hollow (False: a pixel of the projection's outline whose
+        ray passes beside every box).
     """
 
     pixels: np.ndarray
     origin: np.ndarray
     directions: np.ndarray
     entry: np.ndarray
+    through: np.ndarray
 
 
 def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, np.ndarray]) -> dict[str, PropRays]:
@@ -160,15 +164,18 @@ def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, n
         d = cam.rays(np.stack([u, v], axis=1).astype(float)) if len(v) else np.zeros((0, 3))
         c = np.asarray(cam.center, dtype=float)
         best = np.full(len(d), np.inf)
+        through = np.zeros(len(d), bool)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / d
-            for box in (b for b in props if b.solid):
+            for box in props:
                 t1, t2 = (box.lo - c) * inv, (box.hi - c) * inv
                 t_near = np.nanmax(np.minimum(t1, t2), axis=1)
                 t_far = np.nanmin(np.maximum(t1, t2), axis=1)
                 hit = (t_near <= t_far) & (t_far > 0)
-                best = np.where(hit, np.minimum(best, np.maximum(t_near, 0.0)), best)
-        out[cam.name] = PropRays(np.stack([v, u], axis=1), c, d, best)
+                through |= hit
+                if box.solid:
+                    best = np.where(hit, np.minimum(best, np.maximum(t_near, 0.0)), best)
+        out[cam.name] = PropRays(np.stack([v, u], axis=1), c, d, best, through)
     return out
 
 

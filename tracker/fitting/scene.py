@@ -95,8 +95,8 @@ class SceneOptions:
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
     #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
-    #: enters a solid prop (the whole ray when it enters none: a hollow prop, a chair's outline, is
-    #: seen through), passes within a part's radius grown by this (metres) of the part's axis
+    #: enters a solid prop (the whole ray through a hollow one: a chair's outline is seen through),
+    #: passes within a part's radius grown by this (metres) of the part's axis
     #: (None, the default: no ray test, the grown projection alone decides; off by default: with the
     #: chair's parts the knees come forward but the hips and the rendered scenes' ok do not follow:
     #: docs/real_floor.md)
@@ -261,9 +261,10 @@ class SceneTracker:
         """Per camera, (h, w) bool: the pixels where a prop's projection is kept as body at
         ``params``: the body's projection grown by ``prop_margin_m`` (None: ``margin_m``), and with
         ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a solid prop (the whole
-        ray when it enters none), passes within a part's radius grown by ``prop_depth_tol_m`` of the
-        part's axis (``body_capsules``; ``props.rays_meet_capsules``): a ray that meets a solid prop
-        first shows the prop, one through a hollow prop that meets no body shows what is behind it."""
+        ray when it passes hollow ones only), passes within a part's radius grown by
+        ``prop_depth_tol_m`` of the part's axis (``body_capsules``; ``props.rays_meet_capsules``): a
+        ray that meets a solid prop first shows the prop, one through a hollow prop that meets no body
+        shows what is behind it.  Pixels whose ray meets no prop are kept as by the projection alone."""
         margin = self.options.margin_m if self.options.prop_margin_m is None else self.options.prop_margin_m
         keep = self.explained(params, margin)
         tol = self.options.prop_depth_tol_m
@@ -272,7 +273,7 @@ class SceneTracker:
         a, b, radius = self.body_capsules(params)
         for name, rays in self.prop_rays.items():
             v, u = rays.pixels[:, 0], rays.pixels[:, 1]
-            sel = np.flatnonzero(keep[name][v, u])
+            sel = np.flatnonzero(keep[name][v, u] & rays.through)
             if not sel.size:
                 continue
             meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))
