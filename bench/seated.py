@@ -13,7 +13,7 @@ axes, the calibrated segment lengths and radius factors, and the synthetic subje
 calibrated model's mean cone radius.  CPU seconds per run and machine_ref_ms.
 
     python bench/seated.py [--seeds 0,1,2] [--frames 60] [--layout studio|ring] [--size 320x240]
-                           [--seat-sink-m 0.02] [--json]
+                           [--seat-sink-m 0.02] [--props bounding|parts] [--json]
 """
 
 from __future__ import annotations
@@ -45,12 +45,13 @@ def build(args, seed: int) -> tuple[Path, np.ndarray, dict]:
 
     w, h = (int(v) for v in args.size.split("x"))
     sink = f"_sink{args.seat_sink_m:g}" if args.seat_sink_m else ""
-    root = Path(args.cache_dir) / f"seated_s{seed}_f{args.frames}_{args.layout}_{w}x{h}{sink}"
+    kind = "" if args.props == "bounding" else f"_{args.props}"
+    root = Path(args.cache_dir) / f"seated_s{seed}_f{args.frames}_{args.layout}_{w}x{h}{sink}{kind}"
     done = root / "truth.npz"
     if not done.is_file():
         layout = STUDIO_FRONT_SIDE if args.layout == "studio" else None
         truth, subject, _ = write_seated_session(root, seed=seed, frames=args.frames, layout=layout, size=(w, h),
-                                                 seat_sink_m=args.seat_sink_m)
+                                                 seat_sink_m=args.seat_sink_m, props=args.props)
         np.savez(done, truth=truth, radius=json.dumps(subject.radius))
     data = np.load(done)
     return root, data["truth"], json.loads(str(data["radius"]))
@@ -143,6 +144,8 @@ def main() -> int:
     ap.add_argument("--size", default="320x240")
     ap.add_argument("--seat-sink-m", type=float, default=0.0,
                     help="the seat's top this far above the thigh capsules' underside (squashed flesh), metres")
+    ap.add_argument("--props", choices=("bounding", "parts"), default="bounding",
+                    help="the chair's [[prop]] boxes: the operator's bounding boxes or the chair's parts")
     ap.add_argument("--cache-dir", default="/tmp/contourcap_seated_bench")
     ap.add_argument("--no-height-only", action="store_true", help="skip the track without the subject file")
     ap.add_argument("--json", action="store_true")
@@ -151,7 +154,7 @@ def main() -> int:
     seeds = [int(s) for s in args.seeds.split(",")]
     per = [run_seed(args, s) for s in seeds]
     summary = {"machine_ref_ms": round(ref, 2), "layout": args.layout, "frames": args.frames, "seeds": seeds,
-               "seat_sink_m": args.seat_sink_m,
+               "seat_sink_m": args.seat_sink_m, "props": args.props,
                "judged_mm_mean": {k: round(float(np.mean([p[k]["judged_mm"] for p in per])), 1)
                                   for k in ("calibrated", "height_only") if k in per[0]},
                "knees_mm_mean": {k: round(float(np.mean([0.5 * (p[k]["joints_mm"]["left_knee"]

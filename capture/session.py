@@ -30,6 +30,8 @@ Layout (the DESIGN.md contract)::
 
     [[prop]]                      # optional, repeatable: a world box that is never body (a chair)
     box = [x0, y0, z0, x1, y1, z1]   # metres, calibration frame (tracker.fitting.props)
+    hollow = true                 # optional: an outline (a chair's bounding box) seen through where
+                                  # no solid [[prop]] (its seat, its legs) is in the way
 
 Frame numbering: row ``i`` of a camera's CSV describes the ``i``-th frame
 stored in its video; for an image sequence the file number *is* the frame id.
@@ -125,6 +127,8 @@ class Session:
     subject_file: Path | None = None
     #: ``[[prop]]`` boxes, each (x0, y0, z0, x1, y1, z1) metres with x0 < x1, y0 < y1, z0 < z1
     props: tuple[tuple[float, ...], ...] = ()
+    #: per ``[[prop]]``, whether it is ``hollow`` (empty: none is)
+    hollow_props: tuple[bool, ...] = ()
 
     @property
     def camera_names(self) -> tuple[str, ...]:
@@ -329,6 +333,17 @@ def _parse_props(tables, where: str) -> tuple[tuple[float, ...], ...]:
                  for i, t in enumerate(tables))
 
 
+def _parse_hollow(tables, where: str) -> tuple[bool, ...]:
+    """The ``[[prop]]`` tables' ``hollow`` flags (default false); ``_parse_props`` checked the tables."""
+    out = []
+    for i, t in enumerate(tables or ()):
+        flag = t.get("hollow", False)
+        if not isinstance(flag, bool):
+            raise SessionError(f"{where} [[prop]] #{i + 1} key 'hollow': expected true or false, got {flag!r}")
+        out.append(flag)
+    return tuple(out)
+
+
 def load_session(path, *, require_calibration: bool = True) -> Session:
     """Load and validate a session directory (or its ``session.toml``).
 
@@ -379,7 +394,8 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
         calibration = tuple(by_name[n] for n in names)
     subject_file = _optional_path(root, data.get("subject", {}), "file", f"{toml_path} [subject]")
     props = _parse_props(data.get("prop"), str(toml_path))
-    return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file, props)
+    hollow = _parse_hollow(data.get("prop"), str(toml_path))
+    return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file, props, hollow)
 
 
 def write_session_toml(

@@ -44,10 +44,13 @@ def session_model(session: Session, name: str = "knossow40") -> BodyModel:
 
 
 def session_props(session: Session) -> list:
-    """The session's ``[[prop]]`` boxes as ``tracker.fitting.props.PropBox`` (world metres, never body)."""
+    """The session's ``[[prop]]`` boxes as ``tracker.fitting.props.PropBox`` (world metres, never body;
+    ``hollow = true``: ``solid`` False)."""
     from tracker.fitting.props import PropBox
 
-    return [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]") for b in session.props]
+    hollow = session.hollow_props or (False,) * len(session.props)
+    return [PropBox.from_values(b, where=f"{session.root / 'session.toml'} [[prop]]", solid=not h)
+            for b, h in zip(session.props, hollow)]
 
 
 def warm_up_kernels(method: str = "contours") -> float:

@@ -15,10 +15,12 @@ the floor), ``--prop x0,y0,z0,x1,y1,z1`` or ``[[prop]] box = [x0, y0, z0, x1, y1
   point's Jacobian (``tracker.body.kinematics.point_jacobian``).  A limb can then not be fitted
   into the chair, whatever the chair's pixels say.
 
-``prop_rays`` gives, per pixel of a prop's projection, where its ray enters the nearest box, and
-``rays_meet_capsules`` whether a ray segment passes within a radius of segments: a pixel whose
-ray meets a box before it meets the body shows the prop, not the body
-(``SceneOptions.prop_depth_tol_m``).
+``prop_rays`` gives, per pixel of a prop's projection, where its ray enters the nearest solid box,
+and ``rays_meet_capsules`` whether a ray segment passes within a radius of segments: a pixel whose
+ray meets a solid box before it meets the body shows the prop, not the body
+(``SceneOptions.prop_depth_tol_m``).  A box marked hollow (``solid`` False, ``[[prop]] hollow =
+true``: a chair's bounding box around its solid seat and legs) is cut and limits the fit as any, but
+the rays pass through it: what is seen through it is body only where the ray meets the body.
 """
 
 from __future__ import annotations
@@ -53,20 +55,25 @@ class PropBox:
     ----------
     lo, hi : ndarray, shape (3,)
         Opposite corners, metres, ``lo < hi`` on every axis.
+    solid : bool
+        The box is filled (a seat slab, a leg): the body cannot be in it and it hides what is
+        behind it.  False: a hollow region (a chair's bounding box) whose pixels are never body
+        unless a ray through it meets the body; the fit may put the body in it.
     """
 
     lo: np.ndarray
     hi: np.ndarray
+    solid: bool = True
 
     @classmethod
-    def from_values(cls, values: Sequence, where: str = "prop") -> "PropBox":
+    def from_values(cls, values: Sequence, where: str = "prop", *, solid: bool = True) -> "PropBox":
         """A box from ``[x0, y0, z0, x1, y1, z1]`` (metres, the corners in any order per axis);
         PropError naming ``where`` unless ``capture.session.check_box`` accepts them."""
         box = np.asarray(check_box(values, where, PropError))
         lo, hi = box[:3].copy(), box[3:].copy()
         lo.setflags(write=False)
         hi.setflags(write=False)
-        return cls(lo, hi)
+        return cls(lo, hi, bool(solid))
 
     def corners(self) -> np.ndarray:
         """The eight corners, (8, 3) metres."""
@@ -133,14 +140,18 @@ class PropRays:
     directions : ndarray, shape (n, 3)
         Unit world direction of each pixel's ray.
     entry : ndarray, shape (n,)
-        Distance (metres along the ray) at which it first enters a box (0: the centre is inside
-        one), inf where it meets none.
+        Distance (metres along the ray) at which it first enters a solid box (0: the centre is
+        inside one), inf where it meets none.
+    through : ndarray of bool, shape (n,)
+        The ray meets a box, solid or hollow (False: a pixel of the projection's outline whose
+        ray passes beside every box).
     """
 
     pixels: np.ndarray
     origin: np.ndarray
     directions: np.ndarray
     entry: np.ndarray
+    through: np.ndarray
 
 
 def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, np.ndarray]) -> dict[str, PropRays]:
@@ -153,6 +164,7 @@ def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, n
         d = cam.rays(np.stack([u, v], axis=1).astype(float)) if len(v) else np.zeros((0, 3))
         c = np.asarray(cam.center, dtype=float)
         best = np.full(len(d), np.inf)
+        through = np.zeros(len(d), bool)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / d
             for box in props:
@@ -160,8 +172,10 @@ def prop_rays(cameras: Iterable, props: Sequence[PropBox], masks: Mapping[str, n
                 t_near = np.nanmax(np.minimum(t1, t2), axis=1)
                 t_far = np.nanmin(np.maximum(t1, t2), axis=1)
                 hit = (t_near <= t_far) & (t_far > 0)
-                best = np.where(hit, np.minimum(best, np.maximum(t_near, 0.0)), best)
-        out[cam.name] = PropRays(np.stack([v, u], axis=1), c, d, best)
+                through |= hit
+                if box.solid:
+                    best = np.where(hit, np.minimum(best, np.maximum(t_near, 0.0)), best)
+        out[cam.name] = PropRays(np.stack([v, u], axis=1), c, d, best, through)
     return out
 
 
@@ -206,10 +220,12 @@ class PropPenalty:
     samples : points per part along its cone's axis (ends included)
     clearance : the axis keeps this many times the part's smaller radius from a box
     root_clearance : the same for the root part (the pelvis: it rests on a seat)
+    thigh_taper : a thigh's factor goes from ``root_clearance`` at its hip end to ``clearance`` at
+        its knee end (the buttock rests on the seat with the pelvis)
     """
 
     def __init__(self, props: Sequence[PropBox], *, weight: float = 2000.0, samples: int = 5,
-                 clearance: float = 1.0, root_clearance: float = 0.0) -> None:
+                 clearance: float = 1.0, root_clearance: float = 0.0, thigh_taper: bool = False) -> None:
         if samples < 2:
             raise PropError(f"samples: expected >= 2, got {samples!r}")
         self.props = list(props)
@@ -217,6 +233,7 @@ class PropPenalty:
         self.samples = int(samples)
         self.clearance = float(clearance)
         self.root_clearance = float(root_clearance)
+        self.thigh_taper = bool(thigh_taper)
         self._points: dict[int, tuple] = {}
 
     def _model_points(self, model: BodyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -230,8 +247,12 @@ class PropPenalty:
             part = np.repeat(np.arange(model.n_parts), self.samples)
             pts = np.zeros((part.size, 3))
             pts[:, 2] = z.ravel()
-            factor = np.where(model.parent < 0, self.root_clearance, self.clearance)
-            self._points = {key: (model, part, pts, (factor[:, None] * radius).ravel())}
+            factor = np.repeat(np.where(model.parent < 0, self.root_clearance, self.clearance)[:, None],
+                               self.samples, axis=1)
+            if self.thigh_taper:
+                thighs = [i for i, n in enumerate(model.part_names) if n.endswith("thigh")]
+                factor[thighs] = self.root_clearance + (self.clearance - self.root_clearance) * t[None, :]
+            self._points = {key: (model, part, pts, (factor * radius).ravel())}
         return self._points[key][1:]
 
     def residuals(self, model: BodyModel, params: np.ndarray, *, jacobian: bool = False, pose=None):

@@ -88,13 +88,18 @@ class SceneOptions:
     #: ``PropPenalty``'s weight (pixels per metre of intrusion) and clearance (× a part's radius)
     prop_weight: float = 2000.0
     prop_clearance: float = 1.0
+    #: the thighs' clearance from ``PropPenalty``'s root (pelvis) factor at the hip to
+    #: ``prop_clearance`` at the knee (``PropPenalty.thigh_taper``)
+    prop_thigh_taper: bool = False
     #: a prop's pixels are body where the body's projection grown by this covers them (metres;
     #: None: ``margin_m``, as learned clutter)
     prop_margin_m: float | None = None
     #: a prop's pixel kept as body (within the grown projection) only where its ray, before it
-    #: enters the prop, passes within a part's radius grown by this (metres) of the part's axis
-    #: (None, the default: no ray test, the grown projection alone decides; off by default: a box
-    #: is a bounding box, hollow under a seat, and the body seen through it is cut: docs/real_floor.md)
+    #: enters a solid prop (the whole ray through a hollow one: a chair's outline is seen through),
+    #: passes within a part's radius grown by this (metres) of the part's axis
+    #: (None, the default: no ray test, the grown projection alone decides; off by default: with the
+    #: chair's parts the knees come forward but the hips and the rendered scenes' ok do not follow:
+    #: docs/real_floor.md)
     prop_depth_tol_m: float | None = None
     #: without operator props, learn the seat of a subject fitted seated on the first frame
     #: (``tracker.fitting.props.seat_box``) and use it as a prop (off by default: docs/real_floor.md)
@@ -187,7 +192,8 @@ class SceneTracker:
         self.prop_rays = (prop_rays(self.tracker.cameras.values(), self.props, self.prop_masks)
                           if self.props and self.options.prop_depth_tol_m is not None else {})
         self.tracker.penalty = (PropPenalty(self.props, weight=self.options.prop_weight,
-                                            clearance=self.options.prop_clearance) if self.props else None)
+                                            clearance=self.options.prop_clearance,
+                                            thigh_taper=self.options.prop_thigh_taper) if self.props else None)
 
     def _learn_seat(self, params: np.ndarray, raws: Mapping[str, np.ndarray]) -> None:
         """``SceneOptions.auto_seat``: once, from the first fit, the seat under a seated subject."""
@@ -254,9 +260,11 @@ class SceneTracker:
     def prop_keep(self, params: np.ndarray) -> dict[str, np.ndarray]:
         """Per camera, (h, w) bool: the pixels where a prop's projection is kept as body at
         ``params``: the body's projection grown by ``prop_margin_m`` (None: ``margin_m``), and with
-        ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a prop, passes within
-        a part's radius grown by ``prop_depth_tol_m`` of the part's axis (``body_capsules``;
-        ``props.rays_meet_capsules``): a ray that meets the prop first shows the prop.  Pixels whose ray meets no prop are kept as by the projection alone."""
+        ``prop_depth_tol_m`` a prop pixel only where its ray, before it enters a solid prop (the whole
+        ray when it passes hollow ones only), passes within a part's radius grown by
+        ``prop_depth_tol_m`` of the part's axis (``body_capsules``; ``props.rays_meet_capsules``): a
+        ray that meets a solid prop first shows the prop, one through a hollow prop that meets no body
+        shows what is behind it.  Pixels whose ray meets no prop are kept as by the projection alone."""
         margin = self.options.margin_m if self.options.prop_margin_m is None else self.options.prop_margin_m
         keep = self.explained(params, margin)
         tol = self.options.prop_depth_tol_m
@@ -265,7 +273,7 @@ class SceneTracker:
         a, b, radius = self.body_capsules(params)
         for name, rays in self.prop_rays.items():
             v, u = rays.pixels[:, 0], rays.pixels[:, 1]
-            sel = np.flatnonzero(keep[name][v, u] & np.isfinite(rays.entry))
+            sel = np.flatnonzero(keep[name][v, u] & rays.through)
             if not sel.size:
                 continue
             meets = rays_meet_capsules(rays.origin, rays.directions[sel], rays.entry[sel], a, b, radius + float(tol))

@@ -7,7 +7,9 @@ that subject's rendered body (``tracker.synthetic.people``): a seat slab, four l
 backrest, each an axis-aligned world box for ``Studio.render(boxes=...)``.  The chair is drawn
 in the frames only, never in the background: it is in every silhouette, as the chair of a real
 take recorded after its empty-room plate.  ``chair_props`` are the boxes an operator would
-measure for ``--prop``: the seat with its legs (footprint × seat height) and the backrest.
+measure for ``--prop``: the seat with its legs (footprint × seat height) and the backrest;
+``chair_parts`` the chair part by part (what is solid); ``write_seated_session(props="parts")``
+writes the seat's bounding box as a ``hollow`` outline and the parts as solid boxes.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from tracker.synthetic.motions import PoseTrack, standing_track
 from tracker.synthetic.motions import bone_direction as _dir
 from tracker.synthetic.people import JOINT_NAMES, SubjectMotion
 
-__all__ = ["seated_track", "chair_boxes", "chair_props"]
+__all__ = ["seated_track", "chair_boxes", "chair_props", "chair_parts"]
 
 _J = {n: i for i, n in enumerate(JOINT_NAMES)}
 
@@ -91,6 +93,12 @@ def chair_props(boxes: list[tuple]) -> list[list[float]]:
     return [list(map(float, np.concatenate([lo, hi]))), list(map(float, np.concatenate([back[0], back[1]])))]
 
 
+def chair_parts(boxes: list[tuple]) -> list[list[float]]:
+    """The operator's boxes for ``chair_boxes``' chair part by part, ``[x0, y0, z0, x1, y1, z1]``
+    metres: the seat slab, the four legs and the backrest, each as drawn (what is solid)."""
+    return [list(map(float, np.concatenate([lo, hi]))) for lo, hi, _ in boxes]
+
+
 #: a studio like the real uu_studio take's, seen from the seated subject (facing azimuth 0): three
 #: cameras in front (azimuth degrees, horizontal distance metres) and one at the subject's right side
 STUDIO_FRONT_SIDE = ((37.0, 4.2), (0.0, 3.6), (-40.0, 4.2), (-86.0, 2.8))
@@ -121,13 +129,15 @@ def studio_cameras(points: np.ndarray, layout=STUDIO_FRONT_SIDE, *, size=(320, 2
 
 
 def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320, 240), n_background: int = 8,
-                         seat_sink_m: float = 0.0):
+                         seat_sink_m: float = 0.0, props: str = "bounding"):
     """Render ``seated_track`` on ``make_subject(seed)`` sitting on ``chair_boxes``' chair into a session
     directory at ``root`` (JPEG frames ``camK/%06d.jpg``, an empty-room MJPG video per camera without the
     chair, calibration.toml, session.toml with the subject's height and the chair's ``[[prop]]`` boxes).
     ``layout`` None: a ring of four cameras (``fit_ring_cameras``), else ``studio_cameras``' layout;
-    ``seat_sink_m``: ``chair_boxes``' ``sink_m``.
-    Returns (the subject's joint truth (frames, 16, 3) metres, the ``Subject``, the operator's boxes)."""
+    ``seat_sink_m``: ``chair_boxes``' ``sink_m``; ``props``: the ``[[prop]]`` boxes written, ``"bounding"``
+    (``chair_props``) or ``"parts"`` (``chair_props``' seat with its legs as a ``hollow`` outline, then
+    ``chair_parts``).  Returns (the subject's joint truth (frames, 16, 3) metres, the ``Subject``, the
+    boxes written, the seat's bounding box first)."""
     from pathlib import Path
 
     import cv2
@@ -140,6 +150,8 @@ def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320
     from tracker.synthetic.scene import fit_ring_cameras
     from tracker.synthetic.synth import bundled_motion
 
+    if props not in ("bounding", "parts"):
+        raise ValueError(f"props: expected 'bounding' or 'parts', got {props!r}")
     root = Path(root)
     rng = np.random.default_rng(seed)
     bvh = motion_to_bvh(seated_track(frames, fps=25.0, rng=rng), load_bvh(bundled_motion("scaled_131_01")))
@@ -164,10 +176,12 @@ def write_seated_session(root, *, seed: int, frames: int, layout=None, size=(320
         for c, img in zip(cams, images):
             (root / c.name / f"{f:06d}.jpg").write_bytes(studio.camera_output(img, rng)[1])
     save_calibration(root / "calibration.toml", cams)
-    props = chair_props(boxes)
+    hollow = 1 if props == "parts" else 0
+    props = chair_props(boxes)[:1] + chair_parts(boxes) if hollow else chair_props(boxes)
     write_session_toml(root, name="seated", fps=25.0, height_m=subject_height(bvh, subject),
                        cameras=[{"name": c.name, "images": f"{c.name}/%06d.jpg",
                                  "background": f"background/{c.name}.avi"} for c in cams])
     with open(root / "session.toml", "a") as fh:
-        fh.writelines(f"\n[[prop]]\nbox = [{', '.join(f'{v:.4f}' for v in box)}]\n" for box in props)
+        fh.writelines(f"\n[[prop]]\nbox = [{', '.join(f'{v:.4f}' for v in box)}]\n"
+                      + ("hollow = true\n" if i < hollow else "") for i, box in enumerate(props))
     return sm.joints, subject, props
