@@ -9,7 +9,7 @@ from tracker.body.kinematics import forward
 from tracker.body.model import ModelError, load_model
 from tracker.body.subject import Subject, read_subject, write_subject
 from tracker.fitting.subject_size import (SCORE_INSET_PX, WIDTH_ORDER, estimate_segment_lengths, nominal_segment_lengths,
-                                          nominal_widths, segment_joint_parts)
+                                          nominal_widths)
 from tracker.search.scoring import ScoreViews
 from tracker.imaging.render import render_silhouettes
 from tracker.synthetic.scene import ring_cameras
@@ -104,23 +104,6 @@ def test_widths_and_radii_recovered():
     for k, v in radii.items():
         assert abs(fit.radius_scale[k] - v) <= 0.5 * abs(1.0 - v), (k, fit.radius_scale, radii)
     assert fit.iou_after > fit.iou_before
-
-
-def test_segment_joint_parts_both_ends_both_sides():
-    """A length's re-polished joints: its own part, parent and children, mirrored, never the root."""
-    model = load_model("knossow40")
-    names = list(model.part_names)
-    for seg, i in model.segments.items():
-        parts = segment_joint_parts(model, seg)
-        assert 0 not in parts and i in parts
-        assert all(c in parts for c, p in enumerate(model.parent) if p == i)
-        named = {names[k] for k in parts}
-        for n in named:
-            for a, b in (("left_", "right_"), ("right_", "left_")):
-                if n.startswith(a):
-                    assert b + n[len(a):] in named, (seg, n)
-    legs = {"left_thigh", "left_shank", "right_thigh", "right_shank"}
-    assert {names[k] for k in segment_joint_parts(model, "thigh")} == legs
 
 
 def _own_renders(seed: int, size=(320, 240)):

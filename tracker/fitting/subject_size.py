@@ -34,7 +34,7 @@ from tracker.body.model import MODELS_DIR, BodyModel, load_model
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
-__all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "segment_joint_parts", "SEGMENT_ORDER",
+__all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
            "SCORE_INSET_PX",
            "WIDTH_ORDER", "RADIUS_ORDER"]
 
@@ -101,24 +101,6 @@ def pose_steps(model: BodyModel, factor: float) -> dict[str, float]:
     for name, kind in zip(model.param_names, model.param_kind):
         steps[name] = factor * (0.03 if kind == 0 else (0.08 if kind == 1 else 0.12))
     return steps
-
-
-def segment_joint_parts(model: BodyModel, segment: str) -> list[int]:
-    """Indices of the parts whose joint angles a change of ``segment``'s length moves.
-
-    The segment's own part, its parent and its children, on both sides of the body (a part named
-    ``left_*`` brings its ``right_*`` mirror and back), as the segment's length applies to both.
-    """
-    i = model.segments[segment]
-    parent = list(model.parent)
-    own = {i, parent[i]} | {c for c, p in enumerate(parent) if p == i}
-    own.discard(-1)
-    names = list(model.part_names)
-    swap = {"left_": "right_", "right_": "left_"}
-    mirrors = {names.index(swap[names[k][:names[k].index("_") + 1]] + names[k][names[k].index("_") + 1:])
-               for k in own if names[k].split("_")[0] + "_" in swap
-               and swap[names[k].split("_")[0] + "_"] + names[k].split("_", 1)[1] in names}
-    return sorted((own | mirrors) - {0})
 
 
 def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses: Sequence[np.ndarray],
@@ -190,16 +172,10 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     width_steps = {w: {**root, **{model.param_names[k]: 0.03 for k in np.flatnonzero(np.isin(model.param_part, parts))}}
                    for w, parts in model.width_parts.items()}
 
-    # a length moves the joints at its two ends: their angles (both sides) re-polished too (else the hip
-    # and knee angles, polished for the old length, hold the silhouette and the length cannot move)
-    length_steps = {s: {**root, **{model.param_names[k]: 0.03
-                                   for k in np.flatnonzero(np.isin(model.param_part, segment_joint_parts(model, s)))}}
-                    for s in model.segments}
-
     def total(m: BodyModel, dim) -> float:
         if not root_rounds:
             return float(sum(v.with_model(m).score(p) for v, p in zip(views, params)))
-        st = width_steps[dim[1]] if dim[0] == "width" else length_steps[dim[1]] if dim[0] == "length" else root
+        st = width_steps[dim[1]] if dim[0] == "width" else root
         return float(sum(polish_iou(m, v.with_model(m), p, steps=st, rounds=root_rounds)[1]
                          for v, p in zip(views, params)))
 
