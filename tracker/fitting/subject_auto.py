@@ -26,8 +26,7 @@ import numpy as np
 from capture.camera import Camera
 from tracker.body.model import JOINT_ROTATION, BodyModel
 from tracker.body.subject import Subject
-from tracker.fitting.subject_size import (RADIUS_ORDER, SCORE_INSET_PX, WIDTH_ORDER, SubjectFit, estimate_segment_lengths,
-                                          pose_steps)
+from tracker.fitting.subject_size import RADIUS_ORDER, WIDTH_ORDER, SubjectFit, estimate_segment_lengths, pose_steps
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
@@ -64,7 +63,7 @@ class AutoSubjectOptions:
         for an open front/back question (the silhouettes are the same) is sampled when its IoU, if
         measured, is at least this.
     inset_px : float
-        ``ScoreViews.inset_px`` of the scoring views (fit and judge).
+        ``ScoreViews.inset_px`` of the scoring views (fit and judge; ``SCORE_INSET_PX``: unbiased).
     """
 
     frames: int = 9
@@ -77,7 +76,7 @@ class AutoSubjectOptions:
     judge_rounds: int = 3
     min_gain: float = 0.005
     min_iou: float = 0.7
-    inset_px: float = SCORE_INSET_PX
+    inset_px: float = 0.0
 
     def __post_init__(self) -> None:
         if not (2 <= int(self.frames) <= 64 and 1 <= int(self.held_out) < int(self.frames)):
@@ -213,7 +212,7 @@ class SampleCalibration:
 
 
 def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                 rounds: int, inset_px: float = SCORE_INSET_PX) -> list[float]:
+                 rounds: int, inset_px: float = 0.0) -> list[float]:
     """Mean silhouette IoU of each of ``models`` (same parameters, other sizes) over ``sets``
     (``(frame id, params, camera -> mask)``), each pose first polished to the model by ``rounds`` of
     ``polish_iou`` (scoring views drawn with ``inset_px``, ``ScoreViews``); one list entry per model."""
@@ -222,7 +221,7 @@ def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *
 
 
 def held_out_ious(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                  rounds: int, inset_px: float = SCORE_INSET_PX) -> np.ndarray:
+                  rounds: int, inset_px: float = 0.0) -> np.ndarray:
     """:func:`held_out_iou` per set: ndarray ``(len(sets), len(models))``.
 
     Each body's pose is polished from the set's pose and, when another body's polish scored higher,

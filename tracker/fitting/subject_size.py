@@ -43,10 +43,10 @@ SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
 #: Widths and radius groups, searched after the lengths in this order.
 WIDTH_ORDER = ("hip_width", "shoulder_width")
 RADIUS_ORDER = ("trunk_width", "trunk_depth", "thigh", "upper_arm", "shank", "forearm")
-#: ``ScoreViews.inset_px`` of the calibration's scoring views: the model drawn as large as the observed
-#: silhouettes of the same body are at scale 0.5 (the outline's half-pixel growth taken off, less the
-#: growth of a mask halved by area averaging with ties kept), so that no other body scores better on
-#: the model's own renders (docs/subject_calibration.md, round 15).
+#: The ``ScoreViews.inset_px`` at which the model is drawn as large as the observed silhouettes of the same
+#: body are at scale 0.5 (the outline's half-pixel growth taken off, less the growth of a mask halved by
+#: area averaging with ties kept): no other body scores better on the model's own renders.  Not the
+#: calibration's default (``inset_px=0``, the tracker's own views): docs/subject_calibration.md, round 15.
 SCORE_INSET_PX = 0.35
 
 
@@ -109,7 +109,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
                              polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
                              segments: Sequence[str] = SEGMENT_ORDER, widths: Sequence[str] = (),
                              radii: Sequence[str] = (), width_sigma: float = 0.2,
-                             radius_sigma: float = 0.2, inset_px: float = SCORE_INSET_PX) -> SubjectFit:
+                             radius_sigma: float = 0.2, inset_px: float = 0.0) -> SubjectFit:
     """Fit segment lengths (and optionally widths and radii) to silhouettes, jointly with the frames' poses.
 
     Parameters
@@ -131,7 +131,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     root_rounds : int
         ``polish_iou`` rounds of the root translation (1 cm steps) for every candidate (0: none).
     scale, inset_px : float
-        Image scale and ``ScoreViews.inset_px`` of the scoring views.
+        Image scale and ``ScoreViews.inset_px`` of the scoring views (``SCORE_INSET_PX``: unbiased).
     segments, widths, radii : sequence of str
         Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
 
