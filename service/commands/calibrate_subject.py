@@ -38,6 +38,9 @@ def add_subject_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--samples", type=int, default=6, help="frame sets the lengths are fitted to (default 6)")
     p.add_argument("--lengths-only", action="store_true",
                    help="fit the segment lengths only (not the hip/shoulder widths and the radii)")
+    p.add_argument("--score-inset", type=float, default=0.0, metavar="PX",
+                   help="scoring views' outline inset in pixels (ScoreViews.inset_px; 0.35 draws the model "
+                        "unbiased, docs/subject_calibration.md round 15; default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress")
 
 
@@ -129,7 +132,8 @@ def run_subject(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 1
         more = {} if args.lengths_only else {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER}
-        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils, **more)
+        fit = estimate_segment_lengths(fitted_model, [session.camera_model(n) for n in names], poses, sils,
+                                       inset_px=float(args.score_inset), **more)
         subject = Subject(fitted_model.name, fitted_model.height_m, fit.segment_lengths,
                           f"contourcap calibrate subject, frames {args.frames}, {len(poses)} frame sets, "
                           f"silhouette IoU {fit.iou_before:.3f} -> {fit.iou_after:.3f}", fit.widths, fit.radius_scale)

@@ -8,7 +8,9 @@ import pytest
 from tracker.body.kinematics import forward
 from tracker.body.model import ModelError, load_model
 from tracker.body.subject import Subject, read_subject, write_subject
-from tracker.fitting.subject_size import WIDTH_ORDER, estimate_segment_lengths, nominal_segment_lengths, nominal_widths
+from tracker.fitting.subject_size import (SCORE_INSET_PX, WIDTH_ORDER, estimate_segment_lengths, nominal_segment_lengths,
+                                          nominal_widths)
+from tracker.search.scoring import ScoreViews
 from tracker.imaging.render import render_silhouettes
 from tracker.synthetic.scene import ring_cameras
 
@@ -102,3 +104,39 @@ def test_widths_and_radii_recovered():
     for k, v in radii.items():
         assert abs(fit.radius_scale[k] - v) <= 0.5 * abs(1.0 - v), (k, fit.radius_scale, radii)
     assert fit.iou_after > fit.iou_before
+
+
+def _own_renders(seed: int, size=(320, 240)):
+    rng = np.random.default_rng(seed)
+    model = load_model("knossow40")
+    cams = ring_cameras(4, size=size)
+    p = model.random_params(rng, fraction=0.4)
+    p[:2] *= 0.3
+    p[2] = 0.0
+    return model, cams, p, render_silhouettes(model, forward(model, p), cams)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_inset_views_draw_the_rendered_area(seed):
+    # at full scale the observed masks are the renderer's (pixel centre inside the outline): the inset
+    # draw covers the same pixels' count, the plain draw (the outline's pixels set too) more
+    model, cams, p, sils = _own_renders(seed)
+    area = np.array([np.count_nonzero(s) for s in sils])
+    for inset, lo, hi in ((0.5, 0.97, 1.03), (0.0, 1.05, 1.3)):
+        drawn = np.array([np.count_nonzero(r) for r in ScoreViews(model, cams, sils, scale=1.0, inset_px=inset).render(p)])
+        assert np.all((drawn > lo * area) & (drawn < hi * area)), (inset, drawn / area)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_calibration_views_score_the_own_body_best(seed):
+    # on the model's own renders at its true pose no uniformly longer, shorter, thicker or thinner body
+    # scores better in the calibration's views; the plain views prefer a thinner one
+    model, cams, p, sils = _own_renders(seed)
+    nominal = nominal_segment_lengths(model)
+    others = [load_model("knossow40", segment_lengths={k: f * v for k, v in nominal.items()}) for f in (0.97, 1.03)]
+    others += [load_model("knossow40", radius_scale={g: f for g in model.radius_groups}) for f in (0.95, 1.05)]
+    views = ScoreViews(model, cams, sils, scale=0.5, inset_px=SCORE_INSET_PX)
+    own = views.score(p)
+    assert all(views.with_model(m).score(p) < own for m in others), [views.with_model(m).score(p) - own for m in others]
+    plain = ScoreViews(model, cams, sils, scale=0.5)
+    assert plain.with_model(others[2]).score(p) > plain.score(p)

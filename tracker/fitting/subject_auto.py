@@ -7,7 +7,8 @@ replaces the kept set closest in pose to another kept set when that makes the sa
 (the least joint-angle distance between two kept sets grows).  :func:`calibrate_sample` fits the
 subject (``tracker.fitting.subject_size.estimate_segment_lengths``) to the sample's fit sets and
 compares, on its held-out sets, the silhouette IoU of the current body and of the calibrated one,
-each pose polished to its body the same way (``polish_iou``): the calibrated body is adopted only
+each pose polished to its body the same way (``polish_iou``, from the set's pose and from the pose
+the other body reached): the calibrated body is adopted only
 when it explains the held-out silhouettes better by ``min_gain``.  Never a worse body.
 
 The silhouettes should hold the body only: a prop in them is covered better by a bigger body, and the
@@ -61,6 +62,8 @@ class AutoSubjectOptions:
         A set not ok only for its silhouette IoU (a body that is not the model's fails the gate) or
         for an open front/back question (the silhouettes are the same) is sampled when its IoU, if
         measured, is at least this.
+    inset_px : float
+        ``ScoreViews.inset_px`` of the scoring views (fit and judge; ``SCORE_INSET_PX``: unbiased).
     """
 
     frames: int = 9
@@ -73,6 +76,7 @@ class AutoSubjectOptions:
     judge_rounds: int = 3
     min_gain: float = 0.005
     min_iou: float = 0.7
+    inset_px: float = 0.0
 
     def __post_init__(self) -> None:
         if not (2 <= int(self.frames) <= 64 and 1 <= int(self.held_out) < int(self.frames)):
@@ -208,24 +212,38 @@ class SampleCalibration:
 
 
 def held_out_iou(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                 rounds: int) -> list[float]:
+                 rounds: int, inset_px: float = 0.0) -> list[float]:
     """Mean silhouette IoU of each of ``models`` (same parameters, other sizes) over ``sets``
     (``(frame id, params, camera -> mask)``), each pose first polished to the model by ``rounds`` of
-    ``polish_iou``; one list entry per model."""
-    return [float(v) for v in held_out_ious(models, cameras, sets, scale=scale, rounds=rounds).mean(axis=0)]
+    ``polish_iou`` (scoring views drawn with ``inset_px``, ``ScoreViews``); one list entry per model."""
+    return [float(v) for v in held_out_ious(models, cameras, sets, scale=scale, rounds=rounds,
+                                            inset_px=inset_px).mean(axis=0)]
 
 
 def held_out_ious(models: Sequence[BodyModel], cameras: Sequence[Camera], sets, *, scale: float,
-                  rounds: int) -> np.ndarray:
-    """:func:`held_out_iou` per set: ndarray ``(len(sets), len(models))``."""
+                  rounds: int, inset_px: float = 0.0) -> np.ndarray:
+    """:func:`held_out_iou` per set: ndarray ``(len(sets), len(models))``.
+
+    Each body's pose is polished from the set's pose and, when another body's polish scored higher,
+    again from that body's polished pose; the body keeps the better of the two.  A polish from a
+    perturbed pose stops in a local optimum that depends on the body, so a body would otherwise win
+    by where its polish happened to stop (a body judged by the best pose any of them found).
+    """
     names = [c.name for c in cameras]
     ious = np.zeros((len(sets), len(models)))
     for i, (_, p, sils) in enumerate(sets):
-        base = ScoreViews(models[0], cameras, [np.asarray(sils[n]) for n in names], scale=scale)
-        for j, model in enumerate(models):
-            views = base if j == 0 else base.with_model(model)
-            ious[i, j] = (polish_iou(model, views, p, steps=pose_steps(model, 0.5), rounds=rounds)[1] if rounds
-                          else views.score(p))
+        base = ScoreViews(models[0], cameras, [np.asarray(sils[n]) for n in names], scale=scale, inset_px=inset_px)
+        views = [base if j == 0 else base.with_model(m) for j, m in enumerate(models)]
+        if not rounds:
+            ious[i] = [v.score(p) for v in views]
+            continue
+        polished = [polish_iou(m, v, p, steps=pose_steps(m, 0.5), rounds=rounds) for m, v in zip(models, views)]
+        ious[i] = [s for _, s in polished]
+        best = int(np.argmax(ious[i]))
+        for j, (m, v) in enumerate(zip(models, views)):
+            if j != best:
+                again = polish_iou(m, v, polished[best][0], steps=pose_steps(m, 0.5), rounds=rounds)[1]
+                ious[i, j] = max(ious[i, j], again)
     return ious
 
 
@@ -255,8 +273,10 @@ def calibrate_sample(model: BodyModel, cameras: Sequence[Camera], sets, options:
     held = [s for i, s in enumerate(sets) if i in held_idx]
     more = {"widths": WIDTH_ORDER, "radii": RADIUS_ORDER} if options.widths_and_radii else {}
     fit = estimate_segment_lengths(model, cameras, [s[1] for s in fit_sets], [s[2] for s in fit_sets],
-                                   rounds=int(options.rounds), scale=float(options.scale), **more)
-    per_set = held_out_ious([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds)
+                                   rounds=int(options.rounds), scale=float(options.scale),
+                                   inset_px=float(options.inset_px), **more)
+    per_set = held_out_ious([model, fit.model], cameras, held, scale=options.scale, rounds=options.judge_rounds,
+                            inset_px=float(options.inset_px))
     before, after = (float(v) for v in per_set.mean(axis=0))
     adopted = after >= before + float(options.min_gain)
     subject = Subject(model.name, model.height_m, fit.segment_lengths,

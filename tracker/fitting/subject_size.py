@@ -35,6 +35,7 @@ from tracker.search.scoring import ScoreViews
 from tracker.search.seated import polish_iou
 
 __all__ = ["SubjectFit", "pose_steps", "nominal_segment_lengths", "nominal_widths", "estimate_segment_lengths", "SEGMENT_ORDER",
+           "SCORE_INSET_PX",
            "WIDTH_ORDER", "RADIUS_ORDER"]
 
 #: Search order, trunk first.
@@ -42,6 +43,11 @@ SEGMENT_ORDER = ("abdomen", "torso", "thigh", "upper_arm", "shank", "forearm")
 #: Widths and radius groups, searched after the lengths in this order.
 WIDTH_ORDER = ("hip_width", "shoulder_width")
 RADIUS_ORDER = ("trunk_width", "trunk_depth", "thigh", "upper_arm", "shank", "forearm")
+#: The ``ScoreViews.inset_px`` at which the model is drawn as large as the observed silhouettes of the same
+#: body are at scale 0.5 (the outline's half-pixel growth taken off, less the growth of a mask halved by
+#: area averaging with ties kept): no other body scores better on the model's own renders.  Not the
+#: calibration's default (``inset_px=0``, the tracker's own views): docs/subject_calibration.md, round 15.
+SCORE_INSET_PX = 0.35
 
 
 @dataclass(frozen=True)
@@ -103,7 +109,7 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
                              polish_rounds: int = 4, pose_step: float = 0.5, root_rounds: int = 2, scale: float = 0.5,
                              segments: Sequence[str] = SEGMENT_ORDER, widths: Sequence[str] = (),
                              radii: Sequence[str] = (), width_sigma: float = 0.2,
-                             radius_sigma: float = 0.2) -> SubjectFit:
+                             radius_sigma: float = 0.2, inset_px: float = 0.0) -> SubjectFit:
     """Fit segment lengths (and optionally widths and radii) to silhouettes, jointly with the frames' poses.
 
     Parameters
@@ -124,8 +130,8 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
         Factor on ``polish_iou``'s first steps (0.03 m root, 0.08 rad root rotation, 0.12 rad joints).
     root_rounds : int
         ``polish_iou`` rounds of the root translation (1 cm steps) for every candidate (0: none).
-    scale : float
-        Image scale of the scoring views.
+    scale, inset_px : float
+        Image scale and ``ScoreViews.inset_px`` of the scoring views (``SCORE_INSET_PX``: unbiased).
     segments, widths, radii : sequence of str
         Segments, widths (``WIDTH_ORDER``) and radius groups (``RADIUS_ORDER``) to fit (those the model has).
 
@@ -136,7 +142,8 @@ def estimate_segment_lengths(model: BodyModel, cameras: Sequence[Camera], poses:
     if len(poses) != len(silhouettes) or not poses:
         raise ValueError("estimate_segment_lengths: need one silhouette set per pose, at least one")
     names = [c.name for c in cameras]
-    views = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale) for s in silhouettes]
+    views = [ScoreViews(model, cameras, [np.asarray(s[n]) for n in names], scale=scale, inset_px=inset_px)
+             for s in silhouettes]
     nominal = {("length", k): v for k, v in nominal_segment_lengths(model).items()}
     nominal.update({("width", k): v for k, v in nominal_widths(model).items()})
     nominal.update({("radius", k): 1.0 for k in model.radius_groups})

@@ -28,6 +28,32 @@ from tracker.imaging.render import cone_points, internal_edges, render_label_ima
 __all__ = ["ScoreViews", "SearchInputs", "prepare_inputs", "chamfer_from_silhouette", "rendered_views"]
 
 
+def _inset_hulls(hulls: Sequence[np.ndarray], d: float) -> list[np.ndarray]:
+    """Convex polygons (``cv2.convexHull`` output, each (n, 1, 2) int32) moved inward by ``d`` (their
+    units), all at once: each edge along its normal, the corners on the miter (capped as
+    ``tracker.imaging.render``'s ``_shrink``); a polygon thinner than ``2 d`` shrinks about its centroid."""
+    sizes = np.array([len(h) for h in hulls])
+    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    n = np.repeat(sizes, sizes)
+    pos = np.arange(sizes.sum()) - start
+    v = np.concatenate(hulls)[:, 0, :].astype(np.float64)
+    e = v[start + (pos + 1) % n] - v  # edge i: v_i -> v_{i+1}
+    length = np.maximum(np.hypot(e[:, 0], e[:, 1]), 1e-9)
+    which = np.repeat(np.arange(len(hulls)), sizes)
+    area2 = np.bincount(which, v[:, 0] * e[:, 1] - v[:, 1] * e[:, 0])  # twice the signed area
+    normal = np.stack([e[:, 1], -e[:, 0]], axis=1) / length[:, None]
+    normal *= np.where(area2 < 0, -1.0, 1.0)[which, None]  # outward
+    prev = normal[start + (pos - 1) % n]
+    denom = np.maximum(1.0 + np.sum(prev * normal, axis=1), 0.2)
+    out = v - d * (prev + normal) / denom[:, None]
+    thin = (np.abs(area2) < 2 * d * np.bincount(which, length))[which] | (n < 3)
+    if thin.any():
+        centre = np.stack([np.bincount(which, v[:, k]) / sizes for k in (0, 1)], axis=1)[which]
+        out[thin] = centre[thin] + (v[thin] - centre[thin]) * 0.999
+    pts = np.round(out).astype(np.int32)[:, None, :]
+    return np.split(pts, np.cumsum(sizes)[:-1])
+
+
 class ScoreViews:
     """Silhouettes and cameras down-scaled by ``scale`` for fast overlap scoring of poses.
 
@@ -39,6 +65,11 @@ class ScoreViews:
         One mask per camera, in camera order; non-zero = body.
     scale : float
         Image scale of the scoring views (0.5: half width and height).
+    inset_px : float
+        Each part's outline moved inward by this many scoring-view pixels before it is filled
+        (0: none).  ``cv2.fillConvexPoly`` also sets the pixels the outline passes through, which
+        grows a shape by about half a pixel; 0.5 fills the pixels whose centre is inside, as
+        ``tracker.imaging.render`` does.
 
     Attributes
     ----------
@@ -51,8 +82,9 @@ class ScoreViews:
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray], *,
-                 scale: float = 0.5) -> None:
+                 scale: float = 0.5, inset_px: float = 0.0) -> None:
         self.model = model
+        self.inset_px = float(inset_px)
         self.cameras, self.masks = [], []
         for cam, sil in zip(cameras, silhouettes):
             w, h = max(1, int(round(cam.width * scale))), max(1, int(round(cam.height * scale)))
@@ -99,8 +131,12 @@ class ScoreViews:
         ends = [0] + np.cumsum(counts).tolist()
         out = [np.zeros((cam.height, cam.width), np.uint8) if base is None else base[k].astype(np.uint8)
                for _ in range(n_poses) for k, cam in enumerate(self.cameras)]
-        for i in np.flatnonzero(counts >= 3).tolist():  # the parts with a polygon in front
-            cv2.fillConvexPoly(out[i // shape[0]], cv2.convexHull(front[ends[i]:ends[i + 1]]), 1, shift=4)
+        drawn = np.flatnonzero(counts >= 3).tolist()  # the parts with a polygon in front
+        hulls = [cv2.convexHull(front[ends[i]:ends[i + 1]]) for i in drawn]
+        if self.inset_px and hulls:
+            hulls = _inset_hulls(hulls, 16.0 * self.inset_px)
+        for i, hull in zip(drawn, hulls):
+            cv2.fillConvexPoly(out[i // shape[0]], hull, 1, shift=4)
         return out
 
     def render(self, params: np.ndarray, parts: np.ndarray | None = None,
