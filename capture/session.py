@@ -321,27 +321,23 @@ def check_box(values, where: str, error: type[Exception] = ValueError) -> tuple[
     return tuple(lo + hi)
 
 
-def _parse_props(tables, where: str) -> tuple[tuple[float, ...], ...]:
-    """The ``[[prop]]`` tables' boxes, validated by :func:`check_box`."""
+def _parse_props(tables, where: str) -> tuple[tuple[tuple[float, ...], ...], tuple[bool, ...]]:
+    """The ``[[prop]]`` tables' boxes, validated by :func:`check_box`, and their ``hollow`` flags
+    (default false)."""
     if tables is None:
-        return ()
+        return (), ()
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise SessionError(f"{where}: 'prop' must be [[prop]] tables")
     if len(tables) > MAX_PROPS:
         raise SessionError(f"{where}: at most {MAX_PROPS} [[prop]] tables, got {len(tables)}")
-    return tuple(check_box(t.get("box"), f"{where} [[prop]] #{i + 1} key 'box'", SessionError)
-                 for i, t in enumerate(tables))
-
-
-def _parse_hollow(tables, where: str) -> tuple[bool, ...]:
-    """The ``[[prop]]`` tables' ``hollow`` flags (default false); ``_parse_props`` checked the tables."""
-    out = []
-    for i, t in enumerate(tables or ()):
+    boxes, hollow = [], []
+    for i, t in enumerate(tables):
+        boxes.append(check_box(t.get("box"), f"{where} [[prop]] #{i + 1} key 'box'", SessionError))
         flag = t.get("hollow", False)
         if not isinstance(flag, bool):
             raise SessionError(f"{where} [[prop]] #{i + 1} key 'hollow': expected true or false, got {flag!r}")
-        out.append(flag)
-    return tuple(out)
+        hollow.append(flag)
+    return tuple(boxes), tuple(hollow)
 
 
 def load_session(path, *, require_calibration: bool = True) -> Session:
@@ -393,8 +389,7 @@ def load_session(path, *, require_calibration: bool = True) -> Session:
             raise SessionError(f"{calib_path}: no calibration for camera(s) {missing} (has {sorted(by_name)})")
         calibration = tuple(by_name[n] for n in names)
     subject_file = _optional_path(root, data.get("subject", {}), "file", f"{toml_path} [subject]")
-    props = _parse_props(data.get("prop"), str(toml_path))
-    hollow = _parse_hollow(data.get("prop"), str(toml_path))
+    props, hollow = _parse_props(data.get("prop"), str(toml_path))
     return Session(root, name, float(fps), height, lengths, cameras, calibration, subject_file, props, hollow)
 
 

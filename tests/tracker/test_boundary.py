@@ -8,7 +8,7 @@ import numpy as np
 
 from segmentation.distance import chamfer_images
 from tracker.fitting import boundary
-from tracker.fitting.boundary import boundary_rays, boundary_samples, pixel_rays
+from tracker.fitting.boundary import boundary_rays, boundary_samples
 from tracker.synthetic.scene import ring_cameras
 
 
@@ -24,13 +24,13 @@ def test_remembered_samples_and_rays_are_the_computed_ones(rng):
     ch = _chamfer(rng)
     s1, d1 = boundary_rays(ch, cams[0], max_points=40)
     np.testing.assert_array_equal(s1, boundary_samples(ch, max_points=40))
-    np.testing.assert_array_equal(d1, pixel_rays([cams[0]], [s1])[0])
+    np.testing.assert_array_equal(d1, cams[0].rays(s1))
     assert len(s1) == 40 and len(np.unique(s1, axis=0)) == 40
     s2, d2 = boundary_rays(ch, cams[0], max_points=40)
     assert s2 is s1 and d2 is d1 and not s1.flags.writeable  # remembered, and nobody can change them
     # another camera, another sample count, another chamfer object: computed for it
     _, d3 = boundary_rays(ch, cams[1], max_points=40)
-    np.testing.assert_array_equal(d3, pixel_rays([cams[1]], [s1])[0])
+    np.testing.assert_array_equal(d3, cams[1].rays(s1))
     assert len(boundary_rays(ch, cams[0], max_points=10)[0]) == 10
     other = _chamfer(rng, offset=7)
     np.testing.assert_array_equal(boundary_rays(other, cams[0], max_points=40)[0],
@@ -40,7 +40,7 @@ def test_remembered_samples_and_rays_are_the_computed_ones(rng):
     s4, d4 = boundary_rays(fresh, cams[0], max_points=40, rays=False)
     assert not d4.any() and d4.shape == (len(s4), 3)
     _, d5 = boundary_rays(fresh, cams[0], max_points=40)
-    np.testing.assert_array_equal(d5, pixel_rays([cams[0]], [s4])[0])
+    np.testing.assert_array_equal(d5, cams[0].rays(s4))
 
 
 def test_memo_keeps_nothing_alive_and_stays_bounded(rng):

@@ -216,7 +216,6 @@ def test_compact_drops_only_rows_that_add_nothing(scene, rng):
 def test_covered_rays_agree_with_the_rendered_silhouette(name, rng):
     """A pixel's ray meets the body exactly where the renderer fills the pixel (pixel centre inside
     the projected outline), up to the renderer's polygonal outline on the silhouette's rim."""
-    from tracker.fitting.boundary import pixel_rays as _pixel_rays
     from tracker.imaging.visibility import covered_rays
 
     model = load_model(name)
@@ -228,7 +227,7 @@ def test_covered_rays_agree_with_the_rendered_silhouette(name, rng):
         p[:2] *= 0.3
         pose = forward(model, p)
         for cam, lab in zip(cams, render_label_images(model, pose, cams)):
-            dirs, index = _pixel_rays([cam], [uv])
+            dirs, index = cam.rays(uv), np.zeros(len(uv), dtype=np.intp)
             on = covered_rays(model, pose, [cam], index, dirs)
             sil = lab[ys.ravel(), xs.ravel()] >= 0
             assert sil.sum() > 300

@@ -6,7 +6,7 @@ from __future__ import annotations
 from tracker.lazy import lazy_face
 
 _EXPORTS = {
-    "tracker.fitting.boundary": ('boundary_samples', 'boundary_rays', 'pixel_rays'),
+    "tracker.fitting.boundary": ('boundary_samples', 'boundary_rays'),
     "tracker.fitting.cost": ('ChamferCost', 'CostTerms'),
     "tracker.fitting.screw_jacobian": ('ScrewJacobian',),
     "tracker.fitting.solver": ('SolverResult', 'levenberg_marquardt', 'least_squares_fd', 'robust_cost', 'robust_weights'),

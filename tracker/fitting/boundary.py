@@ -1,8 +1,8 @@
 """The observed silhouette boundary the chamfer cost's reverse term pulls on (``tracker.fitting.cost``).
 
-``boundary_samples`` picks pixels on the inner boundary of a camera's silhouette and ``pixel_rays`` turns
-pixels into world rays.  A frame set is fitted many times (a second start, the front/back guard, the limb
-check, the searches' refinements), each fit with a new ``ChamferCost`` over the same chamfer objects:
+``boundary_samples`` picks pixels on the inner boundary of a camera's silhouette.  A frame set is fitted
+many times (a second start, the front/back guard, the limb check, the searches' refinements), each fit
+with a new ``ChamferCost`` over the same chamfer objects:
 ``boundary_rays`` remembers the samples and rays of the last ``MEMO_SIZE`` (chamfer object, camera) pairs by
 identity (weak references: nothing is kept alive), so they are computed once per camera image.  The
 chamfer objects are immutable (``segmentation.distance.ChamferImages`` is a frozen dataclass whose arrays
@@ -14,14 +14,13 @@ from __future__ import annotations
 import threading
 import weakref
 from collections import OrderedDict
-from typing import Sequence
 
 import cv2
 import numpy as np
 
 from capture.camera import Camera
 
-__all__ = ["MEMO_SIZE", "boundary_rays", "boundary_samples", "pixel_rays"]
+__all__ = ["MEMO_SIZE", "boundary_rays", "boundary_samples"]
 
 #: (chamfer object, camera) pairs whose boundary samples and rays are remembered
 MEMO_SIZE = 64
@@ -47,17 +46,6 @@ def boundary_samples(chamfer, *, max_points: int) -> np.ndarray:
     # k <= n points spaced (n - 1) / (k - 1) >= 1 apart round to distinct indices
     pick = np.linspace(0, len(xy) - 1, min(max_points, len(xy))).round().astype(np.intp)
     return (xy[pick] + np.asarray(chamfer.offset_xy)).astype(float)
-
-
-def pixel_rays(cameras: Sequence[Camera], pixels: Sequence[np.ndarray]):
-    """World rays through pixels (lens distortion removed): unit directions (K, 3) and camera
-    index (K,) of the pixels ``pixels[c]`` (k_c, 2) of every camera c (origins: the centres)."""
-    dirs, cam = [np.zeros((0, 3))], [np.zeros(0, dtype=np.intp)]
-    for c, (camera, uv) in enumerate(zip(cameras, pixels)):
-        if len(uv):
-            dirs.append(camera.rays(uv))
-            cam.append(np.full(len(uv), c, dtype=np.intp))
-    return np.concatenate(dirs), np.concatenate(cam)
 
 
 def boundary_rays(chamfer, camera: Camera, *, max_points: int, rays: bool = True) -> tuple[np.ndarray, np.ndarray]:

@@ -257,6 +257,17 @@ def palm_model(model: BodyModel, length: float | None) -> BodyModel:
     return replace(model, cones=cones)
 
 
+def _chamfer_cost(model: BodyModel, cameras: Sequence, chamfer: Mapping[str, object], options: TrackerOptions, *,
+                 sliding: bool = True, visibility: str | None = None) -> ChamferCost:
+    """The ``ChamferCost`` a frame is fitted with under ``options`` (``visibility``: the options' unless
+    given; ``fit_frame``'s cost)."""
+    return ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
+                       visibility=options.visibility if visibility is None else visibility,
+                       truncate_px=options.truncate_px, reverse_weight=options.reverse_weight,
+                       reverse_samples=options.reverse_samples, reverse_min_px=options.reverse_min_px,
+                       reverse_cover_px=options.reverse_cover_px)
+
+
 def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews, start: np.ndarray, *,
               prediction: np.ndarray | None = None, sliding: bool = True, solver: str = "lm",
               options: TrackerOptions = TrackerOptions(), penalty=None) -> tuple[SolverResult, ChamferCost]:
@@ -284,10 +295,7 @@ def fit_frame(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferViews
     result : SolverResult
     cost : ChamferCost
     """
-    cost = ChamferCost(model, cameras, in_camera_order(chamfer, cameras), sliding=sliding, n_samples=options.n_samples,
-                       visibility=options.visibility, truncate_px=options.truncate_px,
-                       reverse_weight=options.reverse_weight, reverse_samples=options.reverse_samples,
-                       reverse_min_px=options.reverse_min_px, reverse_cover_px=options.reverse_cover_px)
+    cost = _chamfer_cost(model, cameras, chamfer, options, sliding=sliding)
     prior = start if prediction is None else prediction
     kw = dict(lower=model.lower, upper=model.upper, prior=model.clamp(prior),
               prior_weight=prior_weights(model, options), loss=options.loss, f_scale=options.f_scale,
@@ -420,7 +428,6 @@ class Tracker:
         self.n_front_back_checks = 0
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
-        self._legs_crossed = False
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -533,10 +540,7 @@ class Tracker:
                 starts.append(x)
         if not starts:
             return kept
-        cost = ChamferCost(model, cams, in_camera_order(chs, cams), n_samples=o.n_samples, visibility="frame",
-                           truncate_px=o.truncate_px, reverse_weight=o.reverse_weight,
-                           reverse_samples=o.reverse_samples, reverse_min_px=o.reverse_min_px,
-                           reverse_cover_px=o.reverse_cover_px)
+        cost = _chamfer_cost(model, cams, chs, o, sliding=self.sliding, visibility="frame")
 
         def data_cost(x):
             return robust_cost(cost.evaluate(x, compact=True).residuals, loss=o.loss, f_scale=o.f_scale)
@@ -660,10 +664,14 @@ class Tracker:
         crossed = o.limb_dead_band > 0 and self.stride.update(
             ankle_separation(self.model, np.asarray(terms.pose.params), terms.pose))
         cov = terms.coverage()
-        self._legs_crossed = o.limb_crossed is not None and ankle_crossing(
-            self.model, np.asarray(terms.pose.params), terms.pose) < -o.limb_crossed * self.model.height_m
         return crossed or (self._since_limbs >= o.limb_every
-                           and (self._legs_crossed or (not lost and np.isfinite(cov) and cov < limit)))
+                           and (self._legs_crossed(terms) or (not lost and np.isfinite(cov) and cov < limit)))
+
+    def _legs_crossed(self, terms) -> bool:
+        """Whether the fit's ankles are crossed by more than ``TrackerOptions.limb_crossed`` × height."""
+        lim = self.options.limb_crossed
+        return lim is not None and ankle_crossing(self.model, np.asarray(terms.pose.params),
+                                                  terms.pose) < -lim * self.model.height_m
 
     def _limbs(self, cams, chs, res, terms, views):
         """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``, the best limb
@@ -677,7 +685,7 @@ class Tracker:
                                self._last_iou if self._last_iou is not None else float(v.score(p)))
         opts = replace(o, max_iterations=o.limb_iterations)
         best = None
-        legs = leg_candidates(self.model, p, crossed=self._legs_crossed)
+        legs = leg_candidates(self.model, p, crossed=self._legs_crossed(terms))
         for name, start in legs + arm_candidates(self.model, p, self.last_good):
             r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=opts,
                                 penalty=self.penalty)

@@ -94,9 +94,10 @@ def leg_candidates(model: BodyModel, params: np.ndarray, crossed: bool = False) 
         q = exchanged.copy()
         q[[k for k in limb_dofs(model, LEGS) if model.param_names[k].split(".")[-1] in ("abduction", "twist")]] = 0.0
         out.append(("uncrossed", model.clamp(q)))
+    legs = dict(side_chains(model))
     for side in ("left", "right"):
         q = p.copy()
-        q[[k for k in limb_dofs(model, LEGS) if model.param_names[k].startswith(side + "_")]] = 0.0
+        q[legs.get(f"{side} leg", np.zeros(0, dtype=int))] = 0.0
         out.append((f"{side}_straight", model.clamp(q)))
     return out
 
