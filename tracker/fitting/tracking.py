@@ -32,8 +32,9 @@ from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptio
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
-from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing, ankle_separation,
-                                  arm_candidates, chain_joint_distance, exchange_verdict, leg_candidates, side_chains)
+from tracker.search.limbs import (ARM_STARTS, ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing,
+                                  ankle_separation, arm_candidates, chain_joint_distance, exchange_verdict,
+                                  leg_candidates, limb_dofs, side_chains)
 from tracker.search.appearance import view_colours
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
@@ -203,6 +204,8 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
+    #: the margin of the arms' starts (None: ``limb_margin``)
+    limb_arm_margin: float | None = None
     #: crossed legs (``tracker.search.limbs.ankle_crossing``: the left ankle more than ``limb_crossed`` ×
     #: height on the right ankle's side) make the limb check due, lost or not, at most every
     #: ``limb_every`` frames, with the ``"uncrossed"`` start among its legs' (None: off)
@@ -674,8 +677,10 @@ class Tracker:
                                                   terms.pose) < -lim * self.model.height_m
 
     def _limbs(self, cams, chs, res, terms, views):
-        """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``, the best limb
-        hypothesis's fit when it is clearly better; ``note``: why the frame is not ok ("" if none)."""
+        """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``; ``note``: why the
+        frame is not ok ("" if none).  The legs' and the arms' starts are judged apart, each chain's best
+        fit against the pose (``exchange_verdict``); a chain clearly better is taken (both: the legs of
+        the one with the arms of the other) and the frame fitted from there."""
         o = self.options
         self._since_limbs = 0
         self.n_limb_checks += 1
@@ -684,7 +689,7 @@ class Tracker:
         kept = hypothesis_cost(self.model, p, terms.rms_px(),
                                self._last_iou if self._last_iou is not None else float(v.score(p)))
         opts = replace(o, max_iterations=o.limb_iterations)
-        best = None
+        best = {}
         legs = leg_candidates(self.model, p, crossed=self._legs_crossed(terms))
         for name, start in legs + arm_candidates(self.model, p, self.last_good):
             r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=opts,
@@ -692,20 +697,28 @@ class Tracker:
             q = np.asarray(r.params)
             t = cost.evaluate(q)
             c = hypothesis_cost(self.model, q, t.rms_px(), float(v.score(q)))
-            if best is None or c < best[0]:
-                best = (c, name, q, t)
-        c, name, q, t = best
-        chain = ARMS if name.endswith(("hanging", "previous")) else LEGS
-        verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
-                                   margin=o.limb_margin, same_m=o.limb_same * self.model.height_m)
-        if verdict.choice == EXCHANGED:
-            r, cost = fit_frame(self.model, cams, chs, q, sliding=self.sliding, solver=self.solver, options=o,
-                                penalty=self.penalty)
-            self.n_limb_switches += 1
-            return r, cost.evaluate(np.asarray(r.params)), True, ""
-        if verdict.choice == UNSURE:
-            return res, terms, False, f"limbs: {name.replace('_', ' ')} fits as well ({c:.2f} vs {kept:.2f})"
-        return res, terms, False, ""
+            chain = ARMS if name.endswith(ARM_STARTS) else LEGS
+            if chain not in best or c < best[chain][0]:
+                best[chain] = (c, name, q, t)
+        taken, notes = {}, []
+        for chain, (c, name, q, t) in best.items():
+            margin = o.limb_arm_margin if chain == ARMS and o.limb_arm_margin is not None else o.limb_margin
+            verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
+                                       margin=margin, same_m=o.limb_same * self.model.height_m)
+            if verdict.choice == EXCHANGED:
+                taken[chain] = q
+            elif verdict.choice == UNSURE:
+                notes.append(f"limbs: {name.replace('_', ' ')} fits as well ({c:.2f} vs {kept:.2f})")
+        if not taken:
+            return res, terms, False, "; ".join(notes)
+        start = taken.get(LEGS, taken.get(ARMS)).copy()
+        if LEGS in taken and ARMS in taken:
+            arms = limb_dofs(self.model, ARMS)
+            start[arms] = taken[ARMS][arms]
+        r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=o,
+                            penalty=self.penalty)
+        self.n_limb_switches += 1
+        return r, cost.evaluate(np.asarray(r.params)), True, "; ".join(notes)
 
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
