@@ -253,7 +253,8 @@ def test_crossed_legs_are_uncrossed(crossed_limit):
 def _wrist_error_m(record, truth, side) -> float:
     names = list(MODEL.joint_names)
     k = names.index(f"{side}_wrist")
-    return float(np.linalg.norm(np.array(record["joints"][names[k]]) - joint_centre_array(MODEL, forward(MODEL, truth))[k]))
+    true = joint_centre_array(MODEL, forward(MODEL, truth))[k]
+    return float(np.linalg.norm(np.array(record["joints"][names[k]]) - true))
 
 
 def _arm_pose(p, side, abduction_deg, flexion_deg, elbow_deg) -> np.ndarray:

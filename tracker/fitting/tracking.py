@@ -75,8 +75,8 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin,
-    limb_same, limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : limbs; colour
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same,
+    limb_arm_margin, limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : limbs
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
@@ -191,10 +191,12 @@ class TrackerOptions:
     #: silhouette boundary unexplained than usual (coverage below the median of the last ``rms_window``
     #: good frames' minus ``limb_coverage_drop``, at most every ``limb_every`` frames) or when the legs
     #: have crossed (ankles apart along the heading by more than ``limb_dead_band`` × height, on the other
-    #: side from the last time), the legs exchanged, each leg straight, each arm hanging and each arm in
-    #: the last good pose are fitted (``limb_iterations`` LM steps); one whose ``hypothesis_cost`` is
-    #: ``limb_margin`` lower is taken, one lower by less whose knees/ankles or elbows/wrists end more than
-    #: ``limb_same`` × height away makes the frame not ok ("limbs"), and with ``limb_flag_coverage`` so
+    #: side from the last time), the legs exchanged, each leg straight, each arm hanging, bent, raised and
+    #: in the last good pose are fitted (``limb_iterations`` LM steps; ``limbs.leg_candidates``,
+    #: ``limbs.arm_candidates``); the legs' and the arms' best are judged apart: one whose
+    #: ``hypothesis_cost`` is ``limb_margin`` (arms: ``limb_arm_margin``) lower is taken, one lower by less
+    #: whose knees/ankles or elbows/wrists end more than ``limb_same`` × height away makes the frame not ok
+    #: ("limbs"), and with ``limb_flag_coverage`` so
     #: does a coverage still below the limit after the check (off: the model's own hop has frames with a
     #: good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
     limb_every: int = 5
@@ -204,7 +206,8 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
-    #: the margin of the arms' starts (None: ``limb_margin``)
+    #: the margin of the arms' starts (None: ``limb_margin``): an arm is a small share of the silhouettes,
+    #: so a right arm lowers the hypothesis cost less than a right leg does
     limb_arm_margin: float | None = None
     #: crossed legs (``tracker.search.limbs.ankle_crossing``: the left ankle more than ``limb_crossed`` ×
     #: height on the right ankle's side) make the limb check due, lost or not, at most every
