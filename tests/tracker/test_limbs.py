@@ -302,3 +302,21 @@ def test_lost_arm_comes_back():
             off += 1
             back += errs[1] < 0.06
     assert off >= 6 and back >= 4, (off, back)
+
+
+@pytest.mark.parametrize("colour_due", [True, False])
+def test_a_limb_lost_by_colour_makes_the_next_check_due(colour_due):
+    """A frame tracked right needs no limb check; after a frame whose colour check found a limb lost the
+    next frame is checked (``limb_colour_due``), once, and not without the option."""
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _stride(0)
+    frame = _render(truth, cams)
+    tr = Tracker(MODEL, cams, initial_params=truth, recover=False, front_back=None,
+                 options=TrackerOptions(limb_colour_due=colour_due))
+    tr.step(0, 0, *frame)
+    checks = tr.n_limb_checks
+    tr.step(1, 33_333_333, *frame)
+    assert tr.n_limb_checks == checks
+    tr._colour_lost, tr._since_limbs = True, 10
+    tr.step(2, 66_666_666, *frame)
+    assert tr.n_limb_checks == checks + int(colour_due)
