@@ -75,7 +75,7 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same, limb_arm_margin,
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same,
     limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views, limb_colour_due : limbs
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
@@ -193,12 +193,11 @@ class TrackerOptions:
     #: have crossed (ankles apart along the heading by more than ``limb_dead_band`` × height, on the other
     #: side from the last time), the legs exchanged, each leg straight, each arm hanging, bent, raised and
     #: in the last good pose are fitted (``limb_iterations`` LM steps; ``limbs.leg_candidates``,
-    #: ``limbs.arm_candidates``); the legs' and the arms' best are judged apart: one whose
-    #: ``hypothesis_cost`` is ``limb_margin`` (arms: ``limb_arm_margin``) lower is taken, one lower by less
-    #: whose knees/ankles or elbows/wrists end more than ``limb_same`` × height away makes the frame not ok
-    #: ("limbs"), and with ``limb_flag_coverage`` so
-    #: does a coverage still below the limit after the check (off: the model's own hop has frames with a
-    #: good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
+    #: ``limbs.arm_candidates``); the legs', the left arm's and the right arm's best are judged apart: one
+    #: whose ``hypothesis_cost`` is ``limb_margin`` lower is taken, one lower by less whose knees/ankles or
+    #: elbows/wrists end more than ``limb_same`` × height away makes the frame not ok ("limbs"), and with
+    #: ``limb_flag_coverage`` so does a coverage still below the limit after the check (off: the model's own
+    #: hop has frames with a good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
     limb_every: int = 5
     limb_flag_coverage: bool = False
     limb_coverage_drop: float = 0.03
@@ -206,9 +205,6 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
-    #: the margin of the arms' starts (None: ``limb_margin``): an arm is a small share of the silhouettes,
-    #: so a right arm lowers the hypothesis cost less than a right leg does
-    limb_arm_margin: float | None = None
     #: crossed legs (``tracker.search.limbs.ankle_crossing``: the left ankle more than ``limb_crossed`` ×
     #: height on the right ankle's side) make the limb check due, lost or not, at most every
     #: ``limb_every`` frames, with the ``"uncrossed"`` start among its legs' (None: off)
@@ -715,9 +711,8 @@ class Tracker:
         taken, notes = [], []
         for group, (c, name, q, t) in best.items():
             chain = LEGS if group == "legs" else ARMS
-            margin = o.limb_arm_margin if chain == ARMS and o.limb_arm_margin is not None else o.limb_margin
             verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
-                                       margin=margin, same_m=o.limb_same * self.model.height_m)
+                                       margin=o.limb_margin, same_m=o.limb_same * self.model.height_m)
             if verdict.choice == EXCHANGED:
                 taken.append((c, group, q))
             elif verdict.choice == UNSURE:
