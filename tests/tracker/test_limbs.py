@@ -10,10 +10,11 @@ from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import JOINT_ROTATION, ROOT_ROTATION, load_model
 from tracker.fitting.tracking import Tracker, TrackerOptions
 from tracker.imaging.render import internal_edges, render_label_images
-from tracker.search.limbs import (ARMS, EXCHANGED, KEPT, LEGS, SAME, UNSURE, StrideWatch, ankle_crossing,
+from tracker.search.limbs import (ARM_STARTS, ARMS, EXCHANGED, KEPT, LEGS, SAME, UNSURE, StrideWatch, ankle_crossing,
                                   ankle_separation, arm_candidates, exchange_limbs, exchange_verdict, leg_candidates, limb_dofs)
 from tracker.synthetic.scene import ring_cameras
 from tracker.body.kinematics import so3_exp
+from tracker.search.mirror import mirror_map
 
 MODEL = load_model("knossow40", height_m=1.75)
 S = np.diag([1.0, -1.0, 1.0])
@@ -26,6 +27,15 @@ def _random_pose(rng) -> np.ndarray:
     j = MODEL.param_kind == JOINT_ROTATION
     p[j] = rng.uniform(MODEL.lower[j], MODEL.upper[j])
     return p
+
+
+def _thorax_frame(params):
+    """Every joint centre in the frame of the arms' parent (the pose with the root, spine and clavicle
+    rotations undone: the arm DOF alone move the arms)."""
+    q = np.asarray(params, dtype=float).copy()
+    keep = set(limb_dofs(MODEL, ARMS)) - {k for k in limb_dofs(MODEL, ARMS) if "clavicle" in MODEL.param_names[k]}
+    q[[k for k in range(MODEL.n_params) if k not in keep]] = 0.0
+    return joint_centre_array(MODEL, forward(MODEL, q))
 
 
 def _pelvis_frame(params, names):
@@ -67,15 +77,30 @@ def test_candidates_change_only_their_chain():
         changed = set(np.flatnonzero(q != p))
         assert changed and changed <= legs, name
     cands = dict(arm_candidates(MODEL, p, prev))
-    assert set(cands) == {"left_hanging", "right_hanging", "left_previous", "right_previous"}
+    assert set(cands) == {f"{side}_{s}" for side in ("left", "right") for s in ARM_STARTS}
     for name, q in cands.items():
         changed = set(np.flatnonzero(q != p))
         assert changed and changed <= arms, name
         assert all(MODEL.param_names[k].startswith(name.split("_")[0]) for k in changed), name
-    names = list(MODEL.joint_names)
-    for side in ("left", "right"):  # a hanging arm: the wrist well below the shoulder
-        jc = joint_centre_array(MODEL, forward(MODEL, arm_candidates(MODEL, MODEL.zero())[0 if side == "left" else 1][1]))
-        assert jc[names.index(f"{side}_shoulder"), 2] - jc[names.index(f"{side}_wrist"), 2] > 0.3 * MODEL.height_m
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_arm_starts_where_they_say(seed):
+    """At seeded random poses, in the thorax's frame: a hanging arm's wrist well below its shoulder and
+    beside the trunk; a bent one's elbow there too and its wrist before it (the pelvis heading), at
+    elbow height; a raised one's wrist out sideways at shoulder height (the T-pose arm)."""
+    rng = np.random.default_rng(seed)
+    p = MODEL.clamp(_random_pose(rng))
+    h = MODEL.height_m
+    for side, out in (("left", 1.0), ("right", -1.0)):
+        s, e, w = (MODEL.joint_names.index(f"{side}_{j}") for j in ("shoulder", "elbow", "wrist"))
+        cands = dict(arm_candidates(MODEL, p))
+        rel = {k: _thorax_frame(cands[f"{side}_{k}"]) for k in ("hanging", "bent", "raised")}
+        hang, bent, up = rel["hanging"], rel["bent"], rel["raised"]
+        assert hang[s, 2] - hang[w, 2] > 0.25 * h and abs(hang[w, 0] - hang[s, 0]) < 0.02 * h
+        np.testing.assert_allclose(bent[e], hang[e], atol=1e-9)
+        assert bent[w, 0] - bent[e, 0] > 0.1 * h and abs(bent[w, 2] - bent[e, 2]) < 0.02 * h
+        assert out * (up[w, 1] - up[s, 1]) > 0.25 * h and abs(up[w, 2] - up[s, 2]) < 0.02 * h
 
 
 def test_stride_watch_fires_on_a_crossing_beyond_the_dead_band():
@@ -223,3 +248,75 @@ def test_crossed_legs_are_uncrossed(crossed_limit):
             assert tr.n_limb_checks == 0 and err > 0.3
         corrected += err < 0.05
     assert corrected >= 3 if crossed_limit is not None else corrected == 0
+
+
+def _wrist_error_m(record, truth, side) -> float:
+    names = list(MODEL.joint_names)
+    k = names.index(f"{side}_wrist")
+    true = joint_centre_array(MODEL, forward(MODEL, truth))[k]
+    return float(np.linalg.norm(np.array(record["joints"][names[k]]) - true))
+
+
+def _arm_pose(p, side, abduction_deg, flexion_deg, elbow_deg) -> np.ndarray:
+    q = p.copy()
+    for dof, deg in (("upper_arm.abduction", abduction_deg), ("upper_arm.flexion", flexion_deg),
+                     ("forearm.flexion", elbow_deg)):
+        k = MODEL.param_index(f"{side}_{dof}")
+        q[k] = np.radians(deg) * (1.0 if side == "left" else _mirror_sign(k))
+    return MODEL.clamp(q)
+
+
+def _mirror_sign(k: int) -> float:
+    """The sign ``mirror_map`` gives the left-side DOF ``k`` on the right side."""
+    index, sign = mirror_map(MODEL)
+    return float(sign[index[k]])
+
+
+def test_lost_arm_comes_back():
+    """Ten seeded mid-stride poses with one arm held out sideways, the forearm up ("raised"), or hanging
+    with the forearm forward before the belly ("bent"), each tracked for one frame from that arm wrong
+    (for "raised" bent before the belly, inside the trunk's silhouette; for "bent" hanging straight).
+    Without the limb check most wrists stay more than 15 cm off; with it at least four of those come back
+    within 6 cm (the arm starts ``"bent"`` and ``"raised"`` of ``arm_candidates``: the "hanging" and
+    "previous" starts alone bring none back), and the check never makes a wrist worse."""
+    cams = ring_cameras(4, size=(320, 240))
+    off = back = 0
+    for seed in range(10):
+        rng = np.random.default_rng(100 + seed)
+        side = ("left", "right")[seed % 2]
+        p = _stride(seed)
+        if seed < 5:  # raised
+            truth = _arm_pose(p, side, rng.uniform(-15, 5), rng.uniform(-10, 20), rng.uniform(40, 80))
+            wrong = _arm_pose(p, side, -80, 10, 90)
+        else:  # bent
+            truth = _arm_pose(p, side, -80, rng.uniform(0, 20), rng.uniform(80, 110))
+            wrong = _arm_pose(p, side, -80, 0, 0)
+        frame = _render(truth, cams)
+        errs = []
+        for every in (0, 5):
+            tr = Tracker(MODEL, cams, initial_params=wrong, recover=False, front_back=None,
+                         options=TrackerOptions(limb_every=every))
+            errs.append(_wrist_error_m(tr.step(0, 0, *frame), truth, side))
+        assert errs[1] <= errs[0] + 0.01, (seed, errs)
+        if errs[0] > 0.15:
+            off += 1
+            back += errs[1] < 0.06
+    assert off >= 6 and back >= 4, (off, back)
+
+
+@pytest.mark.parametrize("colour_due", [True, False])
+def test_a_limb_lost_by_colour_makes_the_next_check_due(colour_due):
+    """A frame tracked right needs no limb check; after a frame whose colour check found a limb lost the
+    next frame is checked (``limb_colour_due``), once, and not without the option."""
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _stride(0)
+    frame = _render(truth, cams)
+    tr = Tracker(MODEL, cams, initial_params=truth, recover=False, front_back=None,
+                 options=TrackerOptions(limb_colour_due=colour_due))
+    tr.step(0, 0, *frame)
+    checks = tr.n_limb_checks
+    tr.step(1, 33_333_333, *frame)
+    assert tr.n_limb_checks == checks
+    tr._colour_lost, tr._since_limbs = True, 10
+    tr.step(2, 66_666_666, *frame)
+    assert tr.n_limb_checks == checks + int(colour_due)

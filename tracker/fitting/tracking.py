@@ -32,8 +32,9 @@ from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptio
 from tracker.fitting.sampler import ChamferViews, in_camera_order
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
-from tracker.search.limbs import (ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing, ankle_separation,
-                                  arm_candidates, chain_joint_distance, exchange_verdict, leg_candidates, side_chains)
+from tracker.search.limbs import (ARM_STARTS, ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing,
+                                  ankle_separation, arm_candidates, chain_joint_distance, exchange_verdict,
+                                  leg_candidates, limb_dofs, side_chains)
 from tracker.search.appearance import view_colours
 from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
@@ -74,8 +75,8 @@ class TrackerOptions:
         Which IoU failures count towards a lost track (the rest are only not ok), and how often.
     front_back_every, front_back_iterations, front_back_margin
         The periodic front/back check.
-    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin,
-    limb_same, limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views : limbs; colour
+    limb_every, limb_flag_coverage, limb_coverage_drop, limb_dead_band, limb_iterations, limb_margin, limb_same,
+    limb_crossed, limb_colour_margin, limb_colour_match, limb_colour_share, limb_colour_views, limb_colour_due : limbs
     initialise_search, recover_search : SearchOptions
         The searches from the silhouettes: the first frame; after ``patience`` bad frames.
     """
@@ -190,12 +191,13 @@ class TrackerOptions:
     #: silhouette boundary unexplained than usual (coverage below the median of the last ``rms_window``
     #: good frames' minus ``limb_coverage_drop``, at most every ``limb_every`` frames) or when the legs
     #: have crossed (ankles apart along the heading by more than ``limb_dead_band`` × height, on the other
-    #: side from the last time), the legs exchanged, each leg straight, each arm hanging and each arm in
-    #: the last good pose are fitted (``limb_iterations`` LM steps); one whose ``hypothesis_cost`` is
-    #: ``limb_margin`` lower is taken, one lower by less whose knees/ankles or elbows/wrists end more than
-    #: ``limb_same`` × height away makes the frame not ok ("limbs"), and with ``limb_flag_coverage`` so
-    #: does a coverage still below the limit after the check (off: the model's own hop has frames with a
-    #: good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
+    #: side from the last time), the legs exchanged, each leg straight, each arm hanging, bent, raised and
+    #: in the last good pose are fitted (``limb_iterations`` LM steps; ``limbs.leg_candidates``,
+    #: ``limbs.arm_candidates``); the legs', the left arm's and the right arm's best are judged apart: one
+    #: whose ``hypothesis_cost`` is ``limb_margin`` lower is taken, one lower by less whose knees/ankles or
+    #: elbows/wrists end more than ``limb_same`` × height away makes the frame not ok ("limbs"), and with
+    #: ``limb_flag_coverage`` so does a coverage still below the limit after the check (off: the model's own
+    #: hop has frames with a good fit below it, docs/robustness.md round 7) (0 ``limb_every``: off)
     limb_every: int = 5
     limb_flag_coverage: bool = False
     limb_coverage_drop: float = 0.03
@@ -219,6 +221,9 @@ class TrackerOptions:
     limb_colour_match: float = 1.0
     limb_colour_share: float = 0.5
     limb_colour_views: int = 1
+    #: a frame whose colour check found a limb lost makes the next frame's limb check due (at most every
+    #: ``limb_every`` frames, not on a frame that counts towards a lost track)
+    limb_colour_due: bool = True
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -428,6 +433,7 @@ class Tracker:
         self.n_front_back_checks = 0
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
+        self._colour_lost = False  # the last frame's colour check found a distal limb lost
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -656,16 +662,19 @@ class Tracker:
         return ref - self.options.limb_coverage_drop
 
     def _limb_due(self, terms, limit: float, lost: bool) -> bool:
-        """Whether the limb check runs (``TrackerOptions``): the legs crossed, or the coverage is below
-        ``limit``, the last check is ``limb_every`` frames back and the frame is not ``lost``."""
+        """Whether the limb check runs (``TrackerOptions``): the legs crossed, or the last check is
+        ``limb_every`` frames back and the legs are crossed or, the frame not ``lost``, its coverage is below
+        ``limit`` or the last frame's colour check found a forearm or hand lost (``limb_colour_due``)."""
         o = self.options
         self._since_limbs += 1
         self.stride.dead_band_m = o.limb_dead_band * self.model.height_m
         crossed = o.limb_dead_band > 0 and self.stride.update(
             ankle_separation(self.model, np.asarray(terms.pose.params), terms.pose))
         cov = terms.coverage()
+        colour = o.limb_colour_due and self._colour_lost
         return crossed or (self._since_limbs >= o.limb_every
-                           and (self._legs_crossed(terms) or (not lost and np.isfinite(cov) and cov < limit)))
+                           and (self._legs_crossed(terms)
+                                or (not lost and (colour or (np.isfinite(cov) and cov < limit)))))
 
     def _legs_crossed(self, terms) -> bool:
         """Whether the fit's ankles are crossed by more than ``TrackerOptions.limb_crossed`` × height."""
@@ -674,8 +683,10 @@ class Tracker:
                                                   terms.pose) < -lim * self.model.height_m
 
     def _limbs(self, cams, chs, res, terms, views):
-        """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``, the best limb
-        hypothesis's fit when it is clearly better; ``note``: why the frame is not ok ("" if none)."""
+        """The limb check (``tracker.search.limbs``): ``(res, terms, switched, note)``; ``note``: why the
+        frame is not ok ("" if none).  The legs' starts, the left arm's and the right arm's are judged
+        apart, each group's best fit against the pose (``exchange_verdict``); the groups clearly better are
+        taken together (the best one's fit with the others' limb DOF) and the frame fitted from there."""
         o = self.options
         self._since_limbs = 0
         self.n_limb_checks += 1
@@ -684,7 +695,7 @@ class Tracker:
         kept = hypothesis_cost(self.model, p, terms.rms_px(),
                                self._last_iou if self._last_iou is not None else float(v.score(p)))
         opts = replace(o, max_iterations=o.limb_iterations)
-        best = None
+        best = {}
         legs = leg_candidates(self.model, p, crossed=self._legs_crossed(terms))
         for name, start in legs + arm_candidates(self.model, p, self.last_good):
             r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=opts,
@@ -692,20 +703,30 @@ class Tracker:
             q = np.asarray(r.params)
             t = cost.evaluate(q)
             c = hypothesis_cost(self.model, q, t.rms_px(), float(v.score(q)))
-            if best is None or c < best[0]:
-                best = (c, name, q, t)
-        c, name, q, t = best
-        chain = ARMS if name.endswith(("hanging", "previous")) else LEGS
-        verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
-                                   margin=o.limb_margin, same_m=o.limb_same * self.model.height_m)
-        if verdict.choice == EXCHANGED:
-            r, cost = fit_frame(self.model, cams, chs, q, sliding=self.sliding, solver=self.solver, options=o,
-                                penalty=self.penalty)
-            self.n_limb_switches += 1
-            return r, cost.evaluate(np.asarray(r.params)), True, ""
-        if verdict.choice == UNSURE:
-            return res, terms, False, f"limbs: {name.replace('_', ' ')} fits as well ({c:.2f} vs {kept:.2f})"
-        return res, terms, False, ""
+            group = f"{name.split('_')[0]} arm" if name.endswith(ARM_STARTS) else "legs"
+            if group not in best or c < best[group][0]:
+                best[group] = (c, name, q, t)
+        chains = dict(side_chains(self.model))
+        chains["legs"] = limb_dofs(self.model, LEGS)
+        taken, notes = [], []
+        for group, (c, name, q, t) in best.items():
+            chain = LEGS if group == "legs" else ARMS
+            verdict = exchange_verdict(kept, c, chain_joint_distance(self.model, terms.pose, t.pose, chain),
+                                       margin=o.limb_margin, same_m=o.limb_same * self.model.height_m)
+            if verdict.choice == EXCHANGED:
+                taken.append((c, group, q))
+            elif verdict.choice == UNSURE:
+                notes.append(f"limbs: {name.replace('_', ' ')} fits as well ({c:.2f} vs {kept:.2f})")
+        if not taken:
+            return res, terms, False, "; ".join(notes)
+        taken.sort(key=lambda x: x[0])
+        start = taken[0][2].copy()
+        for _, group, q in taken[1:]:
+            start[chains[group]] = q[chains[group]]
+        r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver, options=o,
+                            penalty=self.penalty)
+        self.n_limb_switches += 1
+        return r, cost.evaluate(np.asarray(r.params)), True, "; ".join(notes)
 
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
@@ -882,6 +903,7 @@ class Tracker:
         if self.guard is not None and self.guard.state == AMBIGUOUS:
             self._since_ambiguous = 0
         colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
+        self._colour_lost = bool(colour)
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(

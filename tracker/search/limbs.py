@@ -36,11 +36,13 @@ from tracker.body.model import JOINT_ROTATION, BodyModel
 from tracker.search.mirror import exchange_sides, mirror_map, pelvis_heading
 
 __all__ = ["LEGS", "ARMS", "exchange_limbs", "limb_dofs", "side_chains", "leg_candidates", "ankle_separation", "StrideWatch",
-           "ExchangeVerdict", "arm_candidates", "ankle_crossing", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
+           "ExchangeVerdict", "arm_candidates", "ARM_STARTS", "ankle_crossing", "exchange_verdict", "chain_joint_distance", "KEPT", "EXCHANGED", "UNSURE", "SAME"]
 
 #: the chains' part names without their ``left_``/``right_`` prefix
 LEGS = ("thigh", "shank", "foot")
 ARMS = ("clavicle", "upper_arm", "forearm", "hand")
+#: the suffixes of ``arm_candidates``' start names (what tells an arm start from a leg start)
+ARM_STARTS = ("hanging", "bent", "raised", "previous")
 
 KEPT, EXCHANGED, UNSURE, SAME = "kept", "exchanged", "unsure", "same"
 
@@ -123,20 +125,31 @@ def _hanging(model: BodyModel) -> tuple[int, float]:
 
 def arm_candidates(model: BodyModel, params: np.ndarray, previous: np.ndarray | None = None
                    ) -> list[tuple[str, np.ndarray]]:
-    """The starts an arm check fits besides the pose: each arm alone hanging along the trunk (its DOF
-    zero but the upper arm's abduction, lowered by 90°) and, with ``previous`` (a pose of an earlier
-    good frame), each arm alone in that pose.  List of (name, params)."""
+    """The starts an arm check fits besides the pose, each moving one arm alone (its DOF only): hanging
+    along the trunk (its DOF zero but the upper arm's abduction, lowered by 80°), hanging with the elbow
+    bent a right angle (the forearm forward, the hand before the belly), raised (every DOF zero: the
+    arm held out sideways) and, with ``previous`` (a pose of an earlier good frame), in that pose.
+    List of (name, params), names ``"{side}_hanging"``, ``"{side}_bent"``, ``"{side}_raised"``,
+    ``"{side}_previous"`` (``ARM_STARTS``), left then right."""
     p = np.asarray(params, dtype=float)
     index, sign = mirror_map(model)
     k, down = _hanging(model)
     out = []
     arms = dict(side_chains(model))
+    names = list(model.param_names)
     for side in ("left", "right"):
         dofs = arms.get(f"{side} arm", np.zeros(0, dtype=int))
-        q = p.copy()
-        q[dofs] = 0.0
+        raised = p.copy()
+        raised[dofs] = 0.0
+        q = raised.copy()
         q[k if side == "left" else index[k]] = down if side == "left" else sign[k] * down
         out.append((f"{side}_hanging", model.clamp(q)))
+        elbow = f"{side}_forearm.flexion"
+        if elbow in names:
+            b = q.copy()
+            b[names.index(elbow)] = np.pi / 2
+            out.append((f"{side}_bent", model.clamp(b)))
+        out.append((f"{side}_raised", model.clamp(raised)))
         if previous is not None:
             q = p.copy()
             q[dofs] = np.asarray(previous, dtype=float)[dofs]
