@@ -37,6 +37,20 @@ def test_watch_flags_one_camera_above_its_own_median():
         UncoveredWatch(margin=0.0)
 
 
+def test_observe_needs_frames_in_a_row_and_only_vouched_frames_join():
+    w = UncoveredWatch(margin=0.03, min_samples=2, frames=2)
+    for _ in range(2):
+        assert w.observe(["a"], np.array([0.0]), vouched=True) == ""
+    assert w.observe(["a"], np.array([0.1]), vouched=True) == ""  # one frame above: not yet
+    assert w.observe(["a"], np.array([0.1]), vouched=True).startswith("boundary unexplained")
+    assert w.observe(["a"], np.array([0.1]), vouched=False) == ""  # a frame already not ok is not flagged again
+    assert w.observe(["a"], np.array([0.0]), vouched=True) == ""  # the run is broken
+    assert w.observe(["a"], np.array([0.1]), vouched=True) == ""
+    np.testing.assert_allclose(w.excess(["a"], np.array([0.0])), [0.0])  # frames above the margin never joined
+    w.observe(["a"], np.array([0.01]), vouched=False)  # a frame the gate refused does not join either
+    np.testing.assert_allclose(w.excess(["a"], np.array([0.0])), [0.0])
+
+
 def test_watch_window_keeps_the_recent_frames():
     w = UncoveredWatch(margin=0.03, window=3, min_samples=1)
     for v in (0.5, 0.5, 0.0, 0.0, 0.0):
@@ -44,7 +58,7 @@ def test_watch_window_keeps_the_recent_frames():
     np.testing.assert_allclose(w.excess(["a"], np.array([0.0])), [0.0])
 
 
-ON = {"uncovered_margin": 0.03}  # the check on, whatever the default
+ON = {"uncovered_margin": 0.03, "uncovered_frames": 1}  # the check on, from the first frame, whatever the default
 
 
 @pytest.fixture(scope="module")
@@ -103,6 +117,8 @@ def test_an_unexplained_outline_in_one_camera_fails_and_the_track_is_unchanged(s
     assert all(r["ok"] for r in recs[:6])
     assert not any(r["ok"] for r in recs[6:])
     assert all(r["failed"] == ["uncovered"] and cameras[0].name in r["reason"] for r in recs[6:])
+    two, _ = track(scene, later, uncovered_frames=2)  # the default: the second frame in a row
+    assert [r["ok"] for r in two[5:]] == [True, True, False, False]
     off, _ = track(scene, later, uncovered_margin=None)
     assert all(r["ok"] for r in off)
     for a, b in zip(recs, off):  # the check only reports

@@ -225,11 +225,13 @@ class TrackerOptions:
     #: samples farther than ``uncovered_tol`` × the body's height in that camera's pixels (at the root's
     #: depth) from the model (1 - ``CostTerms.coverage_per_camera``) is compared with that camera's median
     #: over the last ``iou_window`` frames reported ok (``tracker.fitting.uncovered``, at least
-    #: ``uncovered_samples`` of them); above it by more than ``uncovered_margin`` in some camera, it makes an
-    #: otherwise good frame not ok ("uncovered"; the track goes on as before) (None: off)
+    #: ``uncovered_samples`` of them); above it by more than ``uncovered_margin`` in some camera on
+    #: ``uncovered_frames`` frames in a row, it makes an otherwise good frame not ok ("uncovered"; the track
+    #: goes on as before) (None: off)
     uncovered_margin: float | None = None
     uncovered_tol: float = 0.045
     uncovered_samples: int = 5
+    uncovered_frames: int = 2
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -434,7 +436,7 @@ class Tracker:
         self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
         self.uncovered = (None if options.uncovered_margin is None else
                           UncoveredWatch(margin=options.uncovered_margin, window=options.iou_window,
-                                         min_samples=options.uncovered_samples))
+                                         min_samples=options.uncovered_samples, frames=options.uncovered_frames))
         self._since_ambiguous = 1 << 30  # frames since the front/back guard's last ambiguous frame
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
@@ -774,19 +776,15 @@ class Tracker:
 
     def _uncovered(self, cams, terms, *, passed: bool) -> str:
         """The unexplained-boundary check (``TrackerOptions.uncovered_margin``) of the fit ``terms`` in
-        ``cams`` that ``passed`` the gate's other checks: why the frame is not ok ("" if it passed, or
-        without the reverse term); a frame that passes every check joins the reference."""
+        ``cams``: why the frame is not ok ("" if it passed, or without the reverse term); only a frame
+        that ``passed`` the gate's other checks can fail it or join the reference."""
         if self.uncovered is None:
             return ""
         root = np.asarray(terms.pose.translation[0], dtype=float)
         depth = np.array([float(np.asarray(c.rotation)[2] @ root + c.translation[2]) for c in cams])
         height_px = np.array([c.matrix[0][0] for c in cams]) * self.model.height_m / np.maximum(depth, 1e-3)
         shares = 1.0 - terms.coverage_per_camera(len(cams), tol_px=self.options.uncovered_tol * height_px)
-        names = [c.name for c in cams]
-        why = self.uncovered.check(names, shares) if passed else ""
-        if passed and not why:
-            self.uncovered.update(names, shares)
-        return why
+        return self.uncovered.observe([c.name for c in cams], shares, vouched=passed)
 
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None,

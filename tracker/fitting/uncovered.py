@@ -36,14 +36,29 @@ class UncoveredWatch:
         Frames kept per camera; the reference is their median.
     min_samples : int
         A camera with fewer frames has no reference and is not checked.
+    frames : int
+        ``observe`` flags a frame only when this many frames in a row (it included) exceeded the margin
+        (a real camera's share is noisy from frame to frame; a lost limb stays lost).
     """
 
-    def __init__(self, *, margin: float, window: int = 30, min_samples: int = 5) -> None:
-        if not margin > 0 or window < 1 or min_samples < 1:
-            raise ValueError(f"UncoveredWatch: need margin > 0, window >= 1, min_samples >= 1, got "
-                             f"{margin}, {window}, {min_samples}")
+    def __init__(self, *, margin: float, window: int = 30, min_samples: int = 5, frames: int = 1) -> None:
+        if not margin > 0 or window < 1 or min_samples < 1 or frames < 1:
+            raise ValueError(f"UncoveredWatch: need margin > 0, window >= 1, min_samples >= 1, frames >= 1, got "
+                             f"{margin}, {window}, {min_samples}, {frames}")
         self.margin, self.window, self.min_samples = float(margin), int(window), int(min_samples)
+        self.frames = int(frames)
         self._shares: dict[str, list[float]] = {}
+        self._run = 0  # frames in a row that exceeded the margin
+
+    def observe(self, names: Sequence[str], shares: np.ndarray, *, vouched: bool) -> str:
+        """One frame: why it is not ok ("" if it passed).  Every frame counts towards the run of frames
+        above the margin; a ``vouched`` frame (one that passed the gate's other checks) is flagged when
+        the run reaches ``frames``, and joins the reference when it is not above the margin itself."""
+        why = self.check(names, shares)
+        self._run = self._run + 1 if why else 0
+        if vouched and not why:
+            self.update(names, shares)
+        return why if vouched and self._run >= self.frames else ""
 
     def excess(self, names: Sequence[str], shares: np.ndarray) -> np.ndarray:
         """Each camera's share minus its reference, shape (n_cams,) (NaN: no reference yet, or no share).
@@ -70,5 +85,6 @@ class UncoveredWatch:
                 self._shares[n] = (self._shares.get(n, []) + [float(s)])[-self.window:]
 
     def reset(self) -> None:
-        """Forget every reference (a new subject or body)."""
+        """Forget every reference and the run (a new subject or body)."""
         self._shares.clear()
+        self._run = 0
