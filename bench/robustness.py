@@ -157,7 +157,7 @@ def render_session(root: Path, motion, subject_index: int, n_cameras: int, size,
 _REASONS = (("silhouette IoU", "iou"), ("rms", "rms"), ("contour on the silhouettes", "inside"),
             ("initialisation failed", "initialisation"), ("no camera", "no_camera"),
             ("limb off its silhouette", "limb_coverage"), ("limbs: ", "limbs_unsure"),
-            ("front/back", "front_back"), ("limb colour: ", "limb_colour"))
+            ("front/back", "front_back"), ("limb colour: ", "limb_colour"), ("boundary unexplained", "uncovered"))
 
 
 def _reason_keys(reason: str) -> list[str]:

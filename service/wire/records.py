@@ -9,7 +9,8 @@ record is exactly the DESIGN.md object (``frame``, ``timestamp_ns``, ``ok``, ``m
 ``missing_cameras``: the names of the cameras a live set went on without; ``subject``: the name of the
 subject body the pose is of; ``failed``: the quality-gate limits a not-ok fit failed, names such as
 ``"rms"``, ``"inside"``, ``"iou"``, ``"front_back"``, ``"limbs"``, ``"limb_colour"`` (a forearm or hand samples the trunk's, arms' or legs'
-learned colour, not its own); the gate's figures ``iou`` (silhouette IoU, when the
+learned colour, not its own), ``"uncovered"`` (a camera's silhouette outline left unexplained beyond its usual
+share); the gate's figures ``iou`` (silhouette IoU, when the
 set's was rendered), ``inside_fraction`` and ``coverage``, numbers).  Status, credit, have and demand records carry
 ``"v": 1``.
 Validation on receipt as in :mod:`service.wire.messages`: one :class:`MessageError` naming the field.

@@ -143,6 +143,9 @@ class CostTerms:
         Distance in pixels from each observed boundary sample to the nearest used contour point of
         its camera (0 on the predicted silhouette, inf where that camera has no contour point);
         None without the reverse term.
+    boundary_cam : ndarray of int, shape (K,), or None
+        The camera (index into the cost's cameras) of each observed boundary sample; None without the
+        reverse term.
     """
 
     pose: Pose
@@ -153,6 +156,7 @@ class CostTerms:
     residuals: np.ndarray
     jacobian: np.ndarray | ScrewJacobian | None
     boundary_dist: np.ndarray | None = None
+    boundary_cam: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:
@@ -170,6 +174,19 @@ class CostTerms:
         if self.boundary_dist is None or not self.boundary_dist.size:
             return float("nan")
         return float(np.count_nonzero(self.boundary_dist <= tol_px) / self.boundary_dist.size)
+
+    def coverage_per_camera(self, n_cams: int, *, tol_px=8.0) -> np.ndarray:
+        """``coverage`` of each camera's own boundary samples, shape (n_cams,) (NaN for a camera
+        without samples, and everywhere without the reverse term); ``tol_px``: a float, or one per
+        camera, shape (n_cams,)."""
+        if self.boundary_dist is None or self.boundary_cam is None:
+            return np.full(n_cams, np.nan)
+        tol = np.broadcast_to(np.asarray(tol_px, dtype=float), (n_cams,))
+        n = np.bincount(self.boundary_cam, minlength=n_cams)[:n_cams]
+        hit = np.bincount(self.boundary_cam, weights=self.boundary_dist <= tol[self.boundary_cam],
+                          minlength=n_cams)[:n_cams]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n > 0, hit / np.maximum(n, 1), np.nan)
 
     def rms_px(self, *, max_px: float | None = None) -> float:
         """RMS of the used residuals (both terms), pixels (NaN if none); with ``max_px``, of those
@@ -397,7 +414,8 @@ class ChamferCost:
             screws = np.ascontiguousarray(np.concatenate([pose.screw_w, pose.screw_v], axis=1).T)
             J = (ScrewJacobian(motion, part, screws, self.model.affects) if structured
                  else screw_rows(motion, part, screws, self.model.affects))
-        return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3])
+        return CostTerms(pose, contours, used, d[:, 0], d[:, 1], r, J, None if rev is None else rev[3],
+                         None if rev is None else self._boundary_cam)
 
     def residual_fn(self, *, compact: bool = True, structured: bool = False):
         """``fun(x, jacobian) -> (r, J or None)`` for ``tracker.fitting.solver``; ``compact`` and

@@ -30,6 +30,7 @@ from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
 from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
+from tracker.fitting.uncovered import UncoveredWatch
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
 from tracker.search.limbs import (ARM_STARTS, ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing,
@@ -224,6 +225,18 @@ class TrackerOptions:
     #: a frame whose colour check found a limb lost makes the next frame's limb check due (at most every
     #: ``limb_every`` frames, not on a frame that counts towards a lost track)
     limb_colour_due: bool = True
+    #: a limb lost against the body leaves its own outline unexplained in the cameras that see it beside
+    #: the body, while the global figures stay good: every frame's share of each camera's observed boundary
+    #: samples farther than ``uncovered_tol`` × the body's height in that camera's pixels (at the root's
+    #: depth) from the model (1 - ``CostTerms.coverage_per_camera``) is compared with that camera's median
+    #: over the last ``iou_window`` frames reported ok (``tracker.fitting.uncovered``, at least
+    #: ``uncovered_samples`` of them); above it by more than ``uncovered_margin`` in some camera on
+    #: ``uncovered_frames`` frames in a row, it makes an otherwise good frame not ok ("uncovered"; the track
+    #: goes on as before) (None: off)
+    uncovered_margin: float | None = None
+    uncovered_tol: float = 0.045
+    uncovered_samples: int = 5
+    uncovered_frames: int = 2
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -426,6 +439,9 @@ class Tracker:
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
         self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
+        self.uncovered = (None if options.uncovered_margin is None else
+                          UncoveredWatch(margin=options.uncovered_margin, window=options.iou_window,
+                                         min_samples=options.uncovered_samples, frames=options.uncovered_frames))
         self._since_ambiguous = 1 << 30  # frames since the front/back guard's last ambiguous frame
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
@@ -463,6 +479,8 @@ class Tracker:
         self.model = palm_model(model, self.options.palm_length)
         if self.guard is not None:
             self.guard.resize(self.model)
+        if self.uncovered is not None:
+            self.uncovered.reset()  # another body leaves another share uncovered
 
     def predict(self, frame_id: int | None = None) -> np.ndarray | None:
         """Start pose for frame ``frame_id`` (default: the next frame set), shape (n_params,); None
@@ -777,6 +795,18 @@ class Tracker:
                           for p, a, n in zip(parts[lost], above[lost], n_seen[lost]))
         return f"limb colour: {names} nearer the trunk's, arms' or legs' colour than its own"
 
+    def _uncovered(self, cams, terms, *, passed: bool) -> str:
+        """The unexplained-boundary check (``TrackerOptions.uncovered_margin``) of the fit ``terms`` in
+        ``cams``: why the frame is not ok ("" if it passed, or without the reverse term); only a frame
+        that ``passed`` the gate's other checks can fail it or join the reference."""
+        if self.uncovered is None:
+            return ""
+        root = np.asarray(terms.pose.translation[0], dtype=float)
+        depth = np.array([float(np.asarray(c.rotation)[2] @ root + c.translation[2]) for c in cams])
+        height_px = np.array([c.matrix[0][0] for c in cams]) * self.model.height_m / np.maximum(depth, 1e-3)
+        shares = 1.0 - terms.coverage_per_camera(len(cams), tol_px=self.options.uncovered_tol * height_px)
+        return self.uncovered.observe([c.name for c in cams], shares, vouched=passed)
+
     def step(self, frame_id: int, timestamp_ns: int, chamfer: Mapping[str, object],
              silhouettes: Mapping[str, np.ndarray] | None = None,
              images: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -904,10 +934,11 @@ class Tracker:
             self._since_ambiguous = 0
         colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self._colour_lost = bool(colour)
+        uncovered = self._uncovered(cams, terms, passed=not (shown or unsure or limbs or colour))
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not shown and not unsure and not limbs and not colour, params=[float(v) for v in res.params],
+            ok=not shown and not unsure and not limbs and not colour and not uncovered, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -916,11 +947,12 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if shown or unsure or limbs or colour:
+        if shown or unsure or limbs or colour or uncovered:
             record["reason"] = "; ".join(([f"poor fit: {shown}"] if shown else []) + ([unsure] if unsure else [])
-                                         + ([limbs] if limbs else []) + ([colour] if colour else []))
+                                         + ([limbs] if limbs else []) + ([colour] if colour else [])
+                                         + ([uncovered] if uncovered else []))
             record["failed"] = (list(shown.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
-                                + (["limb_colour"] if colour else []))
+                                + (["limb_colour"] if colour else []) + (["uncovered"] if uncovered else []))
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
