@@ -9,23 +9,16 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.tracker.test_tracking import HOP, perturb, render_chamfer
+from tests.tracker.test_tracking import hop_scene, perturb
 from tracker.fitting.tracking import Tracker, TrackerOptions
 from tracker.search.scoring import ScoreViews
-from tracker.synthetic.bvh import load_bvh
-from tracker.synthetic.retarget import retarget_bvh
-from tracker.synthetic.scene import ring_cameras
 
 STRICT = 0.85  # above what the fit reaches on the altered silhouettes (0.76-0.83), below its own (~0.92)
 
 
 @pytest.fixture(scope="module")
 def scene():
-    cameras = ring_cameras(4, size=(400, 300))
-    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
-    model, p0 = rt.model, rt.params[0]
-    ch, sil = render_chamfer(model, p0, cameras)
-    return cameras, model, p0, ch, sil
+    return hop_scene()
 
 
 def thinner(sil: dict, px: int = 3) -> dict:

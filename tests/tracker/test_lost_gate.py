@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.tracker.test_tracking import HOP, render_chamfer
+from tests.tracker.test_tracking import HOP, hop_scene, render_chamfer
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.fitting.tracking import Tracker, TrackerOptions
 from service.wire.records import PoseRecord
@@ -18,10 +18,8 @@ from tracker.synthetic.scene import ring_cameras
 
 @pytest.fixture(scope="module")
 def scene():
-    cameras = ring_cameras(4, size=(400, 300))
-    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
-    model, p0 = rt.model, rt.params[0]
-    return cameras, model, p0, render_chamfer(model, p0, cameras)
+    cameras, model, p0, ch, sil = hop_scene()
+    return cameras, model, p0, (ch, sil)
 
 
 def test_a_body_below_min_iou_is_not_ok_but_not_lost(scene):

@@ -27,6 +27,15 @@ def render_chamfer(model, params, cameras) -> tuple[dict, dict]:
     return chamfer, sils
 
 
+def hop_scene() -> tuple:
+    """The gate tests' scene: 4 ring cameras at 400×300 and the hop's pose at 0.5 s on ``knossow40``:
+    ``(cameras, model, params, chamfer, silhouettes)``."""
+    cameras = ring_cameras(4, size=(400, 300))
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
+    model, p0 = rt.model, rt.params[0]
+    return (cameras, model, p0, *render_chamfer(model, p0, cameras))
+
+
 @pytest.fixture(scope="module")
 def cameras():
     return ring_cameras(6, size=(800, 600))

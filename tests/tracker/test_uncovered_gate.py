@@ -10,12 +10,9 @@ import numpy as np
 import pytest
 
 from segmentation.distance import chamfer_images
-from tests.tracker.test_tracking import HOP, perturb, render_chamfer
+from tests.tracker.test_tracking import hop_scene, perturb
 from tracker.fitting.tracking import Tracker, TrackerOptions, _chamfer_cost
 from tracker.fitting.uncovered import UncoveredWatch
-from tracker.synthetic.bvh import load_bvh
-from tracker.synthetic.retarget import retarget_bvh
-from tracker.synthetic.scene import ring_cameras
 
 
 def test_watch_flags_one_camera_above_its_own_median():
@@ -63,11 +60,7 @@ ON = {"uncovered_margin": 0.03, "uncovered_frames": 1}  # the check on, from the
 
 @pytest.fixture(scope="module")
 def scene():
-    cameras = ring_cameras(4, size=(400, 300))
-    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5)
-    model, p0 = rt.model, rt.params[0]
-    ch, sil = render_chamfer(model, p0, cameras)
-    return cameras, model, p0, ch, sil
+    return hop_scene()
 
 
 def with_limb(sil: dict, cameras, k: int = 0) -> tuple[dict, dict]:
