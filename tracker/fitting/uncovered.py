@@ -21,7 +21,10 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["UncoveredWatch"]
+__all__ = ["FAILED", "UncoveredWatch"]
+
+#: the check's name in a pose record's ``failed`` list
+FAILED = "uncovered"
 
 
 class UncoveredWatch:
