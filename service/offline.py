@@ -26,7 +26,7 @@ from tracker.body.model import BodyModel, load_model
 from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
-from tracker.fitting.uncovered import FAILED as UNCOVERED
+from tracker.fitting.uncovered import fit_ok
 
 __all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records",
            "refit_kept", "track_session", "summarise", "TrackSummary"]
@@ -216,8 +216,7 @@ def refit_kept(refit: dict) -> bool:
     choose between the two fits.  It only reports, the track going on as before; here too a refit it
     refuses is kept, with its record saying why it is not ok.
     """
-    failed = refit.get("failed")
-    return bool(refit.get("ok")) or (bool(failed) and set(failed) <= {UNCOVERED} and "params" in refit)
+    return fit_ok(refit) and "params" in refit
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,

@@ -22,10 +22,19 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["FAILED", "UncoveredWatch"]
+__all__ = ["FAILED", "UncoveredWatch", "fit_ok"]
 
 #: the check's name in a pose record's ``failed`` list
 FAILED = "uncovered"
+
+
+def fit_ok(record: dict) -> bool:
+    """Whether pose record ``record``'s fit passed the gate: it is ok, or refused by this check alone.
+
+    What a tracker's owner acts on (keeping a refit, a recovery, the effort): the check only reports,
+    so that the track goes on as it would without it."""
+    failed = record.get("failed")
+    return bool(record.get("ok")) or (bool(failed) and set(failed) <= {FAILED})
 
 
 class UncoveredWatch:
