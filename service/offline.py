@@ -26,9 +26,10 @@ from tracker.body.model import BodyModel, load_model
 from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
 from tracker.fitting.tracking import Tracker, TrackerOptions
+from tracker.fitting.uncovered import fit_ok
 
-__all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records", "track_session",
-           "summarise", "TrackSummary"]
+__all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records",
+           "refit_kept", "track_session", "summarise", "TrackSummary"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -182,9 +183,10 @@ def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str
     The frames a warm-up fits (``SceneTracker.warming``: reverse term off, clutter not yet learned)
     are held with their records; at the first frame after it, ``SceneTracker.retrack`` fits them
     again latest first from the settled state, and a held frame's record is the refit's when the
-    gate passes it, else the first fit's.  Frames still in a warm-up when ``sets`` ends keep their
-    first records.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
-    (so that the held frames' images need not stay in memory; None: they are held).
+    gate passes its fit (``refit_kept``), else the first fit's.  Frames still in a warm-up when
+    ``sets`` ends keep their first records.  ``reread(first, last)``: the sets of frame ids ``first``
+    to ``last`` read again (so that the held frames' images need not stay in memory; None: they are
+    held).
     """
     held: list[tuple[tuple, dict]] = []
     for item in sets:
@@ -199,10 +201,22 @@ def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str
             refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
             for (it, first) in held:
                 refit = refits.get(it[0])
-                yield refit if refit is not None and refit.get("ok") else first
+                yield refit if refit is not None and refit_kept(refit) else first
             held = []
         yield rec
     yield from (r for _, r in held)
+
+
+def refit_kept(refit: dict) -> bool:
+    """Whether ``settled_records`` keeps a warm-up frame's refit (pose record ``refit``) over its first fit:
+    the refit is ok, or refused only by the unexplained-boundary check (``tracker.fitting.uncovered``).
+
+    That check weighs a fit against the track's recent shares of unexplained boundary, with the
+    reverse term on: a first fit of the warm-up (reverse term off) can never fail it, so it cannot
+    choose between the two fits.  It only reports, the track going on as before; here too a refit it
+    refuses is kept, with its record saying why it is not ok.
+    """
+    return fit_ok(refit) and "params" in refit
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,

@@ -41,6 +41,7 @@ from typing import Callable
 import numpy as np
 
 from service.workers.components import TrackerFitter, message_to_chamfer, silhouette_mask
+from tracker.fitting.uncovered import fit_ok
 
 __all__ = ["EffortLevel", "EFFORT_LEVELS", "EffortController", "LiveTrackerFitter", "ThreadSearches"]
 
@@ -466,10 +467,11 @@ class LiveTrackerFitter(TrackerFitter):
                 if self.searching:
                     self._hold(frame_id, images)
                 else:
-                    self.effort.update(self.clock() - t0, bool(record.get("ok")))
+                    self.effort.update(self.clock() - t0, fit_ok(record))
                     if self.auto_subject is not None:
                         self.auto_subject.observe(frame_id, record, silhouettes)
-                if not record.get("ok"):
+                # the fit's verdict, not the unexplained-boundary check's (it only reports: fit_ok)
+                if not fit_ok(record):
                     poor = bool(set(record.get("failed") or ()) - {"front_back"})  # a gate limit, not the guard
                     if self.searching:
                         record["reason"] = f"{record.get('reason', 'poor fit')}; searching: recovery running"
@@ -483,13 +485,13 @@ class LiveTrackerFitter(TrackerFitter):
                             record["effort"] = level.as_record()
                             record["rejoin_ms"] = 1e3 * (self.clock() - t_rejoin)
                         seeds = [tr.last_good, tr.params]
-                        if not record.get("ok") and tr.monitor.bad_frames >= tr.monitor.patience:
+                        if not fit_ok(record) and tr.monitor.bad_frames >= tr.monitor.patience:
                             self._start_search(frame_id, seeds, images, silhouettes)  # rejoin, then the full search
                         elif due and self.rejoin_beside:
                             self._start_search(frame_id, seeds, images, silhouettes, full=False)
             self._last_frame = int(frame_id)
             self._sets_since_rejoin += 1
-        self._last_ok = bool(record.get("ok"))
+        self._last_ok = fit_ok(record)
         if self.subject_name is not None:
             record["subject"] = self.subject_name
         record["fit_ms"] = 1e3 * (self.clock() - t0)

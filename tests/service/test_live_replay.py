@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from service.live_replay import HeldSearches, every_nth
+from tracker.fitting.uncovered import fit_ok
 
 
 def test_held_searches_hold_results_for_their_kind():
@@ -45,10 +46,11 @@ def test_every_nth_cycles_gaps():
 
 
 def _bad_runs(records) -> list[int]:
-    """Lengths of the runs of not-ok records after the first ok one."""
+    """Lengths of the runs of records whose fit failed (``fit_ok``: what the fitter's recovery acts on, the
+    unexplained-boundary check only reporting) after the first good one."""
     runs, n, started = [], 0, False
     for r in records:
-        if r.get("ok"):
+        if fit_ok(r):
             started = True
             if n:
                 runs.append(n)
@@ -97,9 +99,14 @@ def test_a_lost_track_rejoins_within_a_few_sets_while_the_full_search_is_slow(ho
     assert frames == every_nth(120, 2) and all("fit_ms" in r for r in rep.records)
     runs = _bad_runs(rep.records)
     assert max(runs, default=0) <= 8, runs
-    ok = np.array([bool(r.get("ok")) for r in rep.records])
+    ok = np.array([fit_ok(r) for r in rep.records])
     assert ok.sum() >= 0.75 * len(ok)
-    assert np.nanmean(clip_joint_errors(hop_clip, rep.records)[ok]) < 0.06
+    err = clip_joint_errors(hop_clip, rep.records)
+    assert np.nanmean(err[ok]) < 0.06
+    # the sets the unexplained-boundary check refuses are the worse ones (measured: 11, among them 7 sets of an
+    # arm lost 92-126 mm off; the ok sets' mean error 4.1 -> 3.6 cm)
+    shown = np.array([bool(r.get("ok")) for r in rep.records])
+    assert np.nanmean(err[shown]) < np.nanmean(err[ok])
     assert fitter.search_kinds.get("rejoin now", 0) >= 1
     # the sets that ran it say how long it took them
     rejoins = [r for r in rep.records if "rejoin_ms" in r]
@@ -112,7 +119,7 @@ def test_a_lost_track_rejoins_within_a_few_sets_while_the_full_search_is_slow(ho
     assert max(_bad_runs(beside.records), default=0) < 15  # shorter than a full search (measured 9 sets)
     live, _ = run(restart_step=LIVE_RESTART_STEP)  # the live default: the rejoin still bounds the bad runs
     assert max(_bad_runs(live.records), default=0) <= 8
-    live_ok = np.array([bool(r.get("ok")) for r in live.records])
+    live_ok = np.array([fit_ok(r) for r in live.records])
     assert live_ok.sum() >= 0.75 * len(live_ok)
 
 

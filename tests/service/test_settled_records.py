@@ -15,10 +15,11 @@ from tracker.synthetic.synth import bundled_motion
 
 class _Scripted:
     """A stand-in for SceneTracker: ``warm[i]`` whether frame i is in a warm-up, ``ok[i]`` its first
-    fit's verdict, ``refit_ok[i]`` the verdict of fitting it again."""
+    fit's verdict, ``refit_ok[i]`` the verdict of fitting it again and ``refit_failed[i]`` the limits
+    that refit failed when it is not ok."""
 
-    def __init__(self, warm, ok, refit_ok):
-        self.warm, self.ok, self.refit_ok = warm, ok, refit_ok
+    def __init__(self, warm, ok, refit_ok, refit_failed):
+        self.warm, self.ok, self.refit_ok, self.refit_failed = warm, ok, refit_ok, refit_failed
         self.warming = False
         self.retracked: list[list[int]] = []
 
@@ -28,7 +29,8 @@ class _Scripted:
 
     def retrack(self, frames):
         self.retracked.append([f for f, _, _ in frames])
-        return [{"frame": f, "ok": self.refit_ok[f], "pass": "refit"} for f, _, _ in frames]
+        return [{"frame": f, "ok": self.refit_ok[f], "pass": "refit", "params": [0.0]}
+                | ({} if self.refit_ok[f] else {"failed": self.refit_failed[f]}) for f, _, _ in frames]
 
 
 @pytest.mark.parametrize("reread", [False, True])
@@ -38,7 +40,9 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
     n = 40
     warm = rng.random(n) < 0.5
     ok, refit_ok = rng.random(n) < 0.5, rng.random(n) < 0.5
-    st = _Scripted(warm, ok, refit_ok)
+    kinds = (["uncovered"], ["iou"], ["iou", "uncovered"], ["limb_colour"])
+    refit_failed = [kinds[k] for k in rng.integers(0, len(kinds), n)]
+    st = _Scripted(warm, ok, refit_ok, refit_failed)
     reads = []
 
     def read(a, b):  # the frames a..b read again (with one before and after, to be left out)
@@ -62,8 +66,9 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
         f = r["frame"]
         if f not in refitted:
             assert r["pass"] == "first"
-        else:  # a refit is published only when the gate passes it
-            assert r["pass"] == ("refit" if refit_ok[f] else "first")
+        else:  # a refit is published when the gate passes it, or refuses it only for the uncovered check
+            kept = refit_ok[f] or refit_failed[f] == ["uncovered"]
+            assert r["pass"] == ("refit" if kept else "first")
     # the warm frames at the end (no settled frame after them) keep their first records
     assert all(out[f]["pass"] == "first" for f in cur)
 

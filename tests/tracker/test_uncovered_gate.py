@@ -55,6 +55,26 @@ def test_watch_window_keeps_the_recent_frames():
     np.testing.assert_allclose(w.excess(["a"], np.array([0.0])), [0.0])
 
 
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_reference_is_the_median_of_the_last_window_frames(seed):
+    rng = np.random.default_rng(seed)
+    window, names = int(rng.integers(3, 31)), ["a", "b", "c"]
+    w = UncoveredWatch(margin=0.03, window=window, min_samples=2)
+    seen = {n: [] for n in names}
+    for _ in range(int(rng.integers(2, 60))):
+        shares = rng.random(3) * 0.2
+        shares[rng.random(3) < 0.2] = np.nan  # a camera without a share this frame
+        w.update(names, shares)
+        for n, v in zip(names, shares):
+            if np.isfinite(v):
+                seen[n].append(v)
+        now = rng.random(3) * 0.2
+        want = [now[k] - np.median(seen[n][-window:]) if len(seen[n][-window:]) >= 2 else np.nan
+                for k, n in enumerate(names)]
+        np.testing.assert_allclose(w.excess(names, now), want, rtol=0, atol=1e-15)
+
+
 ON = {"uncovered_margin": 0.03, "uncovered_frames": 1}  # the check on, from the first frame, whatever the default
 
 

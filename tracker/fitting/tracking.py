@@ -233,7 +233,7 @@ class TrackerOptions:
     #: ``uncovered_samples`` of them); above it by more than ``uncovered_margin`` in some camera on
     #: ``uncovered_frames`` frames in a row, it makes an otherwise good frame not ok ("uncovered"; the track
     #: goes on as before) (None: off)
-    uncovered_margin: float | None = None
+    uncovered_margin: float | None = 0.05
     uncovered_tol: float = 0.045
     uncovered_samples: int = 5
     uncovered_frames: int = 2

@@ -17,11 +17,24 @@ reports: the track goes on from the gate's own verdict (``tracker.fitting.tracki
 
 from __future__ import annotations
 
+from statistics import median
 from typing import Sequence
 
 import numpy as np
 
-__all__ = ["UncoveredWatch"]
+__all__ = ["FAILED", "UncoveredWatch", "fit_ok"]
+
+#: the check's name in a pose record's ``failed`` list
+FAILED = "uncovered"
+
+
+def fit_ok(record: dict) -> bool:
+    """Whether pose record ``record``'s fit passed the gate: it is ok, or refused by this check alone.
+
+    What a tracker's owner acts on (keeping a refit, a recovery, the effort): the check only reports,
+    so that the track goes on as it would without it."""
+    failed = record.get("failed")
+    return bool(record.get("ok")) or (bool(failed) and set(failed) <= {FAILED})
 
 
 class UncoveredWatch:
@@ -64,7 +77,8 @@ class UncoveredWatch:
         """Each camera's share minus its reference, shape (n_cams,) (NaN: no reference yet, or no share).
 
         ``names``: the cameras, in the order of ``shares`` (n_cams,), each in [0, 1] or NaN."""
-        ref = np.array([np.median(h) if len(h := self._shares.get(n, ())) >= self.min_samples else np.nan
+        # statistics.median: the same median as numpy's, without its overhead on a few dozen floats
+        ref = np.array([median(h) if len(h := self._shares.get(n, ())) >= self.min_samples else np.nan
                         for n in names], dtype=float)
         return np.asarray(shares, dtype=float) - ref
 
