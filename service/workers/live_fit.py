@@ -185,6 +185,10 @@ class LiveTrackerFitter(TrackerFitter):
     catch_up_sets, velocity_damping, restart_step : int, float, float or None
         Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none);
         ``TrackerOptions`` fields live (:data:`LIVE_VELOCITY_DAMPING`, :data:`LIVE_RESTART_STEP`).
+    uncovered : bool
+        Keep the tracker's unexplained-boundary check (``TrackerOptions.uncovered_margin``; it only
+        reports: the fitter acts on ``fit_ok``); off by default live, where it refuses the demo's sets
+        of a lost wrist down to the live ok bar's edge (docs/robustness.md round 17).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
@@ -194,7 +198,7 @@ class LiveTrackerFitter(TrackerFitter):
                  rejoin_beside: bool = False, limbs_both: bool = False, recover_keep: int = 2,
                  initialise_demand_s: float = 0.2, min_search_cameras: float = 0.75, catch_up_sets: int = 8,
                  velocity_damping: float = LIVE_VELOCITY_DAMPING,
-                 restart_step: float | None = LIVE_RESTART_STEP) -> None:
+                 restart_step: float | None = LIVE_RESTART_STEP, uncovered: bool = False) -> None:
         super().__init__(tracker)
         tracker.recover = False
         # no extra IoU render on an RMS jump (TrackerOptions.iou_rms_jump) live: replaying live frame-id
@@ -207,6 +211,9 @@ class LiveTrackerFitter(TrackerFitter):
                                   initialise_search=replace(opts.initialise_search, limb_search_both=bool(limbs_both)),
                                   recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
                                                          keep=int(recover_keep)))
+        if not uncovered:  # the unexplained-boundary check (TrackerOptions.uncovered_margin) off live
+            tracker.options = replace(tracker.options, uncovered_margin=None)
+            tracker.uncovered = None
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)

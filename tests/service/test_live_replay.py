@@ -90,6 +90,7 @@ def test_a_lost_track_rejoins_within_a_few_sets_while_the_full_search_is_slow(ho
 
     def run(**options):
         options.setdefault("restart_step", None)
+        options.setdefault("uncovered", True)  # the unexplained-boundary check on, as offline (off live by default)
         fitter = LiveTrackerFitter.from_session(hop_clip.session, search_runner=HeldSearches({"default": 15,
                                                                                             "rejoin": 3}), **options)
         return replay_live(hop_clip, every_nth(120, 2), fitter=fitter), fitter
@@ -108,6 +109,8 @@ def test_a_lost_track_rejoins_within_a_few_sets_while_the_full_search_is_slow(ho
     shown = np.array([bool(r.get("ok")) for r in rep.records])
     assert np.nanmean(err[shown]) < np.nanmean(err[ok])
     assert fitter.search_kinds.get("rejoin now", 0) >= 1
+    assert fitter.tracker.uncovered is not None  # asked for; off by default live
+    assert LiveTrackerFitter.from_session(hop_clip.session).tracker.uncovered is None
     # the sets that ran it say how long it took them
     rejoins = [r for r in rep.records if "rejoin_ms" in r]
     assert len(rejoins) == fitter.search_kinds["rejoin now"]
