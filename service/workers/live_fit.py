@@ -182,13 +182,10 @@ class LiveTrackerFitter(TrackerFitter):
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
         a search runs only on a set with silhouettes from this fraction of the cameras.
-    catch_up_sets, velocity_damping, restart_step : int, float, float or None
+    catch_up_sets, velocity_damping, restart_step, uncovered : int, float, float or None, bool
         Sets held while a search runs, to bring its pose forward through (``_catch_up``; 0: none);
-        ``TrackerOptions`` fields live (:data:`LIVE_VELOCITY_DAMPING`, :data:`LIVE_RESTART_STEP`).
-    uncovered : bool
-        Keep the tracker's unexplained-boundary check (``TrackerOptions.uncovered_margin``; it only
-        reports: the fitter acts on ``fit_ok``); off by default live, where it refuses the demo's sets
-        of a lost wrist down to the live ok bar's edge (docs/robustness.md round 17).
+        ``TrackerOptions`` fields live (:data:`LIVE_VELOCITY_DAMPING`, :data:`LIVE_RESTART_STEP`); keep the
+        unexplained-boundary check (``uncovered_margin``; off live by default: docs/robustness.md round 17).
     """
 
     def __init__(self, tracker, *, period_s: float = 1 / 30, adaptive: bool = True, roi_margin_m: float = 0.12,
