@@ -174,10 +174,9 @@ class LiveTrackerFitter(TrackerFitter):
     rejoin_headings, rejoin_accept_iou : int, float or None
         The cheap recovery (``tracker.search.recovery.rejoin``): headings per seed; its pose's least IoU (None: gate's).
     rejoin_spacing, rejoin_beside : int, bool
-        A poor fit tries the cheap recovery at once when the last try was at least
-        ``rejoin_spacing`` sets ago (-1: never; the search after ``patience`` bad sets remains),
-        in the set's own time (``_rejoin_now``), or beside the stream (``rejoin_beside``: no
-        latency spike; its pose is taken a few sets later, as a search's).
+        A poor fit tries the cheap recovery at once when the last try was at least ``rejoin_spacing`` sets
+        ago (-1: never; the search after ``patience`` bad sets remains), in the set's own time (``_rejoin_now``),
+        or beside the stream (``rejoin_beside``: no latency spike; its pose taken a few sets later).
     limbs_both, recover_keep, initialise_demand_s, min_search_cameras : bool, int, float, float
         The searches' ``SearchOptions.limb_search_both`` (off: cheaper), the full recovery's ``keep``;
         sets demanded at most every ``initialise_demand_s`` s while initialising (:attr:`demand_interval_s`);
