@@ -30,7 +30,7 @@ from tracker.body.model import ROOT_TRANSLATION, BodyModel
 from tracker.fitting.cost import ChamferCost
 from tracker.fitting.hypotheses import AMBIGUOUS, FrontBackGuard, FrontBackOptions
 from tracker.fitting.sampler import ChamferViews, in_camera_order
-from tracker.fitting.uncovered import UncoveredWatch
+from tracker.fitting.uncovered import FAILED as UNCOVERED, UncoveredWatch
 from tracker.fitting.solver import SolverResult, least_squares_fd, levenberg_marquardt, robust_cost
 from tracker.search.initialise import SearchOptions, initialise
 from tracker.search.limbs import (ARM_STARTS, ARMS, EXCHANGED, LEGS, UNSURE, StrideWatch, ankle_crossing,
@@ -952,7 +952,7 @@ class Tracker:
                                          + ([limbs] if limbs else []) + ([colour] if colour else [])
                                          + ([uncovered] if uncovered else []))
             record["failed"] = (list(shown.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
-                                + (["limb_colour"] if colour else []) + (["uncovered"] if uncovered else []))
+                                + (["limb_colour"] if colour else []) + ([UNCOVERED] if uncovered else []))
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
