@@ -79,3 +79,30 @@ def test_the_guard_resolves_an_automatic_start_quickly():
     assert all(r["ok"] for r in records[3:]), [r.get("reason") for r in records]
     assert all("front/back ambiguous" in r["reason"] for r in records if not r["ok"])
     assert _errors_mm(model, records, rt.params)[2:].max() < 30.0
+
+
+def test_the_first_mirror_weighed_after_a_search_is_the_searchs_refined_one():
+    """The initialisation refines its pose and that pose's mirror fully (``resolve_front_back``); the
+    guard's first comparison starts the mirror's fit from that refined mirror (``offer_mirror``), not from
+    the mirror of the pose fitted once, so both hypotheses are weighed as far refined."""
+    from tracker.search.mirror import pelvis_heading
+
+    rt = retarget_bvh(load_bvh(HOP), model="knossow40", frames=1, start_s=0.5, fps=30)
+    model, cams = rt.model, ring_cameras(4, size=(320, 240))
+    tracker = Tracker(model, cams)
+    starts = []
+    ambiguous = tracker.guard._ambiguous
+
+    def spy(t_s, cams_, chs, images, res, terms, fit, iou):
+        def recorded(start, prediction, *more):
+            starts.append(np.array(start))
+            return fit(start, prediction, *more)
+        return ambiguous(t_s, cams_, chs, images, res, terms, recorded, iou)
+
+    tracker.guard._ambiguous = spy
+    record = tracker.step(0, 0, *_render(model, rt.params[0], cams))
+    offered = tracker._searched_mirror
+    assert offered is not None and starts
+    np.testing.assert_allclose(starts[0], offered)
+    # the other hypothesis: turned round against the pose found
+    assert pelvis_heading(model, np.asarray(record["params"])) @ pelvis_heading(model, offered) < -0.5

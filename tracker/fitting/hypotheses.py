@@ -129,12 +129,21 @@ class FrontBackGuard:
         """Go on with ``model`` (the same parts, other sizes); the colours learned per part are kept."""
         self.model = self.appearance.model = self._pending.model = model
 
+    def offer_mirror(self, params) -> None:
+        """The search's own refined mirror of the pose it found (``InitResult.mirror``; None: none), the start
+        of the mirror's first fit while the question is open and no mirror is tracked yet: both hypotheses
+        are then weighed as far refined (else the searched pose, refined to convergence, is weighed against
+        a mirror fitted once)."""
+        if self.state == AMBIGUOUS and self.mirror is None:
+            self._offered = None if params is None else np.asarray(params, dtype=float)
+
     def reset(self) -> None:
         """Open the question (first frame, re-initialisation): the mirror is tracked again."""
         self.state = AMBIGUOUS
         self.evidence = 0.0
         self.frames = 0
         self.mirror = None  # (params, previous params) of the mirror hypothesis
+        self._offered = None  # a search's refined mirror of the pose (offer_mirror), for the first comparison
         self._pending = AppearanceModel(self.model)  # colours under the pose while ambiguous
         self._pelvis: list[tuple[float, np.ndarray]] = []
         self._since_learn = 0
@@ -204,7 +213,8 @@ class FrontBackGuard:
         o, model = self.options, self.model
         p = np.asarray(res.params, dtype=float)
         if self.mirror is None:
-            start = prev = model.clamp(mirror_params(model, p))
+            offered, self._offered = self._offered, None
+            start = prev = model.clamp(mirror_params(model, p) if offered is None else offered)
         else:
             cur, prev = self.mirror
             start = model.clamp(2.0 * cur - prev) if prev is not None else cur

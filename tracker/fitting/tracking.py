@@ -450,6 +450,7 @@ class Tracker:
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
         self._colour_lost = False  # the last frame's colour check found a distal limb lost
+        self._searched_mirror = None  # the last search's refined mirror of its pose (InitResult.mirror)
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -514,6 +515,8 @@ class Tracker:
             res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
         else:
             res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
+        mirror = getattr(res, "mirror", None)  # the search's refined other front/back hypothesis
+        self._searched_mirror = None if mirror is None else self.model.clamp(np.asarray(mirror, dtype=float))
         return self.model.clamp(np.asarray(res.params, dtype=float))
 
     def _fit(self, cams, chs, start):
@@ -858,6 +861,8 @@ class Tracker:
                 start = self._search(cams, chamfer, silhouettes, None)
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
+            if self.guard is not None:
+                self.guard.offer_mirror(self._searched_mirror)
         res, terms, rms, inside = self._fit(cams, chs, start)
         if self._restart_due(start, terms):
             res, terms, rms, inside = self._restart(cams, chs, res, terms, rms, inside)
@@ -889,6 +894,7 @@ class Tracker:
                     restarted = True  # no velocity across a re-initialisation
                     if self.guard is not None:
                         self.guard.reset()
+                        self.guard.offer_mirror(self._searched_mirror)
         if self.options.front_back_every > 0 and views is not None and not restarted and self.guard is None:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:

@@ -290,7 +290,9 @@ class FrontBack:
         """
         b = self.best
         h = pelvis_heading(model, self.params[b])
-        return InitResult(params=self.params[b], score=float(self.iou[b]), rms_px=float(self.rms_px[b]),
+        other = np.flatnonzero(self.mirrored != self.mirrored[b])
+        mirror = self.params[other[np.argmin(self.cost[other])]] if other.size else None
+        return InitResult(params=self.params[b], mirror=mirror, score=float(self.iou[b]), rms_px=float(self.rms_px[b]),
                           inside_fraction=float(self.inside_fraction[b]), heading_rad=float(np.arctan2(h[1], h[0])),
                           label=("kept", "mirrored")[int(self.mirrored[b])], height_m=float(model.height_m),
                           candidates=len(self.params))

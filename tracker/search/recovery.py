@@ -226,6 +226,7 @@ def local_refine(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
                       prior_rad=prior_rad, reverse_weight=reverse_weight)
     iou = views.score(x)
     best = (front_back_cost(terms.rms_px(), iou, joints_at_limits(model, x)), "kept", x, terms, iou)
+    other = None  # the other front/back hypothesis, when refined
     if mirror_check:  # front or back: refined only where the mirror explains the silhouettes about as well
         m = model.clamp(mirror_params(model, x))
         if views.score(m) >= iou - mirror_margin:
@@ -233,15 +234,16 @@ def local_refine(model: BodyModel, cameras: Sequence[Camera], chamfer: ChamferVi
                                  prior_rad=prior_rad, reverse_weight=reverse_weight)
             iou_m = views.score(xm)
             cost_m = front_back_cost(terms_m.rms_px(), iou_m, joints_at_limits(model, xm))
+            other = xm
             if cost_m < best[0]:
-                best = (cost_m, "mirrored", xm, terms_m, iou_m)
+                other, best = x, (cost_m, "mirrored", xm, terms_m, iou_m)
     _, label, x, terms, iou = best
     if not (iou >= accept_iou and terms.inside_fraction() >= min_inside_fraction):
         return None
     h = pelvis_heading(model, x)
     return InitResult(params=x, score=iou, rms_px=terms.rms_px(), inside_fraction=terms.inside_fraction(),
                       heading_rad=float(np.arctan2(h[1], h[0])), label=f"local/{label}",
-                      height_m=estimate_height(hull, model), candidates=views.n_scored, hull=hull)
+                      height_m=estimate_height(hull, model), candidates=views.n_scored, hull=hull, mirror=other)
 
 
 def recover(model: BodyModel, cameras: Sequence[Camera], silhouettes: Mapping[str, np.ndarray],

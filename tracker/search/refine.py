@@ -65,6 +65,8 @@ class InitResult:
         Poses scored.
     hull : VoxelHull or None
         The visual hull used.
+    mirror : ndarray, shape (n_params,), or None
+        The other front/back hypothesis, refined as far as ``params`` (None when none was refined).
     """
 
     params: np.ndarray
@@ -76,6 +78,7 @@ class InitResult:
     height_m: float
     candidates: int
     hull: VoxelHull | None = field(default=None, repr=False)
+    mirror: np.ndarray | None = field(default=None, repr=False)
 
     def __array__(self, dtype=None, copy=None):
         return np.asarray(self.params, dtype=dtype)
