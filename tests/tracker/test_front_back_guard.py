@@ -100,9 +100,12 @@ def test_the_first_mirror_weighed_after_a_search_is_the_searchs_refined_one():
         return ambiguous(t_s, cams_, chs, images, res, terms, recorded, iou)
 
     tracker.guard._ambiguous = spy
+    offers = []
+    offer = tracker.guard.offer_mirror
+    tracker.guard.offer_mirror = lambda params: (offers.append(params), offer(params))
     record = tracker.step(0, 0, *_render(model, rt.params[0], cams))
-    offered = tracker._searched_mirror
-    assert offered is not None and starts
+    assert len(offers) == 1 and offers[0] is not None and starts
+    offered = offers[0]
     np.testing.assert_allclose(starts[0], offered)
     # the other hypothesis: turned round against the pose found
     assert pelvis_heading(model, np.asarray(record["params"])) @ pelvis_heading(model, offered) < -0.5

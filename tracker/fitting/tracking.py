@@ -450,7 +450,6 @@ class Tracker:
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
         self._colour_lost = False  # the last frame's colour check found a distal limb lost
-        self._searched_mirror = None  # the last search's refined mirror of its pose (InitResult.mirror)
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -505,8 +504,9 @@ class Tracker:
             return self.model.clamp(self.params + scale * (self.params - self.previous))
         return self.params
 
-    def _search(self, cams, chamfer, silhouettes, hint) -> np.ndarray:
-        """Initialisation (hint None) or recovery from silhouettes; raises ValueError on failure."""
+    def _search(self, cams, chamfer, silhouettes, hint) -> tuple[np.ndarray, np.ndarray | None]:
+        """Initialisation (hint None) or recovery from silhouettes: the pose and the search's refined mirror
+        of it (``InitResult.mirror``, None if none); raises ValueError on failure."""
         self.n_initialisations += 1
         self._since_search = 0
         sils = {c.name: silhouettes[c.name] for c in cams}
@@ -515,9 +515,8 @@ class Tracker:
             res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
         else:
             res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
-        mirror = getattr(res, "mirror", None)  # the search's refined other front/back hypothesis
-        self._searched_mirror = None if mirror is None else self.model.clamp(np.asarray(mirror, dtype=float))
-        return self.model.clamp(np.asarray(res.params, dtype=float))
+        mirror = None if res.mirror is None else self.model.clamp(np.asarray(res.mirror, dtype=float))
+        return self.model.clamp(np.asarray(res.params, dtype=float)), mirror
 
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
@@ -858,11 +857,11 @@ class Tracker:
             if not can_search:
                 return fail("no initial pose: pass initial_params, or silhouettes for automatic initialisation")
             try:
-                start = self._search(cams, chamfer, silhouettes, None)
+                start, mirror = self._search(cams, chamfer, silhouettes, None)
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
             if self.guard is not None:
-                self.guard.offer_mirror(self._searched_mirror)
+                self.guard.offer_mirror(mirror)
         res, terms, rms, inside = self._fit(cams, chs, start)
         if self._restart_due(start, terms):
             res, terms, rms, inside = self._restart(cams, chs, res, terms, rms, inside)
@@ -881,8 +880,8 @@ class Tracker:
                                     else {"rms_px": rms, "inside_fraction": inside})
         if bad and state.lost and self.recover and can_search:
             try:
-                res2, terms2, rms2, inside2 = self._fit(cams, chs, self._search(cams, chamfer, silhouettes,
-                                                                                 self.last_good))
+                found, mirror = self._search(cams, chamfer, silhouettes, self.last_good)
+                res2, terms2, rms2, inside2 = self._fit(cams, chs, found)
             except ValueError:
                 pass
             else:
@@ -894,7 +893,7 @@ class Tracker:
                     restarted = True  # no velocity across a re-initialisation
                     if self.guard is not None:
                         self.guard.reset()
-                        self.guard.offer_mirror(self._searched_mirror)
+                        self.guard.offer_mirror(mirror)
         if self.options.front_back_every > 0 and views is not None and not restarted and self.guard is None:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
@@ -941,10 +940,14 @@ class Tracker:
         colour = "" if shown or unsure or limbs else self._limb_colour(cams, chs, images, np.asarray(res.params))
         self._colour_lost = bool(colour)
         uncovered = self._uncovered(cams, terms, passed=not (shown or unsure or limbs or colour))
+        # why the frame is not ok: (the record's failed names, its reason), in the record's order
+        refusals = ([(list(shown.failed), f"poor fit: {shown}")] if shown else []) + [
+            ([name], why) for name, why in (("front_back", unsure), ("limbs", limbs), ("limb_colour", colour),
+                                            (UNCOVERED, uncovered)) if why]
         self.last_result = res
         joints = joint_centre_array(self.model, terms.pose)
         record.update(
-            ok=not shown and not unsure and not limbs and not colour and not uncovered, params=[float(v) for v in res.params],
+            ok=not refusals, params=[float(v) for v in res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
             rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
             coverage=_finite(terms.coverage()),
@@ -953,12 +956,9 @@ class Tracker:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
-        if shown or unsure or limbs or colour or uncovered:
-            record["reason"] = "; ".join(([f"poor fit: {shown}"] if shown else []) + ([unsure] if unsure else [])
-                                         + ([limbs] if limbs else []) + ([colour] if colour else [])
-                                         + ([uncovered] if uncovered else []))
-            record["failed"] = (list(shown.failed) + (["front_back"] if unsure else []) + (["limbs"] if limbs else [])
-                                + (["limb_colour"] if colour else []) + ([UNCOVERED] if uncovered else []))
+        if refusals:
+            record["reason"] = "; ".join(why for _, why in refusals)
+            record["failed"] = [name for names, _ in refusals for name in names]
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped
             self.previous = None
