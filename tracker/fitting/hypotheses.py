@@ -19,10 +19,9 @@ Silhouettes cannot tell a T-pose from the same body turned round with left and r
     labelling of the image colours over the mirrored one;
   - ``walk``: the pelvis moving at walking speed along the heading rather than against it.
 
-  The frames are reported not ok ("front/back ambiguous") until ``|D|`` reaches ``margin``, each
-  with the hypothesis ``D`` favours so far (the pose while ``D >= 0``; the track goes on from the
-  pose whichever is reported); the winner is then kept (the tracker switches to the mirror's fit when it wins) and the colour model
-  is learned from it from then on.
+  The frames are reported not ok ("front/back ambiguous"), each with the hypothesis ``D`` favours so
+  far (the track goes on from the pose), until ``|D|`` reaches ``margin``; the winner is then kept
+  (the tracker switches to the mirror's fit when it wins) and the colour model learned from it.
 * **resolved**: every ``check_every`` frames the mirror of the pose is fitted and weighed with the
   same cues, and in between the feet cue and the learned colours against their mirrored labelling; the
   evidence against the pose runs in a leaky sum, and when it reaches ``-reopen`` the question is
