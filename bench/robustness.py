@@ -222,6 +222,14 @@ def _score(records: list, truth: np.ndarray, fps: float) -> tuple[dict, dict, di
     return score, joint_mm, series
 
 
+def _add_quality(series: dict, records: list, n: int) -> None:
+    """Add to ``series`` each of the ``n`` frames' quality figures (IoU, RMS, inside fraction, coverage
+    and the not-ok ``reason`` of ``records``; None for a frame without a record), for gate studies."""
+    by_frame = {rec["frame"]: rec for rec in records}
+    for key in ("iou", "rms_px", "inside_fraction", "coverage", "reason"):
+        series[key] = [by_frame.get(k, {}).get(key) for k in range(n)]
+
+
 def _pred(records: list, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(joints (n, 16, 3) m, NaN without a pose; ok flags (n,)) of ``records`` on ``truth``'s frames."""
     pred = np.full(truth.shape, np.nan)
@@ -329,12 +337,11 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             else:  # not adopted (or no trusted fit): the height-only track stands
                 rec_c, cpu_c = records, cpu_s
             score_c, joint_c, series_c = _score(rec_c, truth, fps)
+            _add_quality(series_c, rec_c, len(truth))
             calibrated = {**score_c, "joint_mm": joint_c, "unprocessed": len(truth) - len(rec_c), "cpu_s": cpu_c,
                           "calibration": info, "series": series_c}
     score, joint_mm, series = _score(records, truth, fps)
-    by_frame = {rec["frame"]: rec for rec in records}
-    for key in ("iou", "rms_px", "inside_fraction", "coverage", "reason"):  # the quality figures, for gate studies
-        series[key] = [by_frame.get(k, {}).get(key) for k in range(len(truth))]
+    _add_quality(series, records, len(truth))
     floor_m = ik_floor_joints_m(motion, subject_index, height, fps=fps, model=MODEL[0]) if ik_floor else None
     floor_mm = None if floor_m is None else float(1e3 * floor_m.mean())
     lat = [r["latency_ms"] for r in records]

@@ -217,8 +217,9 @@ class LiveTrackerFitter(TrackerFitter):
         self.clock = clock
         self._lock = threading.Lock()
         self.search_runner = ThreadSearches() if search_runner is None else search_runner
-        # (frame id of the pose, the pose brought forward, the search's own pose); poses None on failure
-        self._found: tuple[int, np.ndarray | None, np.ndarray | None] | None = None
+        # (frame id of the pose, the pose brought forward, the search's own pose, the search's refined mirror of
+        # the pose brought forward or None); poses None on failure
+        self._found: tuple[int, np.ndarray | None, np.ndarray | None, np.ndarray | None] | None = None
         self._last_frame: int | None = None
         self._clipped = False
         self._last_ok = False
@@ -296,11 +297,12 @@ class LiveTrackerFitter(TrackerFitter):
                         res = recover(tr.model, cams, sils, chs, seeds[0],
                                       options=replace(tr.options.recover_search, local=False))
                 found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
+                mirror = None if res is None or res.mirror is None else tr.model.clamp(np.asarray(res.mirror, float))
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
-                found = None
+                found = mirror = None
             with self._lock:
-                self._found = (frame_id, found, found)
+                self._found = (frame_id, found, found, mirror)
             self.search_kinds[kind] = self.search_kinds.get(kind, 0) + 1
             return kind if found is not None else None
 
@@ -328,7 +330,9 @@ class LiveTrackerFitter(TrackerFitter):
         brought forward through the sets held while it searched (:meth:`_catch_up`).  The
         tracker's prediction, the pose brought forward and the search's own pose are fitted to
         this set and the one whose fit scores the highest silhouette IoU becomes the tracker's
-        pose (the prediction on a tie: the track came back by itself)."""
+        pose (the prediction on a tie: the track came back by itself).  As ``Tracker.step`` does with
+        its own searches, the front/back question is opened at the pose taken and the search's refined
+        mirror of it (brought forward too) offered as the mirror's first start (``FrontBackGuard.offer_mirror``)."""
         from tracker.fitting.tracking import fit_frame
         from tracker.search.scoring import ScoreViews
 
@@ -337,7 +341,7 @@ class LiveTrackerFitter(TrackerFitter):
         if found is None or found[1] is None:
             return
         tr = self.tracker
-        start_frame, start, own = found
+        start_frame, start, own, mirror = found
         names = [n for n in tr.cameras if n in images and np.any(silhouettes[n])]
         current = tr.predict(frame_id)
         poses = [p for p in (current, start, None if own is start else own) if p is not None]
@@ -356,6 +360,15 @@ class LiveTrackerFitter(TrackerFitter):
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
+        self._open_front_back(mirror)
+
+    def _open_front_back(self, mirror) -> None:
+        """A search's pose was taken: the guard's question opened at it (it is open already after the
+        initialisation) with the search's refined ``mirror`` (or None) offered, as ``Tracker.step`` does."""
+        guard = self.tracker.guard
+        if guard is not None:
+            guard.reset()
+            guard.offer_mirror(mirror)
 
     def _hold(self, frame_id: int, images: dict) -> None:
         """Keep a set that arrived while a search runs (its chamfer images), at most
@@ -372,7 +385,8 @@ class LiveTrackerFitter(TrackerFitter):
         """Bring a found pose forward: fit it (full effort) to each held set after its own in turn.
 
         Runs after the search, in its time (``search_runner``'s ``then``); the found entry becomes
-        ``(frame id of the last set fitted, pose, the search's own pose)`` and the held sets are let go."""
+        ``(frame id of the last set fitted, pose, the search's own pose, mirror)`` (the search's refined mirror
+        of the pose brought forward through the same sets) and the held sets are let go."""
         from tracker.fitting.tracking import fit_frame
 
         tr = self.tracker
@@ -380,22 +394,25 @@ class LiveTrackerFitter(TrackerFitter):
             found, held, self._held = self._found, self._held, []
         if found is None or found[1] is None:
             return
-        frame_id, params = int(found[0]), np.asarray(found[1], dtype=float)
+        frame_id, params, mirror = int(found[0]), np.asarray(found[1], dtype=float), found[3]
         need = self._min_cameras()
         for fid, chs in held:
             names = [n for n in tr.cameras if n in chs]
             if fid <= frame_id or len(names) < need:
                 continue
+            cams = [tr.cameras[n] for n in names]
             try:
-                res, _ = fit_frame(tr.model, [tr.cameras[n] for n in names], {n: chs[n] for n in names}, params,
-                                   sliding=tr.sliding, solver=tr.solver, options=self.base_options)
+                brought = [fit_frame(tr.model, cams, {n: chs[n] for n in names}, p, sliding=tr.sliding,
+                                     solver=tr.solver, options=self.base_options)[0].params
+                           for p in ([params] if mirror is None else [params, mirror])]
             except ValueError as exc:  # a set it cannot be fitted to: keep what was brought so far
                 log.info("catch-up stopped at frame %d: %s", fid, exc)
                 break
-            params, frame_id = tr.model.clamp(np.asarray(res.params, dtype=float)), fid
+            params, frame_id = tr.model.clamp(np.asarray(brought[0], dtype=float)), fid
+            mirror = None if mirror is None else tr.model.clamp(np.asarray(brought[1], dtype=float))
         with self._lock:
             if self._found is found:
-                self._found = (frame_id, params, found[2])
+                self._found = (frame_id, params, found[2], mirror)
 
     def _rejoin_now(self, frame_id: int, timestamp_ns: int, images: dict, silhouettes: dict) -> dict | None:
         """The cheap recovery (``tracker.search.recovery.rejoin`` from the last good pose and the
@@ -421,6 +438,7 @@ class LiveTrackerFitter(TrackerFitter):
         tr.params, tr.previous, tr._frames = tr.model.clamp(np.asarray(res.params, dtype=float)), None, (None, None)
         tr.monitor.reset()
         self.rejoined += 1
+        self._open_front_back(None if res.mirror is None else tr.model.clamp(np.asarray(res.mirror, dtype=float)))
         return tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
 
     def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:

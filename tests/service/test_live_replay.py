@@ -163,3 +163,59 @@ def test_a_stale_search_pose_is_brought_forward_through_the_sets_held_meanwhile(
     assert "full" not in fitter.search_kinds, fitter.search_kinds
     old, _ = run(0)
     assert sum(bool(r.get("ok")) for r in old.records) < sum(ok)
+
+
+@pytest.mark.slow
+def test_a_live_search_offers_its_refined_mirror_to_the_front_back_guard(hop_clip):
+    """As ``Tracker.step`` does with its own searches, the live fitter's initialisation (run beside the
+    stream, held 3 sets) hands the guard its refined mirror of the pose, brought forward through the held
+    sets as the pose is: the guard's first mirror fit starts from it, not from the mirror of the pose
+    fitted once; a rejoin taken in the set's time opens the question again with its own mirror."""
+    from service.live_replay import replay_live
+    from service.workers.live_fit import LiveTrackerFitter
+    from tracker.search.mirror import pelvis_heading
+
+    fitter = LiveTrackerFitter.from_session(hop_clip.session, search_runner=HeldSearches({"default": 3, "rejoin": 0}))
+    guard, model = fitter.tracker.guard, fitter.tracker.model
+    offers, starts, caught = [], [], []
+    offer, ambiguous, catch_up = guard.offer_mirror, guard._ambiguous, fitter._catch_up
+    guard.offer_mirror = lambda p: (offers.append(None if p is None else np.array(p)), offer(p))
+
+    def spy(t_s, cams, chs, images, res, terms, fit, iou):
+        def recorded(start, prediction, *more):
+            starts.append(np.array(start))
+            return fit(start, prediction, *more)
+        return ambiguous(t_s, cams, chs, images, res, terms, recorded, iou)
+
+    def spied_catch_up():
+        before = fitter._found
+        catch_up()
+        caught.append((before, fitter._found))
+
+    guard._ambiguous, fitter._catch_up = spy, spied_catch_up
+    rep = replay_live(hop_clip, every_nth(12, 1), fitter=fitter)
+    assert fitter.search_kinds.get("initialise") == 1 and caught
+    (f0, pose0, _, mirror0), (f1, pose1, _, mirror1) = caught[0]
+    assert mirror0 is not None and f1 > f0  # the search refined a mirror; brought forward with the pose
+    assert not np.allclose(mirror1, mirror0)
+    assert offers and offers[0] is not None
+    np.testing.assert_allclose(offers[0], mirror1)
+    np.testing.assert_allclose(starts[0], offers[0])
+    first = next(r for r in rep.records if "params" in r and "searching" not in r.get("reason", ""))
+    assert first["front_back"] == "ambiguous"
+    assert pelvis_heading(model, np.asarray(first["params"])) @ pelvis_heading(model, offers[0]) < -0.5
+    # a rejoin taken in the set's time (a frame after the replay's): the question opened again, with the
+    # rejoin's own refined mirror offered
+    from types import SimpleNamespace
+
+    from service.workers.components import BackgroundSegmenter, message_to_chamfer, silhouette_mask
+
+    k = 14
+    chamfer = {n: message_to_chamfer(BackgroundSegmenter(model=hop_clip.backgrounds[n])(
+        SimpleNamespace(camera=n, frame_id=k, timestamp_ns=0), hop_clip.images[n][k], roi=None))
+        for n in hop_clip.images}
+    n_offers, n_resolved = len(offers), guard.n_resolved
+    record = fitter._rejoin_now(k, int(k * 1e9 / 30), chamfer, {n: silhouette_mask(c) for n, c in chamfer.items()})
+    assert record is not None and len(offers) == n_offers + 1
+    assert "fit" in record["front_back_cues"]  # the mirror weighed on the rejoin's set: the question was open
+    assert record["front_back"] == "ambiguous" or guard.n_resolved == n_resolved + 1

@@ -109,3 +109,29 @@ def test_the_first_mirror_weighed_after_a_search_is_the_searchs_refined_one():
     np.testing.assert_allclose(starts[0], offered)
     # the other hypothesis: turned round against the pose found
     assert pelvis_heading(model, np.asarray(record["params"])) @ pelvis_heading(model, offered) < -0.5
+
+
+def test_an_open_question_reports_the_hypothesis_its_evidence_favours():
+    """A standing subject tracked from the mirror of the truth, recovery off: once the question is
+    re-opened, every frame while it is open reports the hypothesis its evidence sum favours (the mirror,
+    here the truth, when the sum is negative) while the track goes on from the pose until the margin is
+    reached; a frame with a non-negative sum reports the pose."""
+    model, cams = load_model("knossow40"), ring_cameras(4, size=(320, 240))
+    truth = _standing(model, 16, seed=3)
+    tracker = Tracker(model, cams, initial_params=mirror_params(model, truth[0]), recover=False)
+    records, tracked = [], []
+    for k, p in enumerate(truth):
+        records.append(tracker.step(k, int(k * 1e9 / 30), *_render(model, p, cams)))
+        tracked.append(np.array(tracker.params))
+    errs = _errors_mm(model, records, truth)
+    errs_tracked = _errors_mm(model, [{"params": p} for p in tracked], truth)
+    open_frames = [k for k, r in enumerate(records) if r["front_back"] == "ambiguous"]
+    assert open_frames, [r["front_back"] for r in records]
+    favoured = [k for k in open_frames if records[k]["front_back_cues"]["sum"] < 0]
+    assert favoured, [records[k]["front_back_cues"] for k in open_frames]
+    for k in open_frames:
+        assert (records[k].get("front_back_reported") == "mirror") == (k in favoured)
+        assert not records[k]["ok"]
+    # the mirror reported is the truth; the tracked pose is still the turned one
+    assert errs[favoured].max() < 30.0 and errs_tracked[favoured].min() > 100.0, (errs.round(), errs_tracked.round())
+    assert not any("front_back_reported" in r for r in records if r["front_back"] == "resolved")

@@ -19,9 +19,9 @@ Silhouettes cannot tell a T-pose from the same body turned round with left and r
     labelling of the image colours over the mirrored one;
   - ``walk``: the pelvis moving at walking speed along the heading rather than against it.
 
-  The frames are reported not ok ("front/back ambiguous") until ``|D|`` reaches ``margin``; the
-  winner is then kept (the tracker switches to the mirror's fit when it wins) and the colour model
-  is learned from it from then on.
+  The frames are reported not ok ("front/back ambiguous"), each with the hypothesis ``D`` favours so
+  far (the track goes on from the pose), until ``|D|`` reaches ``margin``; the winner is then kept
+  (the tracker switches to the mirror's fit when it wins) and the colour model learned from it.
 * **resolved**: every ``check_every`` frames the mirror of the pose is fitted and weighed with the
   same cues, and in between the feet cue and the learned colours against their mirrored labelling; the
   evidence against the pose runs in a leaky sum, and when it reaches ``-reopen`` the question is
@@ -94,13 +94,16 @@ class FrontBackOptions:
 
 @dataclass
 class GuardOutcome:
-    """What the guard concluded for a frame: ``swap`` (the mirror's ``(res, terms)`` to report
-    instead of the pose's, or None), ``reason`` ("" or why the frame is not ok), ``cues`` (the
-    frame's evidence terms, for logs and tests)."""
+    """What the guard concluded for a frame: ``swap`` (the mirror's ``(res, terms)`` to track and
+    report instead of the pose's, or None), ``reason`` ("" or why the frame is not ok), ``cues`` (the
+    frame's evidence terms, for logs and tests), ``report`` (while the question is open and the
+    evidence so far favours the mirror: the mirror's ``(res, terms)`` to report for this frame, the
+    track going on from the pose; else None)."""
 
     swap: tuple | None
     reason: str
     cues: dict
+    report: tuple | None = None
 
 
 class FrontBackGuard:
@@ -241,7 +244,10 @@ class FrontBackGuard:
             self.evidence = 0.0
             self._since_learn = self._since_colour = self._since_check = 0
             return GuardOutcome(swap, "", cues)
-        return GuardOutcome(None, f"front/back ambiguous (evidence {self.evidence:+.1f} of ±{o.margin:g})", cues)
+        # not settled: the frame is reported with the hypothesis the evidence favours so far (the
+        # pose on a tie), its best estimate; which one is tracked changes only when the margin is reached
+        return GuardOutcome(None, f"front/back ambiguous (evidence {self.evidence:+.1f} of ±{o.margin:g})", cues,
+                            report=(res_m, terms_m) if self.evidence < 0 else None)
 
     def _watch(self, t_s, cams, chs, images, res, terms, ok, fit, iou) -> GuardOutcome:
         o, model = self.options, self.model

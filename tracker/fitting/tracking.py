@@ -450,6 +450,7 @@ class Tracker:
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
         self._colour_lost = False  # the last frame's colour check found a distal limb lost
+        self._reported = None  # the mirror's (res, terms) the record reports this frame (the guard's open question)
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -751,7 +752,8 @@ class Tracker:
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
         bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
-        ("" or why the frame is not ok although the fit is good)."""
+        ("" or why the frame is not ok although the fit is good).  ``self._reported``: the mirror's
+        ``(res, terms)`` when the open question's evidence favours it (the record reports it), else None."""
         def fit(start, prediction, iterations=None):
             opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
                                                                       ftol=min(self.options.ftol, 2e-3))
@@ -765,6 +767,7 @@ class Tracker:
                                 else None, res=res, terms=terms, ok=not bad, fit=fit, iou=iou)
         record["front_back"] = self.guard.state
         record["front_back_cues"] = {k: round(float(v), 3) for k, v in out.cues.items()}
+        self._reported = out.report
         swapped = out.swap is not None
         if swapped:
             res, terms = out.swap
@@ -929,6 +932,7 @@ class Tracker:
         else:
             self.stride.reset()
         unsure = ""
+        self._reported = None
         if self.guard is not None:
             res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
                                                                         views)
@@ -945,14 +949,18 @@ class Tracker:
             ([name], why) for name, why in (("front_back", unsure), ("limbs", limbs), ("limb_colour", colour),
                                             (UNCOVERED, uncovered)) if why]
         self.last_result = res
-        joints = joint_centre_array(self.model, terms.pose)
+        # the pose reported: the tracked one, or the mirror the open question's evidence favours
+        r_res, r_terms = (res, terms) if self._reported is None else self._reported
+        joints = joint_centre_array(self.model, r_terms.pose)
         record.update(
-            ok=not refusals, params=[float(v) for v in res.params],
+            ok=not refusals, params=[float(v) for v in r_res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
-            rms_px=_finite(rms), iterations=int(res.iterations), inside_fraction=_finite(inside),
-            coverage=_finite(terms.coverage()),
+            rms_px=_finite(r_terms.rms_px()), iterations=int(r_res.iterations),
+            inside_fraction=_finite(r_terms.inside_fraction()), coverage=_finite(r_terms.coverage()),
         )
-        if self._last_iou is not None:
+        if self._reported is not None:
+            record["front_back_reported"] = "mirror"
+        elif self._last_iou is not None:
             record["iou"] = self._last_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
