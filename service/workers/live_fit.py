@@ -208,8 +208,7 @@ class LiveTrackerFitter(TrackerFitter):
                                   recover_search=replace(opts.recover_search, limb_search_both=bool(limbs_both),
                                                          keep=int(recover_keep)))
         if not uncovered:  # the unexplained-boundary check (TrackerOptions.uncovered_margin) off live
-            tracker.options = replace(tracker.options, uncovered_margin=None)
-            tracker.uncovered = None
+            tracker.options = replace(tracker.options, uncovered_margin=None)  # the tracker drops its watch
         self.base_options = tracker.options
         self.effort = EffortController(period_s, levels=len(EFFORT_LEVELS) if adaptive else 1)
         self.roi_margin_m, self.roi_margin_per_frame_m = float(roi_margin_m), float(roi_margin_per_frame_m)

@@ -5,6 +5,8 @@ undershoots everywhere by a little passes; the check never changes the track."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -155,6 +157,23 @@ def test_the_reference_follows_a_resized_body(scene):
     assert np.isfinite(tracker.uncovered.excess([cameras[0].name], np.zeros(1))).all()
     tracker.resize(model)
     assert np.isnan(tracker.uncovered.excess([cameras[0].name], np.zeros(1))).all()
+
+
+def test_new_options_rebuild_the_watch_only_when_its_settings_change(scene):
+    cameras, model, p0, ch, sil = scene
+    tracker = Tracker(model, cameras, initial_params=p0, options=TrackerOptions(**ON))
+    for k in range(6):
+        tracker.step(k, k, ch, sil)
+    watch = tracker.uncovered
+    tracker.options = replace(tracker.options, n_samples=tracker.options.n_samples + 1)
+    assert tracker.uncovered is watch  # another setting: the watch and its history kept
+    assert np.isfinite(tracker.uncovered.excess([cameras[0].name], np.zeros(1))).all()
+    tracker.options = replace(tracker.options, uncovered_margin=None)
+    assert tracker.uncovered is None
+    assert tracker.step(6, 6, ch, sil)["ok"]
+    tracker.options = replace(tracker.options, uncovered_margin=0.07)
+    assert tracker.uncovered is not watch and tracker.uncovered.margin == 0.07
+    assert np.isnan(tracker.uncovered.excess([cameras[0].name], np.zeros(1))).all()  # a new watch starts empty
 
 
 @pytest.mark.parametrize("seed", [0, 1])

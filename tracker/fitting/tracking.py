@@ -439,9 +439,6 @@ class Tracker:
         self._good_rms: list[float] = []
         self._good_iou: list[float] = []  # IoUs of frames that passed the RMS and inside limits
         self._good_unexplained: list[float] = []  # uncovered silhouette shares of frames that passed min_iou
-        self.uncovered = (None if options.uncovered_margin is None else
-                          UncoveredWatch(margin=options.uncovered_margin, window=options.iou_window,
-                                         min_samples=options.uncovered_samples, frames=options.uncovered_frames))
         self._since_ambiguous = 1 << 30  # frames since the front/back guard's last ambiguous frame
         self._since_search = 0  # frames since the last search (initialisation or recovery)
         self._since_iou = options.iou_every  # the first frame is checked
@@ -472,6 +469,23 @@ class Tracker:
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
+
+    @property
+    def options(self) -> TrackerOptions:
+        """The tracker's options; setting them rebuilds the unexplained-boundary watch (``uncovered``)
+        when its settings change (``uncovered_margin`` None: no watch) and keeps it, with its history,
+        when they do not."""
+        return self._options
+
+    @options.setter
+    def options(self, options: TrackerOptions) -> None:
+        self._options = options
+        watch = (None if options.uncovered_margin is None else
+                 (options.uncovered_margin, options.iou_window, options.uncovered_samples, options.uncovered_frames))
+        if watch != getattr(self, "_uncovered_settings", False):
+            self._uncovered_settings = watch
+            self.uncovered = None if watch is None else UncoveredWatch(
+                margin=watch[0], window=watch[1], min_samples=watch[2], frames=watch[3])
     def resize(self, model: BodyModel) -> None:
         """Track with ``model`` from the next frame on: the same model's parameters, other sizes
         (a calibrated subject); the pose, its velocity and the front/back guard's state are kept."""
