@@ -206,15 +206,6 @@ class TrackerOptions:
     limb_iterations: int = 6
     limb_margin: float = 0.5
     limb_same: float = 0.04
-    #: before the verdict, each group's best start and the pose itself are fitted on to convergence (up
-    #: to ``limb_converge`` LM steps, the front/back check's tolerances): a whole limb moved by a start
-    #: is still far from its minimum after ``limb_iterations`` steps, and judged there it loses to a
-    #: converged wrong pose (None: judged after ``limb_iterations`` steps)
-    limb_converge: int | None = None
-    #: the limb check is also due, at most every ``limb_every`` frames, on a frame whose silhouette IoU
-    #: was checked and is below ``min_iou`` (lost or not): legs exchanged fore and aft and lost arms leave
-    #: the coverage as it was
-    limb_iou_due: bool = False
     #: crossed legs (``tracker.search.limbs.ankle_crossing``: the left ankle more than ``limb_crossed`` ×
     #: height on the right ankle's side) make the limb check due, lost or not, at most every
     #: ``limb_every`` frames, with the ``"uncrossed"`` start among its legs' (None: off)
@@ -701,9 +692,8 @@ class Tracker:
             ankle_separation(self.model, np.asarray(terms.pose.params), terms.pose))
         cov = terms.coverage()
         colour = o.limb_colour_due and self._colour_lost
-        low_iou = o.limb_iou_due and self._last_iou is not None and not self._last_iou >= o.min_iou
         return crossed or (self._since_limbs >= o.limb_every
-                           and (self._legs_crossed(terms) or low_iou
+                           and (self._legs_crossed(terms)
                                 or (not lost and (colour or (np.isfinite(cov) and cov < limit)))))
 
     def _legs_crossed(self, terms) -> bool:
@@ -736,9 +726,6 @@ class Tracker:
             group = f"{name.split('_')[0]} arm" if name.endswith(ARM_STARTS) else "legs"
             if group not in best or c < best[group][0]:
                 best[group] = (c, name, q, t)
-        if o.limb_converge:
-            kept = min(kept, self._limb_converged(cams, chs, p, v)[0])
-            best = {g: self._limb_converged(cams, chs, q, v, name) for g, (_, name, q, _) in best.items()}
         chains = dict(side_chains(self.model))
         chains["legs"] = limb_dofs(self.model, LEGS)
         taken, notes = [], []
@@ -760,17 +747,6 @@ class Tracker:
                             penalty=self.penalty)
         self.n_limb_switches += 1
         return r, cost.evaluate(np.asarray(r.params)), True, "; ".join(notes)
-
-    def _limb_converged(self, cams, chs, start, views, name=""):
-        """``(hypothesis_cost, name, params, terms)`` of the fit from ``start`` to convergence
-        (``TrackerOptions.limb_converge`` LM steps)."""
-        o = self.options
-        r, cost = fit_frame(self.model, cams, chs, start, sliding=self.sliding, solver=self.solver,
-                            options=replace(o, max_iterations=o.limb_converge, ftol=2e-3, rtol=0.0),
-                            penalty=self.penalty)
-        q = np.asarray(r.params)
-        t = cost.evaluate(q)
-        return hypothesis_cost(self.model, q, t.rms_px(), float(views.score(q))), name, q, t
 
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
