@@ -237,6 +237,9 @@ class TrackerOptions:
     uncovered_tol: float = 0.045
     uncovered_samples: int = 5
     uncovered_frames: int = 2
+    #: a lost track's search also runs the first frame's search from the silhouettes alone and keeps, of the two
+    #: fits, the one of lower ``hypothesis_cost`` (the recovery seeded by the last good pose stays near it)
+    recover_full: bool = False
     #: the first frame's search (``tracker.search.initialise.initialise``)
     initialise_search: SearchOptions = SearchOptions()
     #: the search after ``patience`` bad frames (``tracker.search.recovery.recover``); three refined
@@ -532,6 +535,22 @@ class Tracker:
             res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
         mirror = None if res.mirror is None else self.model.clamp(np.asarray(res.mirror, dtype=float))
         return self.model.clamp(np.asarray(res.params, dtype=float)), mirror
+
+    def _full_search(self, cams, chamfer, silhouettes, chs, views, fitted, mirror):
+        """``(fitted, mirror)`` of the recovery, or of the initialisation's search from the silhouettes alone
+        fitted the same way when its ``hypothesis_cost`` is lower (``TrackerOptions.recover_full``)."""
+        try:
+            found, mirror3 = self._search(cams, chamfer, silhouettes, None)
+        except ValueError:
+            return fitted, mirror
+        other = self._fit(cams, chs, found)
+        v = views()
+
+        def cost(f):
+            q = np.asarray(f[0].params)
+            return hypothesis_cost(self.model, q, f[2], float(v.score(q)))
+
+        return (other, mirror3) if cost(other) < cost(fitted) else (fitted, mirror)
 
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
@@ -899,6 +918,9 @@ class Tracker:
             try:
                 found, mirror = self._search(cams, chamfer, silhouettes, self.last_good)
                 res2, terms2, rms2, inside2 = self._fit(cams, chs, found)
+                if self.options.recover_full:
+                    (res2, terms2, rms2, inside2), mirror = self._full_search(cams, chamfer, silhouettes, chs, views,
+                                                                            (res2, terms2, rms2, inside2), mirror)
             except ValueError:
                 pass
             else:
