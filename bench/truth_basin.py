@@ -4,11 +4,11 @@ Renders one ``bench/robustness.py`` clip and tracks it as the bench does; on eve
 with the tracker's own figures (RMS chamfer residual, silhouette IoU at half resolution, the
 ``hypothesis_cost`` the limb and front/back checks judge by, the robust data cost), three poses:
 
-- ``tracked``: the tracker's pose;
+- ``tracked``: the pose the frame's record reports (the one the bench scores);
 - ``ik``: the truth's IK pose (the tracker's height-sized model posed by inverse kinematics onto the
   true joints, as the bench's IK floor but in the render's world frame);
 - ``ik_fit``: that pose polished by the tracker's fit (``fit_frame``, the tracker's options, its prior
-  centred on the start), and ``ik_fit_prior``: the same with the prior on the last tracked pose.
+  centred on the start), and ``ik_fit_prior``: the same with the prior on the tracker's last pose.
 
 A frame far off (``--far``, mm) whose ``ik_fit`` scores a lower hypothesis cost than the tracked pose
 is a *search* failure (the objective prefers a pose near the truth the searches did not reach); one
@@ -94,12 +94,13 @@ def run(subject: int, clip: str, cameras: int) -> dict:
         truth, p, q0 = state["truth"][frame_id], np.asarray(rec["params"]), model.clamp(state["ik"][frame_id])
         row = {"tracked": figures(model, cams, chs, views, p, opts, truth),
                "ik": figures(model, cams, chs, views, q0, opts, truth)}
-        res, _ = TT.fit_frame(model, cams, chs, q0, prediction=q0, options=opts)
+        fit = dict(sliding=self.sliding, solver=self.solver, options=opts, penalty=self.penalty)
+        res, _ = TT.fit_frame(model, cams, chs, q0, prediction=q0, **fit)
         row["ik_fit"] = figures(model, cams, chs, views, np.asarray(res.params), opts, truth)
         if state["prior"] is not None:
-            res, _ = TT.fit_frame(model, cams, chs, q0, prediction=state["prior"], options=opts)
+            res, _ = TT.fit_frame(model, cams, chs, q0, prediction=state["prior"], **fit)
             row["ik_fit_prior"] = figures(model, cams, chs, views, np.asarray(res.params), opts, truth)
-        state["prior"] = p
+        state["prior"] = np.array(self.params)  # the tracker's own pose (the record may report the mirror)
         row["ok"], row["reason"] = bool(rec.get("ok")), rec.get("reason", "")
         state["rows"][str(int(frame_id))] = row
         return rec
@@ -169,7 +170,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tracker-option", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args(argv)
     if args.summary:
-        print(summary([json.load(open(f)) for f in args.clip], args.far))
+        print(summary([json.loads(Path(f).read_text()) for f in args.clip], args.far))
         return 0
     warnings.filterwarnings("ignore")
     cv2.setNumThreads(1)

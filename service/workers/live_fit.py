@@ -296,7 +296,7 @@ class LiveTrackerFitter(TrackerFitter):
                         res = recover(tr.model, cams, sils, chs, seeds[0],
                                       options=replace(tr.options.recover_search, local=False))
                 found = None if res is None else tr.model.clamp(np.asarray(res.params, dtype=float))
-                mirror = None if res is None or res.mirror is None else tr.model.clamp(np.asarray(res.mirror, float))
+                mirror = None if res is None else res.clamped_mirror(tr.model)
             except Exception as exc:  # a failed search is retried on the next set
                 log.info("%s failed: %s", what, exc)
                 found = mirror = None
@@ -355,19 +355,13 @@ class LiveTrackerFitter(TrackerFitter):
             best = max(range(len(fitted)), key=lambda i: (fitted[i][0], -i))
             if current is not None and best == 0:
                 return  # the track is as good: it came back by itself
+            if poses[best] is own and own is not start:
+                mirror = None  # the mirror was brought forward with the other pose: the guard mirrors this one
             start, start_frame = fitted[best][1], int(frame_id)
         tr.params, tr.previous, tr._frames = start, None, (None, start_frame)
         tr.monitor.reset()
         self.rejoined += 1
-        self._open_front_back(mirror)
-
-    def _open_front_back(self, mirror) -> None:
-        """A search's pose was taken: the guard's question opened at it (it is open already after the
-        initialisation) with the search's refined ``mirror`` (or None) offered, as ``Tracker.step`` does."""
-        guard = self.tracker.guard
-        if guard is not None:
-            guard.reset()
-            guard.offer_mirror(mirror)
+        tr.open_front_back(mirror)
 
     def _hold(self, frame_id: int, images: dict) -> None:
         """Keep a set that arrived while a search runs (its chamfer images), at most
@@ -400,15 +394,22 @@ class LiveTrackerFitter(TrackerFitter):
             if fid <= frame_id or len(names) < need:
                 continue
             cams = [tr.cameras[n] for n in names]
+
+            def bring(p):
+                res, _ = fit_frame(tr.model, cams, {n: chs[n] for n in names}, p, sliding=tr.sliding,
+                                   solver=tr.solver, options=self.base_options)
+                return tr.model.clamp(np.asarray(res.params, dtype=float))
+
             try:
-                brought = [fit_frame(tr.model, cams, {n: chs[n] for n in names}, p, sliding=tr.sliding,
-                                     solver=tr.solver, options=self.base_options)[0].params
-                           for p in ([params] if mirror is None else [params, mirror])]
+                params, frame_id = bring(params), fid
             except ValueError as exc:  # a set it cannot be fitted to: keep what was brought so far
                 log.info("catch-up stopped at frame %d: %s", fid, exc)
                 break
-            params, frame_id = tr.model.clamp(np.asarray(brought[0], dtype=float)), fid
-            mirror = None if mirror is None else tr.model.clamp(np.asarray(brought[1], dtype=float))
+            if mirror is not None:
+                try:
+                    mirror = bring(mirror)
+                except ValueError:  # the pose goes on without it (the guard mirrors the pose itself)
+                    mirror = None
         with self._lock:
             if self._found is found:
                 self._found = (frame_id, params, found[2], mirror)
@@ -437,7 +438,7 @@ class LiveTrackerFitter(TrackerFitter):
         tr.params, tr.previous, tr._frames = tr.model.clamp(np.asarray(res.params, dtype=float)), None, (None, None)
         tr.monitor.reset()
         self.rejoined += 1
-        self._open_front_back(None if res.mirror is None else tr.model.clamp(np.asarray(res.mirror, dtype=float)))
+        tr.open_front_back(res.clamped_mirror(tr.model))
         return tr.step(frame_id, timestamp_ns, images, silhouettes=silhouettes)
 
     def _prediction_record(self, frame_id: int, timestamp_ns: int, n_cameras: int) -> dict:

@@ -10,7 +10,7 @@ from segmentation.distance import chamfer_images
 from tracker.body.kinematics import forward, joint_centre_array
 from tracker.body.model import load_model
 from tracker.fitting.hypotheses import FrontBackGuard
-from tracker.fitting.tracking import Tracker, TrackerOptions
+from tracker.fitting.tracking import Tracker
 from tracker.imaging.render import internal_edges, render_label_images
 from tracker.search.mirror import mirror_params
 from tracker.synthetic.bvh import load_bvh
@@ -135,3 +135,7 @@ def test_an_open_question_reports_the_hypothesis_its_evidence_favours():
     # the mirror reported is the truth; the tracked pose is still the turned one
     assert errs[favoured].max() < 30.0 and errs_tracked[favoured].min() > 100.0, (errs.round(), errs_tracked.round())
     assert not any("front_back_reported" in r for r in records if r["front_back"] == "resolved")
+    for k in favoured:  # the record's joints and quality figures are those of the params it reports
+        joints = joint_centre_array(model, forward(model, np.asarray(records[k]["params"])))
+        np.testing.assert_allclose([records[k]["joints"][n] for n in model.joint_names], joints, atol=1e-9)
+        assert "the mirror reported" in records[k]["reason"] and 0.0 < records[k]["iou"] <= 1.0

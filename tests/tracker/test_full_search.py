@@ -63,3 +63,27 @@ def test_the_full_search_keeps_the_fit_of_lower_hypothesis_cost():
             else:
                 assert kept is offered and after < 0.01, (seed, after)
             assert cost(kept) <= cost(offered) + 1e-9
+
+
+def test_the_option_runs_the_full_search_when_a_track_is_lost():
+    """Tracked from a start turned 90° and 0.5 m off with a last good pose: the search from the silhouettes
+    alone runs beside the recovery with ``recover_full`` and never without it."""
+    cams = ring_cameras(4, size=(320, 240))
+    truth = _stride(0)
+    labels = render_label_images(MODEL, forward(MODEL, truth), cams)
+    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cams, labels)}
+    chs = {c.name: chamfer_images(sils[c.name], internal_edges(lab)) for c, lab in zip(cams, labels)}
+    wrong = truth.copy()
+    wrong[:2] += 0.5
+    wrong[5] += np.pi / 2
+    for on in (False, True):
+        tr = Tracker(MODEL, cams, initial_params=MODEL.clamp(wrong), patience=1, front_back=None,
+                     options=TrackerOptions(recover_full=on))
+        tr.last_good = MODEL.clamp(wrong)
+        calls, full = [], tr._full_search
+        tr._full_search = lambda *a: (calls.append(1), full(*a))[1]
+        records = [tr.step(k, k, chs, silhouettes=sils) for k in range(3)]
+        assert tr.n_initialisations >= 1  # the track was lost and searched
+        assert bool(calls) == on, (on, calls)
+        if on:
+            assert _error_m(records[-1]["params"], truth) < 0.15

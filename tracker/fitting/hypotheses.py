@@ -97,8 +97,8 @@ class GuardOutcome:
     """What the guard concluded for a frame: ``swap`` (the mirror's ``(res, terms)`` to track and
     report instead of the pose's, or None), ``reason`` ("" or why the frame is not ok), ``cues`` (the
     frame's evidence terms, for logs and tests), ``report`` (while the question is open and the
-    evidence so far favours the mirror: the mirror's ``(res, terms)`` to report for this frame, the
-    track going on from the pose; else None)."""
+    evidence so far favours the mirror: the mirror's ``(res, terms, iou)`` to report for this frame, ``iou``
+    its mean silhouette IoU or None, the track going on from the pose; else None)."""
 
     swap: tuple | None
     reason: str
@@ -190,9 +190,9 @@ class FrontBackGuard:
             return self._watch(t_s, cams, chs, images, res, terms, ok, fit, iou)
         return self._ambiguous(t_s, cams, chs, images, res, terms, fit, iou)
 
-    def _compare(self, t_s, cams, chs, images, p, terms, pm, terms_m, iou) -> tuple[dict, object]:
-        """The cues of the pose ``p`` against the fitted mirror ``pm`` (positive: the pose) and the
-        pose's colour samples (None without images)."""
+    def _compare(self, t_s, cams, chs, images, p, terms, pm, terms_m, iou) -> tuple[dict, object, float | None]:
+        """The cues of the pose ``p`` against the fitted mirror ``pm`` (positive: the pose), the
+        pose's colour samples (None without images) and the mirror's mean IoU (None without ``iou``)."""
         o, model = self.options, self.model
         iou_p = iou(p) if iou is not None else 1.0
         iou_m = iou(pm) if iou is not None else 1.0
@@ -210,7 +210,7 @@ class FrontBackGuard:
                 cues["colour"] = 0.5 * o.colour_weight * float(np.clip(
                     (self.appearance.evidence(s) - self.appearance.evidence(sm)) / o.colour_scale, -1.0, 1.0))
         cues["walk"] = self._walk(p, t_s)  # the mirror faces the other way: its cue is the negative
-        return cues, s
+        return cues, s, (float(iou_m) if iou is not None else None)
 
     def _ambiguous(self, t_s, cams, chs, images, res, terms, fit, iou) -> GuardOutcome:
         o, model = self.options, self.model
@@ -224,7 +224,7 @@ class FrontBackGuard:
         res_m, terms_m = fit(start, self.mirror[0] if self.mirror is not None else start)
         pm = np.asarray(res_m.params, dtype=float)
         self.mirror = (pm, None if self.mirror is None else self.mirror[0])
-        cues, s = self._compare(t_s, cams, chs, images, p, terms, pm, terms_m, iou)
+        cues, s, iou_m = self._compare(t_s, cams, chs, images, p, terms, pm, terms_m, iou)
         if s is not None:
             self._pending.update(s)
         self.evidence += float(sum(cues.values()))
@@ -247,7 +247,7 @@ class FrontBackGuard:
         # not settled: the frame is reported with the hypothesis the evidence favours so far (the
         # pose on a tie), its best estimate; which one is tracked changes only when the margin is reached
         return GuardOutcome(None, f"front/back ambiguous (evidence {self.evidence:+.1f} of ±{o.margin:g})", cues,
-                            report=(res_m, terms_m) if self.evidence < 0 else None)
+                            report=(res_m, terms_m, iou_m) if self.evidence < 0 else None)
 
     def _watch(self, t_s, cams, chs, images, res, terms, ok, fit, iou) -> GuardOutcome:
         o, model = self.options, self.model
@@ -260,7 +260,7 @@ class FrontBackGuard:
             self._since_check = self._since_colour = 0
             start = model.clamp(mirror_params(model, p))
             res_m, terms_m = fit(start, start, o.check_iterations)
-            cues, s = self._compare(t_s, cams, chs, images, p, terms, np.asarray(res_m.params, float), terms_m, iou)
+            cues, s, _ = self._compare(t_s, cams, chs, images, p, terms, np.asarray(res_m.params, float), terms_m, iou)
         else:
             self._walk(p, t_s)
             self._since_feet += 1

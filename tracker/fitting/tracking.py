@@ -431,6 +431,7 @@ class Tracker:
             raise ValueError("cameras: names must be unique")
         self.sliding = bool(sliding)
         self.solver = solver
+        self._uncovered_settings = False  # none yet: setting the options builds the watch
         self.options = options
         self.recover = bool(recover)
         #: extra residuals of every frame's fit (``fit_frame``'s ``penalty``; None: none)
@@ -450,7 +451,6 @@ class Tracker:
         self._good_cov: list[float] = []  # coverage of the frames that passed the gate's limits
         self._since_limbs = options.limb_every
         self._colour_lost = False  # the last frame's colour check found a distal limb lost
-        self._reported = None  # the mirror's (res, terms) the record reports this frame (the guard's open question)
         self.stride = StrideWatch(options.limb_dead_band * model.height_m if options.limb_dead_band > 0 else 1.0)
         self.n_limb_checks = 0
         self.n_limb_switches = 0
@@ -472,7 +472,6 @@ class Tracker:
         if self.guard is not None and self.params is not None:
             self.guard.state = "resolved"
 
-
     @property
     def options(self) -> TrackerOptions:
         """The tracker's options; setting them rebuilds the unexplained-boundary watch (``uncovered``)
@@ -485,10 +484,11 @@ class Tracker:
         self._options = options
         watch = (None if options.uncovered_margin is None else
                  (options.uncovered_margin, options.iou_window, options.uncovered_samples, options.uncovered_frames))
-        if watch != getattr(self, "_uncovered_settings", False):
+        if watch != self._uncovered_settings:
             self._uncovered_settings = watch
             self.uncovered = None if watch is None else UncoveredWatch(
                 margin=watch[0], window=watch[1], min_samples=watch[2], frames=watch[3])
+
     def resize(self, model: BodyModel) -> None:
         """Track with ``model`` from the next frame on: the same model's parameters, other sizes
         (a calibrated subject); the pose, its velocity and the front/back guard's state are kept."""
@@ -533,17 +533,16 @@ class Tracker:
             res = initialise(self.model, cams, sils, chs, options=self.options.initialise_search)
         else:
             res = recover(self.model, cams, sils, chs, hint, options=self.options.recover_search)
-        mirror = None if res.mirror is None else self.model.clamp(np.asarray(res.mirror, dtype=float))
-        return self.model.clamp(np.asarray(res.params, dtype=float)), mirror
+        return self.model.clamp(np.asarray(res.params, dtype=float)), res.clamped_mirror(self.model)
 
     def _full_search(self, cams, chamfer, silhouettes, chs, views, fitted, mirror):
         """``(fitted, mirror)`` of the recovery, or of the initialisation's search from the silhouettes alone
         fitted the same way when its ``hypothesis_cost`` is lower (``TrackerOptions.recover_full``)."""
         try:
             found, mirror3 = self._search(cams, chamfer, silhouettes, None)
+            other = self._fit(cams, chs, found)
         except ValueError:
             return fitted, mirror
-        other = self._fit(cams, chs, found)
         v = views()
 
         def cost(f):
@@ -551,6 +550,13 @@ class Tracker:
             return hypothesis_cost(self.model, q, f[2], float(v.score(q)))
 
         return (other, mirror3) if cost(other) < cost(fitted) else (fitted, mirror)
+
+    def open_front_back(self, mirror: np.ndarray | None) -> None:
+        """A search's pose was taken: the front/back guard's question is opened at it (no guard: nothing),
+        the search's refined ``mirror`` (n_params,) or None offered as the mirror's first start."""
+        if self.guard is not None:
+            self.guard.reset()
+            self.guard.offer_mirror(mirror)
 
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
@@ -784,9 +790,9 @@ class Tracker:
 
     def _guard(self, record, cams, chs, images, res, terms, bad, views):
         """The front/back guard's frame (``tracker.fitting.hypotheses``): ``(res, terms, rms, inside,
-        bad, swapped, reason)``, the mirror's fit when the guard chose it; ``reason``: the guard's
-        ("" or why the frame is not ok although the fit is good).  ``self._reported``: the mirror's
-        ``(res, terms)`` when the open question's evidence favours it (the record reports it), else None."""
+        bad, swapped, reason, report)``, the mirror's fit when the guard chose it; ``reason``: the guard's
+        ("" or why the frame is not ok although the fit is good); ``report``: the mirror's ``(res, terms,
+        iou)`` when the open question's evidence favours it (the record reports it), else None."""
         def fit(start, prediction, iterations=None):
             opts = self.options if iterations is None else replace(self.options, max_iterations=int(iterations),
                                                                       ftol=min(self.options.ftol, 2e-3))
@@ -800,14 +806,13 @@ class Tracker:
                                 else None, res=res, terms=terms, ok=not bad, fit=fit, iou=iou)
         record["front_back"] = self.guard.state
         record["front_back_cues"] = {k: round(float(v), 3) for k, v in out.cues.items()}
-        self._reported = out.report
         swapped = out.swap is not None
         if swapped:
             res, terms = out.swap
             self._last_iou = None
             bad = self._bad(terms, views)
             self.n_turned += 1
-        return res, terms, terms.rms_px(), terms.inside_fraction(), bad, swapped, out.reason
+        return res, terms, terms.rms_px(), terms.inside_fraction(), bad, swapped, out.reason, out.report
 
     def _limb_colour(self, cams, chs, images, params) -> str:
         """The colour check of the distal limbs (``TrackerOptions.limb_colour_margin``): why the frame
@@ -918,7 +923,7 @@ class Tracker:
             try:
                 found, mirror = self._search(cams, chamfer, silhouettes, self.last_good)
                 res2, terms2, rms2, inside2 = self._fit(cams, chs, found)
-                if self.options.recover_full:
+                if self.options.recover_full and self.last_good is not None:  # else the search above was it
                     (res2, terms2, rms2, inside2), mirror = self._full_search(cams, chamfer, silhouettes, chs, views,
                                                                             (res2, terms2, rms2, inside2), mirror)
             except ValueError:
@@ -930,9 +935,7 @@ class Tracker:
                     if not bad or self._soft(bad):
                         self.monitor.reset()
                     restarted = True  # no velocity across a re-initialisation
-                    if self.guard is not None:
-                        self.guard.reset()
-                        self.guard.offer_mirror(mirror)
+                    self.open_front_back(mirror)
         if self.options.front_back_every > 0 and views is not None and not restarted and self.guard is None:
             self._since_front_back += 1
             if self._since_front_back >= self.options.front_back_every:
@@ -967,11 +970,10 @@ class Tracker:
                 self._good_cov = (self._good_cov + [float(cov)])[-self.options.rms_window:]
         else:
             self.stride.reset()
-        unsure = ""
-        self._reported = None
+        unsure, report = "", None
         if self.guard is not None:
-            res, terms, rms, inside, bad, swapped, unsure = self._guard(record, cams, chs, images, res, terms, bad,
-                                                                        views)
+            res, terms, rms, inside, bad, swapped, unsure, report = self._guard(record, cams, chs, images, res, terms,
+                                                                                bad, views)
             restarted = restarted or swapped
         # what the record reports; the track goes on from ``bad``
         shown = Verdict() if bad.excused and self._since_ambiguous > self.options.iou_excuse_after_ambiguous else bad
@@ -985,8 +987,9 @@ class Tracker:
             ([name], why) for name, why in (("front_back", unsure), ("limbs", limbs), ("limb_colour", colour),
                                             (UNCOVERED, uncovered)) if why]
         self.last_result = res
-        # the pose reported: the tracked one, or the mirror the open question's evidence favours
-        r_res, r_terms = (res, terms) if self._reported is None else self._reported
+        # the pose reported: the tracked one, or the mirror the open question's evidence favours (the frame's
+        # reason and failed limits stay the tracked pose's; its quality figures are the reported one's)
+        r_res, r_terms, r_iou = (res, terms, self._last_iou) if report is None else report
         joints = joint_centre_array(self.model, r_terms.pose)
         record.update(
             ok=not refusals, params=[float(v) for v in r_res.params],
@@ -994,14 +997,15 @@ class Tracker:
             rms_px=_finite(r_terms.rms_px()), iterations=int(r_res.iterations),
             inside_fraction=_finite(r_terms.inside_fraction()), coverage=_finite(r_terms.coverage()),
         )
-        if self._reported is not None:
+        if report is not None:
             record["front_back_reported"] = "mirror"
-        elif self._last_iou is not None:
-            record["iou"] = self._last_iou
+        if r_iou is not None:
+            record["iou"] = r_iou
         self._since_iou = 0 if self._last_iou is not None else self._since_iou + 1
         self._last_bad = bool(bad)
         if refusals:
-            record["reason"] = "; ".join(why for _, why in refusals)
+            record["reason"] = "; ".join(why for _, why in refusals) + (
+                "" if report is None else "; the mirror reported (the limits above are the tracked pose's)")
             record["failed"] = [name for names, _ in refusals for name in names]
         if bad and not self._soft(bad):
             self.params = np.array(res.params)  # next start; the velocity reference is dropped

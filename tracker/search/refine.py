@@ -83,6 +83,10 @@ class InitResult:
     def __array__(self, dtype=None, copy=None):
         return np.asarray(self.params, dtype=dtype)
 
+    def clamped_mirror(self, model) -> np.ndarray | None:
+        """``mirror`` within ``model``'s joint limits (``BodyModel.clamp``), or None without one."""
+        return None if self.mirror is None else model.clamp(np.asarray(self.mirror, dtype=float))
+
 
 def _subset_fun(fun, x_full: np.ndarray, idx: np.ndarray):
     """Restrict ``fun(x, jacobian) -> (r, J)`` to the parameters ``idx``."""
