@@ -4,28 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from segmentation.distance import chamfer_images
+from tests.tracker.test_limbs import MODEL, _render, _stride
 from tracker.body.kinematics import forward, joint_centre_array
-from tracker.body.model import load_model
 from tracker.fitting.tracking import Tracker, TrackerOptions
-from tracker.imaging.render import internal_edges, render_label_images
 from tracker.search.mirror import hypothesis_cost
 from tracker.search.scoring import ScoreViews
 from tracker.synthetic.scene import ring_cameras
-
-MODEL = load_model("knossow40", height_m=1.75)
-
-
-def _stride(seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    p = MODEL.zero()
-    p[:2] = rng.uniform(-0.4, 0.4, 2)
-    p[5] = rng.uniform(-np.pi, np.pi)
-    ix = MODEL.param_index
-    p[ix("left_thigh.flexion")], p[ix("right_thigh.flexion")] = np.radians(30.0), np.radians(-18.0)
-    p[ix("right_shank.flexion")] = np.radians(35.0)
-    p[ix("left_upper_arm.abduction")] = p[ix("right_upper_arm.abduction")] = np.radians(-65.0)
-    return p
 
 
 def _error_m(params, truth) -> float:
@@ -40,9 +24,7 @@ def test_the_full_search_keeps_the_fit_of_lower_hypothesis_cost():
     cams = ring_cameras(4, size=(320, 240))
     for seed in range(3):
         truth = _stride(seed)
-        labels = render_label_images(MODEL, forward(MODEL, truth), cams)
-        sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cams, labels)}
-        chs = {c.name: chamfer_images(sils[c.name], internal_edges(lab)) for c, lab in zip(cams, labels)}
+        chs, sils = _render(truth, cams)
         tr = Tracker(MODEL, cams, initial_params=truth, front_back=None, options=TrackerOptions(recover_full=True))
         views = ScoreViews(MODEL, cams, [sils[c.name] for c in cams], scale=0.5)
 
@@ -70,9 +52,7 @@ def test_the_option_runs_the_full_search_when_a_track_is_lost():
     alone runs beside the recovery with ``recover_full`` and never without it."""
     cams = ring_cameras(4, size=(320, 240))
     truth = _stride(0)
-    labels = render_label_images(MODEL, forward(MODEL, truth), cams)
-    sils = {c.name: np.where(lab >= 0, 255, 0).astype(np.uint8) for c, lab in zip(cams, labels)}
-    chs = {c.name: chamfer_images(sils[c.name], internal_edges(lab)) for c, lab in zip(cams, labels)}
+    chs, sils = _render(truth, cams)
     wrong = truth.copy()
     wrong[:2] += 0.5
     wrong[5] += np.pi / 2

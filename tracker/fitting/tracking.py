@@ -901,8 +901,7 @@ class Tracker:
                 start, mirror = self._search(cams, chamfer, silhouettes, None)
             except ValueError as exc:
                 return fail(f"initialisation failed: {exc}")
-            if self.guard is not None:
-                self.guard.offer_mirror(mirror)
+            self.open_front_back(mirror)
         res, terms, rms, inside = self._fit(cams, chs, start)
         if self._restart_due(start, terms):
             res, terms, rms, inside = self._restart(cams, chs, res, terms, rms, inside)
@@ -989,13 +988,16 @@ class Tracker:
         self.last_result = res
         # the pose reported: the tracked one, or the mirror the open question's evidence favours (the frame's
         # reason and failed limits stay the tracked pose's; its quality figures are the reported one's)
-        r_res, r_terms, r_iou = (res, terms, self._last_iou) if report is None else report
+        if report is None:
+            r_res, r_terms, r_iou, r_rms, r_inside = res, terms, self._last_iou, rms, inside
+        else:
+            (r_res, r_terms, r_iou), r_rms, r_inside = report, report[1].rms_px(), report[1].inside_fraction()
         joints = joint_centre_array(self.model, r_terms.pose)
         record.update(
             ok=not refusals, params=[float(v) for v in r_res.params],
             joints={n: [float(v) for v in joints[i]] for i, n in enumerate(self.model.joint_names)},
-            rms_px=_finite(r_terms.rms_px()), iterations=int(r_res.iterations),
-            inside_fraction=_finite(r_terms.inside_fraction()), coverage=_finite(r_terms.coverage()),
+            rms_px=_finite(r_rms), iterations=int(r_res.iterations),
+            inside_fraction=_finite(r_inside), coverage=_finite(r_terms.coverage()),
         )
         if report is not None:
             record["front_back_reported"] = "mirror"
