@@ -227,7 +227,8 @@ def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]
     learned) and, with ``refused``, while its record is not ok (a lost stretch: the track found its way
     back later, so the frames before can be fitted again from there); at the next frame that is neither,
     ``st.retrack`` fits the held frames again latest first from that frame's state, and a held frame's
-    record is the refit's unless the gate passed the first fit and not the refit (``refit_kept``).  At most
+    record is the refit's when the gate passes it, or refuses both and it covers the silhouettes at least
+    as well (``refit_kept``), else the first fit's.  At most
     ``max_held`` frames are held (the oldest leave with their first records); frames still held when
     ``sets`` ends keep theirs.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last``
     read again (so that the held frames' images need not stay in memory; None: they are held).
@@ -256,15 +257,20 @@ def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]
 def refit_kept(refit: dict, first: dict) -> bool:
     """Whether ``settled_records`` keeps a held frame's refit (pose record ``refit``) over its first fit
     (``first``): the refit has a pose and passed the gate (``tracker.fitting.uncovered.fit_ok``: it is ok,
-    or refused only by the unexplained-boundary check), or the first fit did not pass it either.
+    or refused only by the unexplained-boundary check), or neither passed and the refit's silhouette IoU
+    is at least the first fit's (the refit when either has none).
 
     The unexplained-boundary check weighs a fit against the track's recent shares of unexplained
     boundary, with the reverse term on: a first fit of a scene's warm-up (reverse term off) can never
     fail it, so it cannot choose between the two fits; it only reports, and a refit it refuses is kept
-    with its record saying why it is not ok.  When both fits are refused the refit is kept: it was fitted
-    from an accepted pose the frame is next to, where the first fit belongs to a stretch that went wrong.
+    with its record saying why it is not ok.
     """
-    return "params" in refit and (fit_ok(refit) or not fit_ok(first))
+    if "params" not in refit:
+        return False
+    if fit_ok(refit) or fit_ok(first):
+        return fit_ok(refit)
+    a, b = first.get("iou"), refit.get("iou")
+    return a is None or b is None or b >= a
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
