@@ -224,8 +224,9 @@ def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]
 
     ``st``: a ``SceneTracker`` or an ``ImageTracker`` (``step``, ``warming``, ``retrack``).  A frame is
     held with its record while ``st.warming`` (a scene's warm-up: reverse term off, clutter not yet
-    learned) and, with ``refused``, while its record is not ok (a lost stretch: the track found its way
-    back later, so the frames before can be fitted again from there); at the next frame that is neither,
+    learned) and, with ``refused``, while the gate refuses its fit (``fit_ok``: the unexplained-boundary check
+    alone only reports; a lost stretch: the track found its way back later, so the frames before can be
+    fitted again from there); at the next frame that is neither,
     ``st.retrack`` fits the held frames again latest first from that frame's state, and a held frame's
     record is the refit's when the gate passes it, or refuses both and it covers the silhouettes at least
     as well (``refit_kept``), else the first fit's.  At most
@@ -236,7 +237,7 @@ def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]
     held: list[tuple[tuple, dict]] = []
     for item in sets:
         rec = st.step(*item)
-        if st.warming or (refused and not rec.get("ok")):
+        if st.warming or (refused and not fit_ok(rec)):
             held.append((item if reread is None else item[:2], rec))
             if len(held) > max_held:
                 yield held.pop(0)[1]
