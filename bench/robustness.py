@@ -17,7 +17,8 @@ the subject's standing height measured on the rendered body), background models 
 10 rendered empty-room frames per camera, and the session is tracked by
 ``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
 ``knossow40`` model sized from the height) exactly as ``contourcap track --floor-test --no-scene`` does
-(``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
+(the stretches the gate refused fitted again backwards from the next accepted frame; ``--no-retrack``: every
+frame once, as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
 ``tracker.blobs`` on the colour frames, initialised by the same silhouette search).  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
@@ -178,7 +179,8 @@ def ik_floor_joints_m(motion, subject_index: int, height_m: float, *, fps: float
 
 
 #: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``; the
-#: floor test of ``segmentation.floor`` unless ``--no-floor-test``: ``contourcap track --floor-test``)
+#: floor test of ``segmentation.floor`` unless ``--no-floor-test``: ``contourcap track --floor-test``;
+#: ``--no-retrack``: ``retrack=False``)
 TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
                        "options": TrackerOptions(lost_iou_margin=LOST_IOU_MARGIN)}
 
@@ -441,6 +443,9 @@ def main(argv=None) -> int:
                     help="track without the front/back guard (tracker.fitting.hypotheses), for comparison")
     ap.add_argument("--no-floor-test", action="store_true",
                     help="segment each camera alone (no segmentation.floor test), as the live workers do")
+    ap.add_argument("--no-retrack", action="store_true",
+                    help="fit every frame once, as a live tracker does (contourcap track --no-retrack; default: "
+                         "the stretches the gate refused are fitted again backwards from the next accepted frame)")
     ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
     ap.add_argument("--calibrate", type=int, default=0, metavar="FRAMES",
@@ -468,6 +473,8 @@ def main(argv=None) -> int:
         TRACK_OPTIONS["front_back"] = None
     if args.no_floor_test:
         TRACK_OPTIONS["segmentation"] = SegmentationParams(floor_test=False)
+    if args.no_retrack:
+        TRACK_OPTIONS["retrack"] = False
     if args.tracker_option:
         TRACK_OPTIONS["options"] = _tracker_options(args.tracker_option, ap, TRACK_OPTIONS["options"])
     if args.blob_option:
@@ -500,8 +507,9 @@ def main(argv=None) -> int:
     warm_s = warm_up_kernels(args.method)
     skeleton = load_bvh(bundled_motion("scaled_131_01"))
     t_start = time.perf_counter()
-    header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps, "frames_per_clip": args.frames, "cameras": cams,
-              "motions": clips, "clip_budget_s": args.clip_budget_s, "date": datetime.date.today().isoformat()}
+    header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps,
+              "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
+              "retrack": not args.no_retrack, "date": datetime.date.today().isoformat()}
     per_clip = []
     for s in subjects:
         for j, name in enumerate(clips):

@@ -4,7 +4,9 @@ The offline twin of the live pipeline (``contourcap track``).  Per camera a YUV 
 is learned by :func:`service.backgrounds.learn_background` (background media, else a temporal
 median of session frames); every frame is
 segmented with ``segmentation.pipeline.segment_frame`` and each frame set is fitted by
-``tracker.fitting.tracking.Tracker``.  Yields one DESIGN.md pose record per frame id.
+``tracker.fitting.tracking.Tracker``.  Unlike a live tracker it can look ahead: the frames of a stretch
+the gate refused are fitted again backwards from the first accepted frame after it (``settled_records``).
+Yields one DESIGN.md pose record per frame id.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from tracker.fitting.tracking import Tracker, TrackerOptions
 from tracker.fitting.uncovered import fit_ok
 
 __all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records",
-           "refit_kept", "track_session", "summarise", "TrackSummary"]
+           "refit_kept", "track_session", "summarise", "ImageTracker", "TrackSummary", "MAX_HELD_FRAMES"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -131,7 +133,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
     stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
     props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
-    retrack : bool, with ``scene``: fit a warm-up's frames again once it is over (``settled_records``)
+    retrack : bool, contours: fit a scene's warm-up frames and every refused stretch again, backwards from the
+        first accepted frame after it (``settled_records``; False: every frame once, as a live tracker does)
 
     Yields
     ------
@@ -151,48 +154,93 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
+
+    def read(fids, check=None):
+        return ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
+                for fid, group in _frame_sets(session, names, fids, check))
+
     if scene is not None:
         st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
                           segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation), props=props)
-        def read(fids, check=None):
-            return ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
-                    for fid, group in _frame_sets(session, names, fids, check))
+    else:
+        st = ImageTracker(tracker, {n: backgrounds[n] for n in names}, segmentation=segmentation,
+                          floor=floor_test(cams, backgrounds, segmentation), colour=colour)
+    sets = read(frames, stream_check)
+    yield from (settled_records(st, sets, lambda a, b: read(range(a, b + 1))) if retrack
+                else (st.step(*s) for s in sets))
 
-        sets = read(frames, stream_check)
-        yield from (settled_records(st, sets, lambda a, b: read(range(a, b + 1))) if retrack
-                    else (st.step(*s) for s in sets))
-        return
-    floor = floor_test(cams, backgrounds, segmentation)
-    for fid, group in _frame_sets(session, names, frames, stream_check):
-        images = {n: f.image for n, f in group.items()}
-        segs = {n: segment_frame(backgrounds[n], img, params=segmentation,
-                                 floor=None if floor is None else floor.for_camera(n, images))
+
+class ImageTracker:
+    """A ``Tracker`` fed with images: every camera's frame segmented against its background model (with
+    the floor test when given), then fitted; ``track_session``'s path without ``scene``.
+
+    Parameters
+    ----------
+    tracker : Tracker
+    backgrounds : camera name -> BackgroundModel
+    segmentation : SegmentationParams or None (the defaults)
+    floor : segmentation.floor.FloorShadows or None, the multi-view floor test of shadow-like pixels
+    colour : bool, hand the frame's images to the tracker (its front/back guard and limb colour check)
+
+    Attributes
+    ----------
+    warming : always False (nothing is learned from the scene; ``settled_records`` asks)
+    """
+
+    warming = False
+
+    def __init__(self, tracker: Tracker, backgrounds: Mapping[str, BackgroundModel], *,
+                 segmentation: SegmentationParams | None = None, floor: FloorShadows | None = None,
+                 colour: bool = True) -> None:
+        self.tracker, self.backgrounds = tracker, dict(backgrounds)
+        self.segmentation, self.floor, self.colour = segmentation, floor, colour
+
+    def step(self, frame_id: int, timestamp_ns: int, images: Mapping[str, np.ndarray]) -> dict:
+        """Segment ``images`` (camera name -> BGR uint8 (h, w, 3)) and fit them; the pose record."""
+        segs = {n: segment_frame(self.backgrounds[n], img, params=self.segmentation,
+                                 floor=None if self.floor is None else self.floor.for_camera(n, images))
                 for n, img in images.items()}
-        ts = next(iter(group.values())).timestamp_ns
-        yield tracker.step(fid, ts, {n: s.chamfer for n, s in segs.items()},
-                           silhouettes={n: s.silhouette for n, s in segs.items()},
-                           images={n: f.image for n, f in group.items()} if colour else None)
+        return self.tracker.step(frame_id, timestamp_ns, {n: s.chamfer for n, s in segs.items()},
+                                 silhouettes={n: s.silhouette for n, s in segs.items()},
+                                 images=dict(images) if self.colour else None)
+
+    def retrack(self, frames: Iterable[tuple[int, int, Mapping[str, np.ndarray]]]) -> list[dict]:
+        """Fit ``frames`` (frame id, timestamp ns, camera name -> BGR image) again, in the order given,
+        from this tracker's state on a copy (``Tracker.twin``); their pose records in that order."""
+        twin = ImageTracker(self.tracker.twin(), self.backgrounds, segmentation=self.segmentation,
+                            floor=self.floor, colour=self.colour)
+        return [twin.step(*item) for item in frames]
 
 
-def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
-                    reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None
-                    ) -> Iterator[dict]:
+#: at most this many frames are held for a refit (``settled_records``): older ones keep their first records
+MAX_HELD_FRAMES = 150
+
+
+def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
+                    reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None,
+                    *, refused: bool = True, max_held: int = MAX_HELD_FRAMES) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
-    the frames of each warm-up fitted again once it is over.
+    the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
-    The frames a warm-up fits (``SceneTracker.warming``: reverse term off, clutter not yet learned)
-    are held with their records; at the first frame after it, ``SceneTracker.retrack`` fits them
-    again latest first from the settled state, and a held frame's record is the refit's when the
-    gate passes its fit (``refit_kept``), else the first fit's.  Frames still in a warm-up when
-    ``sets`` ends keep their first records.  ``reread(first, last)``: the sets of frame ids ``first``
-    to ``last`` read again (so that the held frames' images need not stay in memory; None: they are
-    held).
+    ``st``: a ``SceneTracker`` or an ``ImageTracker`` (``step``, ``warming``, ``retrack``).  A frame is
+    held with its record while ``st.warming`` (a scene's warm-up: reverse term off, clutter not yet
+    learned) and, with ``refused``, while the gate refuses its fit (``fit_ok``: the unexplained-boundary check
+    alone only reports; a lost stretch: the track found its way back later, so the frames before can be
+    fitted again from there); at the next frame that is neither,
+    ``st.retrack`` fits the held frames again latest first from that frame's state, and a held frame's
+    record is the refit's when the gate passes it, or refuses both and it covers the silhouettes at least
+    as well (``refit_kept``), else the first fit's.  At most
+    ``max_held`` frames are held (the oldest leave with their first records); frames still held when
+    ``sets`` ends keep theirs.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last``
+    read again (so that the held frames' images need not stay in memory; None: they are held).
     """
     held: list[tuple[tuple, dict]] = []
     for item in sets:
         rec = st.step(*item)
-        if st.warming:
+        if st.warming or (refused and not fit_ok(rec)):
             held.append((item if reread is None else item[:2], rec))
+            if len(held) > max_held:
+                yield held.pop(0)[1]
             continue
         if held:
             firsts = {it[0]: r for it, r in held}
@@ -201,22 +249,29 @@ def settled_records(st: SceneTracker, sets: Iterable[tuple[int, int, Mapping[str
             refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
             for (it, first) in held:
                 refit = refits.get(it[0])
-                yield refit if refit is not None and refit_kept(refit) else first
+                yield refit if refit is not None and refit_kept(refit, first) else first
             held = []
         yield rec
     yield from (r for _, r in held)
 
 
-def refit_kept(refit: dict) -> bool:
-    """Whether ``settled_records`` keeps a warm-up frame's refit (pose record ``refit``) over its first fit:
-    the refit is ok, or refused only by the unexplained-boundary check (``tracker.fitting.uncovered``).
+def refit_kept(refit: dict, first: dict) -> bool:
+    """Whether ``settled_records`` keeps a held frame's refit (pose record ``refit``) over its first fit
+    (``first``): the refit has a pose and passed the gate (``tracker.fitting.uncovered.fit_ok``: it is ok,
+    or refused only by the unexplained-boundary check), or neither passed and the refit's silhouette IoU
+    is at least the first fit's (the refit when either has none).
 
-    That check weighs a fit against the track's recent shares of unexplained boundary, with the
-    reverse term on: a first fit of the warm-up (reverse term off) can never fail it, so it cannot
-    choose between the two fits.  It only reports, the track going on as before; here too a refit it
-    refuses is kept, with its record saying why it is not ok.
+    The unexplained-boundary check weighs a fit against the track's recent shares of unexplained
+    boundary, with the reverse term on: a first fit of a scene's warm-up (reverse term off) can never
+    fail it, so it cannot choose between the two fits; it only reports, and a refit it refuses is kept
+    with its record saying why it is not ok.
     """
-    return fit_ok(refit) and "params" in refit
+    if "params" not in refit:
+        return False
+    if fit_ok(refit) or fit_ok(first):
+        return fit_ok(refit)
+    a, b = first.get("iou"), refit.get("iou")
+    return a is None or b is None or b >= a
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,

@@ -1,5 +1,6 @@
-"""``service.offline.settled_records`` and ``SceneTracker.retrack``: the warm-up's frames of an
-offline take are fitted again backwards from the settled state, and only the records change."""
+"""``service.offline.settled_records``, ``SceneTracker.retrack`` and ``ImageTracker.retrack``: the warm-up's
+frames and the refused stretches of an offline take are fitted again backwards from the next accepted
+frame, and only their records change."""
 
 from __future__ import annotations
 
@@ -25,17 +26,18 @@ class _Scripted:
 
     def step(self, fid, ts, images):
         self.warming = self.warm[fid]
-        return {"frame": fid, "ok": self.ok[fid], "pass": "first"}
+        return {"frame": fid, "ok": self.ok[fid], "pass": "first", "iou": 0.5 + 0.01 * (fid % 7)}
 
     def retrack(self, frames):
         self.retracked.append([f for f, _, _ in frames])
-        return [{"frame": f, "ok": self.refit_ok[f], "pass": "refit", "params": [0.0]}
+        return [{"frame": f, "ok": self.refit_ok[f], "pass": "refit", "params": [0.0], "iou": 0.5 + 0.01 * (f % 5)}
                 | ({} if self.refit_ok[f] else {"failed": self.refit_failed[f]}) for f, _, _ in frames]
 
 
+@pytest.mark.parametrize("refused", [False, True])
 @pytest.mark.parametrize("reread", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
+def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread, refused):
     rng = np.random.default_rng(seed)
     n = 40
     warm = rng.random(n) < 0.5
@@ -49,12 +51,14 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
         reads.append((a, b))
         return ((i, 1000 * i, {}) for i in range(max(a - 1, 0), min(b + 2, n)))
 
-    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n)), read if reread else None))
+    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n)), read if reread else None, refused=refused))
     assert [r["frame"] for r in out] == list(range(n))
-    # every maximal run of warm frames followed by a settled frame is refitted once, latest first
+    # every maximal run of held frames (warm, or refused when asked) followed by an accepted frame is
+    # refitted once, latest first
+    held = warm | (~ok if refused else False)
     runs, cur = [], []
     for i in range(n):
-        if warm[i]:
+        if held[i]:
             cur.append(i)
         elif cur:
             runs.append(cur[::-1])
@@ -66,11 +70,26 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread):
         f = r["frame"]
         if f not in refitted:
             assert r["pass"] == "first"
-        else:  # a refit is published when the gate passes it, or refuses it only for the uncovered check
-            kept = refit_ok[f] or refit_failed[f] == ["uncovered"]
+        else:  # a refit is published when the gate passes it (or refuses it only for the uncovered check),
+            # or when the first fit was refused too and covers the silhouettes no better
+            passed = refit_ok[f] or refit_failed[f] == ["uncovered"]
+            kept = passed or (not ok[f] and f % 5 >= f % 7)
             assert r["pass"] == ("refit" if kept else "first")
-    # the warm frames at the end (no settled frame after them) keep their first records
+    # the held frames at the end (no accepted frame after them) keep their first records
     assert all(out[f]["pass"] == "first" for f in cur)
+
+
+@pytest.mark.parametrize("max_held", [1, 3, 7])
+def test_a_long_refused_stretch_holds_at_most_max_held_frames(max_held):
+    n = 20
+    ok = np.zeros(n, bool)
+    ok[[0, 12, 19]] = True  # refused stretches 1-11 and 13-18, both followed by an accepted frame
+    st = _Scripted(np.zeros(n, bool), ok, np.ones(n, bool), [[]] * n)
+    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n)), max_held=max_held))
+    assert [r["frame"] for r in out] == list(range(n))
+    assert st.retracked == [list(range(11, max(0, 11 - max_held), -1)), list(range(18, max(12, 18 - max_held), -1))]
+    refitted = {f for run in st.retracked for f in run}
+    assert [r["pass"] for r in out] == ["refit" if f in refitted else "first" for f in range(n)]
 
 
 @pytest.fixture(scope="module")
@@ -117,7 +136,7 @@ def test_retrack_refits_the_warm_up_on_a_copy(hop):
     assert not st.warming
 
 
-def test_track_session_retrack_changes_only_the_warm_up(hop):
+def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     session = load_session(hop)
     opts = SceneOptions(warmup_frames=4)
     plain = list(track_session(session, scene=opts, retrack=False))
@@ -125,7 +144,8 @@ def test_track_session_retrack_changes_only_the_warm_up(hop):
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     k = 5  # the start frame and the 4 warm-up frames after it
     for a, b in zip(plain[k:], settled[k:]):
-        np.testing.assert_array_equal(a["params"], b["params"])
+        if a["ok"]:  # an accepted frame after the warm-up is never fitted again
+            np.testing.assert_array_equal(a["params"], b["params"])
     # measured: the first two frames' first fits are not ok (front/back still ambiguous), every
     # refit from the settled, resolved state is
     assert not all(r["ok"] for r in plain[:k])
@@ -149,3 +169,43 @@ def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, 
     assert main(["track", str(hop), "--out", str(out), "--frames", "0:3", *flag]) == 0
     assert seen["retrack"] is (not flag)
     assert len(out.read_text().splitlines()) == 3
+
+
+def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(hop):
+    from capture.replay import iter_frame_sets
+    from service.offline import ImageTracker, background_models, session_model
+    from tracker.fitting.tracking import Tracker, TrackerOptions
+
+    session = load_session(hop)
+    names = list(session.camera_names)
+    backgrounds, _ = background_models(session, names)
+    it = ImageTracker(Tracker(session_model(session), [session.camera_model(n) for n in names]), backgrounds)
+    sets = [(fid, next(iter(g.values())).timestamp_ns, {n: f.image for n, f in g.items()})
+            for fid, g in iter_frame_sets(session, cameras=names)]
+    first = [it.step(*item) for item in sets[:6]]
+    params, previous = it.tracker.params.copy(), it.tracker.previous
+    again = it.retrack(sets[4::-1])
+    assert [r["frame"] for r in again] == [4, 3, 2, 1, 0]
+    assert all(r.get("iou") is not None for r in again), [r.get("iou") for r in again]
+    # from the accepted frame 5 the refits are poses of the same frames, near the first fits' where those passed
+    for a, b in zip(first[4::-1], again):
+        if a["ok"]:
+            assert np.max(np.abs(np.subtract(a["joints"]["left_wrist"], b["joints"]["left_wrist"]))) < 0.05
+    # the tracker itself is where it was and keeps its own options
+    np.testing.assert_array_equal(it.tracker.params, params)
+    assert (it.tracker.previous is None) == (previous is None)
+    assert it.tracker.options.iou_every == TrackerOptions().iou_every
+
+
+def test_track_session_without_scene_refits_only_refused_frames(hop):
+    session = load_session(hop)
+    plain = list(track_session(session, retrack=False))
+    settled = list(track_session(session))
+    assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
+    for a, b in zip(plain, settled):
+        if a["ok"]:
+            np.testing.assert_array_equal(a["params"], b["params"])
+    # measured: the first frame's front/back question is still open (refused); fitted again from the
+    # accepted frame after it, the gate passes it
+    assert not plain[0]["ok"] and settled[0]["ok"], (plain[0].get("reason"), settled[0].get("reason"))
+    assert settled[0]["params"] != plain[0]["params"]

@@ -345,11 +345,12 @@ class SceneTracker:
         ``frames``: ``(frame id, timestamp ns, camera name -> BGR image)``, usually the warm-up's
         frames latest first, so that each fit starts from its successor's: the copy fits them with
         the reverse term on (its warm-up is over), the clutter learned so far, the props cut where
-        the body does not cover them, and no velocity into the first of them.  The background
-        models, which nothing changes, are shared with the copy."""
+        the body does not cover them, no velocity into the first of them, and the IoU checked on every
+        frame (``Tracker.twin``).  The background models, which nothing changes, are shared with the copy."""
         twin = copy.deepcopy(self, {id(bg): bg for bg in self.backgrounds.values()})
         twin._since_init = max(twin._since_init, self.options.warmup_frames)
         twin.tracker.previous = None
+        twin._base_options = replace(twin._base_options, iou_every=1)
         return [twin.step(fid, ts, images) for fid, ts, images in frames]
 
     def _initialise(self, segs: Mapping) -> None:

@@ -17,6 +17,7 @@ initial pose, quality below the thresholds) gives ``ok: false`` and a ``reason``
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
@@ -557,6 +558,18 @@ class Tracker:
         if self.guard is not None:
             self.guard.reset()
             self.guard.offer_mirror(mirror)
+
+    def twin(self) -> "Tracker":
+        """A copy of this tracker that fits frames again from its state (``service.offline``'s refits of a
+        warm-up or of a refused stretch, latest first); this tracker is left as it is.
+
+        The copy has no velocity into its first frame and checks the silhouette IoU on every frame
+        (``TrackerOptions.iou_every`` 1): a refit replaces a frame's first fit when the gate passes it, so
+        it is judged by every limit the first fit was."""
+        twin = copy.deepcopy(self)
+        twin.previous = None
+        twin.options = replace(twin.options, iou_every=1)
+        return twin
 
     def _fit(self, cams, chs, start):
         prior = start if self.params is None else self.params
