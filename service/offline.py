@@ -31,7 +31,8 @@ from tracker.fitting.tracking import Tracker, TrackerOptions
 from tracker.fitting.uncovered import fit_ok
 
 __all__ = ["background_models", "floor_test", "warm_up_kernels", "session_model", "session_props", "settled_records",
-           "refit_kept", "track_session", "summarise", "ImageTracker", "TrackSummary", "MAX_HELD_FRAMES"]
+           "refit_kept", "track_session", "summarise", "ImageTracker", "TrackSummary", "MAX_HELD_FRAMES",
+           "MAX_HELD_BYTES"]
 
 
 def session_model(session: Session, name: str = "knossow40") -> BodyModel:
@@ -110,7 +111,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   blob_options=None, scene: SceneOptions | None = None,
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
-                  stream_check: StreamCheck | None = None, props=None, retrack: bool = True) -> Iterator[dict]:
+                  stream_check: StreamCheck | None = None, props=None, retrack: bool = True,
+                  stop: Callable[[], bool] | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -124,8 +126,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Start pose; else automatic initialisation on the first frame.
     backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
-    method : {"contours", "blobs"}
-        ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (with ``blob_options``).
+    method : {"contours", "blobs"}, ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (``blob_options``)
     scene : SceneOptions, optional
         Contours only: decide which foreground is body (``tracker.fitting.scene``).
     ignore : dict, optional, camera name -> (h, w) bool mask of pixels never body (with ``scene``)
@@ -133,8 +134,9 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
     stream_check : StreamCheck, optional, sees each frame set (names a camera cut short)
     props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
-    retrack : bool, contours: fit a scene's warm-up frames and every refused stretch again, backwards from the
-        first accepted frame after it (``settled_records``; False: every frame once, as a live tracker does)
+    retrack, stop : bool, callable () -> bool or None; contours: fit a scene's warm-up frames and every refused
+        stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
+        images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records
 
     Yields
     ------
@@ -166,8 +168,9 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         st = ImageTracker(tracker, {n: backgrounds[n] for n in names}, segmentation=segmentation,
                           floor=floor_test(cams, backgrounds, segmentation), colour=colour)
     sets = read(frames, stream_check)
-    yield from (settled_records(st, sets, lambda a, b: read(range(a, b + 1))) if retrack
-                else (st.step(*s) for s in sets))
+    per_set = sum(3 * c.width * c.height for c in cams)
+    yield from (settled_records(st, sets, max_held=max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)), stop=stop)
+                if retrack else (st.step(*s) for s in sets if stop is None or not stop()))
 
 
 class ImageTracker:
@@ -214,44 +217,53 @@ class ImageTracker:
 
 #: at most this many frames are held for a refit (``settled_records``): older ones keep their first records
 MAX_HELD_FRAMES = 150
+#: ``track_session`` holds the images of at most this many bytes of frame sets for a refit
+MAX_HELD_BYTES = 1 << 30
 
 
-def settled_records(st, sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
+def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
                     reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None,
-                    *, refused: bool = True, max_held: int = MAX_HELD_FRAMES) -> Iterator[dict]:
+                    *, refused: bool = True, max_held: int = MAX_HELD_FRAMES,
+                    stop: Callable[[], bool] | None = None) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
-    ``st``: a ``SceneTracker`` or an ``ImageTracker`` (``step``, ``warming``, ``retrack``).  A frame is
-    held with its record while ``st.warming`` (a scene's warm-up: reverse term off, clutter not yet
-    learned) and, with ``refused``, while the gate refuses its fit (``fit_ok``: the unexplained-boundary check
-    alone only reports; a lost stretch: the track found its way back later, so the frames before can be
-    fitted again from there); at the next frame that is neither,
-    ``st.retrack`` fits the held frames again latest first from that frame's state, and a held frame's
-    record is the refit's when the gate passes it, or refuses both and it covers the silhouettes at least
-    as well (``refit_kept``), else the first fit's.  At most
-    ``max_held`` frames are held (the oldest leave with their first records); frames still held when
-    ``sets`` ends keep theirs.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last``
-    read again (so that the held frames' images need not stay in memory; None: they are held).
+    ``st`` has ``step``, ``warming`` and ``retrack``.  A frame is held with its record while ``st.warming``
+    (a scene's warm-up: reverse term off, clutter not yet learned) and, with ``refused``, while the gate
+    refuses its fit (``fit_ok``: the unexplained-boundary check alone only reports; a lost stretch the track
+    found its way out of later); at the next frame that is neither, ``st.retrack`` fits the held frames
+    again latest first from that frame's state, and a held frame's record is the refit's, marked
+    ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are held (the
+    oldest leave with their first records); frames still held when ``sets`` ends, when ``stop()`` (asked
+    before each frame) says so, or when an exception (an interrupt) leaves the loop keep their first records
+    and are yielded first.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
+    (so that the held frames' images need not stay in memory while held; None: they are held).
     """
     held: list[tuple[tuple, dict]] = []
-    for item in sets:
-        rec = st.step(*item)
-        if st.warming or (refused and not fit_ok(rec)):
-            held.append((item if reread is None else item[:2], rec))
-            if len(held) > max_held:
-                yield held.pop(0)[1]
-            continue
-        if held:
-            firsts = {it[0]: r for it, r in held}
-            again = list(held) if reread is None else [(it, firsts[it[0]]) for it in
-                                                        reread(held[0][0][0], held[-1][0][0]) if it[0] in firsts]
-            refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
-            for (it, first) in held:
-                refit = refits.get(it[0])
-                yield refit if refit is not None and refit_kept(refit, first) else first
-            held = []
-        yield rec
+    try:
+        for item in sets:
+            if stop is not None and stop():
+                break
+            rec = st.step(*item)
+            if st.warming or (refused and not fit_ok(rec)):
+                held.append((item if reread is None else item[:2], rec))
+                if len(held) > max_held:
+                    yield held.pop(0)[1]
+                continue
+            if held:
+                firsts = {it[0]: r for it, r in held}
+                again = list(held) if reread is None else [(it, firsts[it[0]]) for it in
+                                                            reread(held[0][0][0], held[-1][0][0]) if it[0] in firsts]
+                refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
+                out, held = held, []
+                for (it, first) in out:
+                    refit = refits.get(it[0])
+                    yield {**refit, "refit": True} if refit is not None and refit_kept(refit, first) else first
+            yield rec
+    except (Exception, KeyboardInterrupt):
+        out, held = held, []
+        yield from (r for _, r in out)
+        raise
     yield from (r for _, r in held)
 
 

@@ -53,7 +53,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--no-retrack", action="store_true",
-                        help="fit every frame once, as a live tracker does (default: the scene's warm-up frames and "
+                        help="contours: fit every frame once, as a live tracker does (default: the scene's warm-up frames and "
                              "every stretch the gate refused are fitted again backwards from the next accepted frame)")
     parser.add_argument("--allow-missing-cameras", action="store_true",
                         help="track on with the cameras that have frames when a camera's video is cut short or "

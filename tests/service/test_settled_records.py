@@ -92,6 +92,70 @@ def test_a_long_refused_stretch_holds_at_most_max_held_frames(max_held):
     assert [r["pass"] for r in out] == ["refit" if f in refitted else "first" for f in range(n)]
 
 
+class _Records:
+    """A stand-in tracker whose first records and refits are given per frame id (dicts), and that can raise."""
+
+    warming = False
+
+    def __init__(self, firsts, refits, raise_at=None):
+        self.firsts, self.refits, self.raise_at = firsts, refits, raise_at
+        self.retracked: list[list[int]] = []
+
+    def step(self, fid, ts, images):
+        if fid == self.raise_at:
+            raise KeyboardInterrupt
+        return {"frame": fid, **self.firsts[fid]}
+
+    def retrack(self, frames):
+        self.retracked.append([f for f, _, _ in frames])
+        return [{"frame": f, **self.refits[f]} for f, _, _ in frames]
+
+
+def _sets(n):
+    return ((i, 1000 * i, {}) for i in range(n))
+
+
+def test_refit_rules_without_a_pose_without_an_iou_and_for_the_uncovered_check_alone():
+    refused = {"ok": False, "failed": ["iou"], "params": [1.0]}
+    firsts = {0: {"ok": True, "params": [0.0]},
+              1: {**refused, "iou": 0.7},  # a refit without a pose is never kept
+              2: refused,  # no IoU on the first fit: the refit (refused too) is kept
+              3: {**refused, "iou": 0.75},  # both refused, the refit's IoU lower: the first kept
+              4: {"ok": False, "failed": ["uncovered"], "params": [1.0]},  # passes the gate: not held, an anchor
+              5: {**refused, "iou": 0.7},
+              6: {"ok": True, "params": [0.0]}}
+    refits = {1: {"ok": False, "failed": ["rms"]}, 2: {**refused, "params": [2.0], "iou": 0.6},
+              3: {**refused, "params": [2.0], "iou": 0.74}, 5: {"ok": True, "params": [2.0], "iou": 0.9}}
+    st = _Records(firsts, refits)
+    out = list(settled_records(st, _sets(7)))
+    assert st.retracked == [[3, 2, 1], [5]]
+    assert [r["frame"] for r in out] == list(range(7))
+    assert [r.get("refit", False) for r in out] == [False, False, True, False, False, True, False]
+    assert out[2]["params"] == [2.0] and out[3]["params"] == [1.0] and out[5]["ok"]
+
+
+@pytest.mark.parametrize("how", ["interrupt", "stop"])
+def test_held_frames_are_yielded_with_their_first_fits_when_the_run_ends_early(how):
+    n = 12
+    firsts = {i: {"ok": i < 3, "params": [0.0]} | ({} if i < 3 else {"failed": ["iou"]}) for i in range(n)}
+    st = _Records(firsts, {}, raise_at=9 if how == "interrupt" else None)
+    steps = []
+    out = []
+    stop = (lambda: len(steps) >= 9) if how == "stop" else None
+    st_step = st.step
+    st.step = lambda *a: steps.append(a[0]) or st_step(*a)
+    gen = settled_records(st, _sets(n), stop=stop)
+    if how == "interrupt":
+        with pytest.raises(KeyboardInterrupt):
+            for r in gen:
+                out.append(r)
+    else:
+        out = list(gen)
+    # frames 3-8 were held (refused, no accepted frame after them yet): they leave with their first fits
+    assert [r["frame"] for r in out] == list(range(9))
+    assert not any(r.get("refit") for r in out) and st.retracked == []
+
+
 @pytest.fixture(scope="module")
 def hop(tmp_path_factory):
     out = tmp_path_factory.mktemp("hop")
@@ -122,8 +186,12 @@ def test_retrack_refits_the_warm_up_on_a_copy(hop):
     assert k in (4, 5) and not any(warm[k:]), warm
     before = st.tracker.params.copy(), st.tracker.previous.copy() if st.tracker.previous is not None else None
     learned = {n: l.mask.copy() for n, l in st.learners.items()}
+    base = st._base_options
     again = st.retrack(sets[k - 1::-1])
     assert [r["frame"] for r in again] == list(range(k))[::-1]
+    # the copy checks the IoU on every frame (tracker.fitting.tracking.refit_options); this tracker does not
+    assert all(r.get("iou") is not None for r in again), [r.get("iou") for r in again]
+    assert st._base_options is base and st.tracker.options.iou_every == base.iou_every > 1
     # every refit is a pose the gate passes, or refuses only for a hand on the trunk's colour (the limb
     # colour check: in this 4-camera warm-up both wrists are 200-300 mm off the truth)
     assert all("params" in r and (r["ok"] or r["failed"] == ["limb_colour"]) for r in again), \
@@ -184,6 +252,7 @@ def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(
             for fid, g in iter_frame_sets(session, cameras=names)]
     first = [it.step(*item) for item in sets[:6]]
     params, previous = it.tracker.params.copy(), it.tracker.previous
+    guard = (it.tracker.guard.state, list(it.tracker.guard._pelvis))
     again = it.retrack(sets[4::-1])
     assert [r["frame"] for r in again] == [4, 3, 2, 1, 0]
     assert all(r.get("iou") is not None for r in again), [r.get("iou") for r in again]
@@ -194,6 +263,7 @@ def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(
     # the tracker itself is where it was and keeps its own options
     np.testing.assert_array_equal(it.tracker.params, params)
     assert (it.tracker.previous is None) == (previous is None)
+    assert (it.tracker.guard.state, it.tracker.guard._pelvis) == guard  # the copy is deep: its guard walked alone
     assert it.tracker.options.iou_every == TrackerOptions().iou_every
 
 

@@ -44,7 +44,7 @@ from segmentation.clutter import StaticClutter, segment_without_clutter
 from segmentation.pipeline import SegmentationParams
 from tracker.body.kinematics import forward, joint_centres
 from tracker.fitting.props import PropBox, PropPenalty, prop_masks, prop_rays, rays_meet_capsules, seat_box
-from tracker.fitting.tracking import Tracker
+from tracker.fitting.tracking import Tracker, refit_options
 from tracker.search.scoring import ScoreViews
 from tracker.search.seated import initialise_any
 
@@ -346,11 +346,12 @@ class SceneTracker:
         frames latest first, so that each fit starts from its successor's: the copy fits them with
         the reverse term on (its warm-up is over), the clutter learned so far, the props cut where
         the body does not cover them, no velocity into the first of them, and the IoU checked on every
-        frame (``Tracker.twin``).  The background models, which nothing changes, are shared with the copy."""
+        frame (``tracker.fitting.tracking.refit_options``).  The background models, which nothing changes, are
+        shared with the copy."""
         twin = copy.deepcopy(self, {id(bg): bg for bg in self.backgrounds.values()})
         twin._since_init = max(twin._since_init, self.options.warmup_frames)
         twin.tracker.previous = None
-        twin._base_options = replace(twin._base_options, iou_every=1)
+        twin._base_options = refit_options(twin._base_options)
         return [twin.step(fid, ts, images) for fid, ts, images in frames]
 
     def _initialise(self, segs: Mapping) -> None:

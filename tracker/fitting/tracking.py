@@ -42,7 +42,8 @@ from tracker.search.mirror import hypothesis_cost, mirror_params
 from tracker.search.recovery import LossMonitor, recover
 from tracker.search.scoring import ScoreViews
 
-__all__ = ["Tracker", "TrackerOptions", "Verdict", "fit_frame", "prior_weights", "palm_model", "MAX_EXTRAPOLATION"]
+__all__ = ["Tracker", "TrackerOptions", "Verdict", "fit_frame", "prior_weights", "palm_model", "refit_options",
+           "MAX_EXTRAPOLATION"]
 
 MAX_EXTRAPOLATION = 3.0
 """The constant-velocity prediction extrapolates at most this many times the last step."""
@@ -262,6 +263,12 @@ def prior_weights(model: BodyModel, options: TrackerOptions) -> np.ndarray:
         px² per m² or per rad².
     """
     return np.where(model.param_kind == ROOT_TRANSLATION, options.prior_m, options.prior_rad)
+
+
+def refit_options(options: TrackerOptions) -> TrackerOptions:
+    """``options`` for fitting frames again (``Tracker.twin``, ``SceneTracker.retrack``): the silhouette IoU
+    checked on every frame, so that a refit that replaces a frame's first fit is judged by every limit."""
+    return replace(options, iou_every=1)
 
 
 def palm_model(model: BodyModel, length: float | None) -> BodyModel:
@@ -568,7 +575,7 @@ class Tracker:
         it is judged by every limit the first fit was."""
         twin = copy.deepcopy(self)
         twin.previous = None
-        twin.options = replace(twin.options, iou_every=1)
+        twin.options = refit_options(twin.options)
         return twin
 
     def _fit(self, cams, chs, start):
