@@ -112,7 +112,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
                   stream_check: StreamCheck | None = None, props=None, retrack: bool = True,
-                  stop: Callable[[], bool] | None = None) -> Iterator[dict]:
+                  stop: Callable[[], bool] | None = None,
+                  on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
     Parameters
@@ -122,8 +123,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     sliding, solver, options, segmentation
         Contour tracker settings (``tracker.fitting.tracking.Tracker``, ``SegmentationParams``).
     frames, cameras : range or None, sequence of str or None; frame ids, camera names (None: all)
-    initial_params : ndarray, shape (n_params,), optional
-        Start pose; else automatic initialisation on the first frame.
+    initial_params : ndarray, shape (n_params,), optional, the start pose (None: automatic initialisation)
     backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}, ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (``blob_options``)
@@ -136,7 +136,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
     retrack, stop : bool, callable () -> bool or None; contours: fit a scene's warm-up frames and every refused
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
-        images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records
+        images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
+        ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
 
     Yields
     ------
@@ -169,8 +170,17 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                           floor=floor_test(cams, backgrounds, segmentation), colour=colour)
     sets = read(frames, stream_check)
     per_set = sum(3 * c.width * c.height for c in cams)
-    yield from (settled_records(st, sets, max_held=max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)), stop=stop)
-                if retrack else (st.step(*s) for s in sets if stop is None or not stop()))
+    if retrack:
+        yield from settled_records(st, sets, max_held=max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)),
+                                   stop=stop, on_step=on_step)
+        return
+    for item in sets:
+        if stop is not None and stop():
+            return
+        rec = st.step(*item)
+        if on_step is not None:
+            on_step(rec)
+        yield rec
 
 
 class ImageTracker:
@@ -224,7 +234,8 @@ MAX_HELD_BYTES = 1 << 30
 def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
                     reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None,
                     *, refused: bool = True, max_held: int = MAX_HELD_FRAMES,
-                    stop: Callable[[], bool] | None = None) -> Iterator[dict]:
+                    stop: Callable[[], bool] | None = None,
+                    on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
@@ -237,7 +248,8 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
     oldest leave with their first records); frames still held when ``sets`` ends, when ``stop()`` (asked
     before each frame) says so, or when an exception (an interrupt) leaves the loop keep their first records
     and are yielded first.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
-    (so that the held frames' images need not stay in memory while held; None: they are held).
+    (so that the held frames' images need not stay in memory while held; None: they are held).  ``on_step(record)``
+    sees every first fit as it is made (progress while frames are held).
     """
     held: list[tuple[tuple, dict]] = []
     try:
@@ -245,6 +257,8 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
             if stop is not None and stop():
                 break
             rec = st.step(*item)
+            if on_step is not None:
+                on_step(rec)
             if st.warming or (refused and not fit_ok(rec)):
                 held.append((item if reread is None else item[:2], rec))
                 if len(held) > max_held:

@@ -130,6 +130,12 @@ def run(args: argparse.Namespace) -> int:
     print(f" {warm_up_kernels(args.method):.1f} s", file=sys.stderr)
     records = []
     t0 = time.perf_counter()
+    fitted = []  # the first fits as they are made (frames held for a refit are written later)
+
+    def fitted_one(rec):
+        fitted.append(rec["frame"])
+        _progress(len(fitted), total, time.perf_counter() - t0, rec)
+
     out = JsonlWriter(args.out)
     try:
         for rec in track_session(session, model=model, sliding=not args.no_sliding, solver=args.solver,
@@ -137,12 +143,13 @@ def run(args: argparse.Namespace) -> int:
                                  method=args.method, stream_check=check, ignore=ignore, props=props,
                                  segmentation=SegmentationParams(floor_test=args.floor_test),
                                  scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
-                                 retrack=not args.no_retrack):
+                                 retrack=not args.no_retrack, on_step=fitted_one):
             if subject_name is not None:
                 rec["subject"] = subject_name
             out.write(json.dumps(rec).encode())
             records.append({k: rec.get(k) for k in ("ok", "iterations", "rms_px")})
-            _progress(len(records), total, time.perf_counter() - t0, rec)
+            if args.method != "contours":  # the blob tracker's records come one per frame, as fitted
+                _progress(len(records), total, time.perf_counter() - t0, rec)
     except BaseException:
         kept = out.abandon()
         if kept is not None:

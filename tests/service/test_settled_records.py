@@ -51,7 +51,13 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, reread, r
         reads.append((a, b))
         return ((i, 1000 * i, {}) for i in range(max(a - 1, 0), min(b + 2, n)))
 
-    out = list(settled_records(st, ((i, 1000 * i, {}) for i in range(n)), read if reread else None, refused=refused))
+    seen = []  # on_step: every first fit as it is made, held or not (what progress shows)
+    out = []
+    for r in settled_records(st, ((i, 1000 * i, {}) for i in range(n)), read if reread else None, refused=refused,
+                             on_step=lambda rec: seen.append(rec["frame"])):
+        assert seen[-1] >= r["frame"]  # a record is yielded only after its frame was fitted
+        out.append(r)
+    assert seen == list(range(n))
     assert [r["frame"] for r in out] == list(range(n))
     # every maximal run of held frames (warm, or refused when asked) followed by an accepted frame is
     # refitted once, latest first
