@@ -52,7 +52,7 @@ def run_seed(seed: int, args) -> dict:
     fps = 1e9 / max(truth[1]["timestamp_ns"] - truth[0]["timestamp_ns"], 1)
     t0 = time.perf_counter()
     records = list(track_session(load_session(root), colour=not args.no_colour, clock=time.process_time,
-                                 **({"front_back": None} if args.no_guard else {})))
+                                 retrack=not args.no_retrack, **({"front_back": None} if args.no_guard else {})))
     wall = time.perf_counter() - t0
     first_s = int(round(fps))
     mirrored = set(mirrored_frames(records, truth))
@@ -83,6 +83,9 @@ def main(argv=None) -> int:
                     help="shadow: shoes the segmentation takes for shadow (no feet in the silhouettes)")
     ap.add_argument("--no-colour", action="store_true")
     ap.add_argument("--no-guard", action="store_true", help="without the front/back guard (the tracker before it)")
+    ap.add_argument("--no-retrack", action="store_true",
+                    help="fit every frame once, as live (default: refused stretches fitted again backwards, as "
+                         "contourcap track does)")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "contourcap" / "bench_mirror"))
     args = ap.parse_args(argv)
     ref = machine_ref_ms()
@@ -91,7 +94,7 @@ def main(argv=None) -> int:
     fps_frames = sum(r["frames"] for r in runs)
     out = {
         "seeds": args.seeds, "cameras": args.cameras, "size": args.size, "colour": not args.no_colour,
-        "guard": not args.no_guard, "shoes": args.shoes,
+        "guard": not args.no_guard, "retrack": not args.no_retrack, "shoes": args.shoes,
         "frames": frames,
         "mirrored_frames_percent": 100.0 * sum(r["mirrored"] for r in runs) / max(frames, 1),
         "mirrored_after_1s": sum(r["mirrored_after_1s"] for r in runs),

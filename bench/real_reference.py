@@ -289,7 +289,7 @@ def build_reference(session, frames: range | None, stride: int, *, static: bool,
 
 
 def run_contourcap(session, frames: range | None, model: str, path: Path, *,
-                   progress: bool = True) -> tuple[list[dict], dict]:
+                   progress: bool = True, retrack: bool = True) -> tuple[list[dict], dict]:
     """Track the same frames with contourcap in this process (``service.offline``, the code of
     ``contourcap track``), write its pose records to ``path``; returns them and its timing (background
     learning apart from the per-set figures, which include decoding and segmentation)."""
@@ -302,7 +302,7 @@ def run_contourcap(session, frames: range | None, model: str, path: Path, *,
     records = []
     with open(path, "w", encoding="utf-8") as fh:
         for rec in track_session(session, model=session_model(session, model), frames=frames,
-                                 backgrounds=backgrounds):
+                                 backgrounds=backgrounds, retrack=retrack):
             fh.write(json.dumps(rec) + "\n")
             records.append(rec)
             if progress:
@@ -501,6 +501,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--track", action="store_true",
                     help="also track the same frames with contourcap in this run (same core) and evaluate that")
     ap.add_argument("--model", default="knossow40", help="body model for --track")
+    ap.add_argument("--no-retrack", action="store_true",
+                    help="--track: fit every frame once, as live (default: refused stretches fitted again backwards)")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default SESSION/real_reference)")
     ap.add_argument("--frames", default=None, metavar="A:B", help="frame ids A (inclusive) to B (exclusive)")
     ap.add_argument("--stride", type=int, default=1, help="use every k-th frame (default 1)")
@@ -554,7 +556,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     track_timing = None
     if args.track:
         tracked = out / "contourcap_poses.jsonl"
-        poses, track_timing = run_contourcap(session, frames, args.model, tracked)
+        poses, track_timing = run_contourcap(session, frames, args.model, tracked, retrack=not args.no_retrack)
         track_timing["poses"] = str(tracked)
     sheet = out / "reference_sheet.png"
     make_sheet(session, reference, poses, sheet, rows=args.sheet_rows)
