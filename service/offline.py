@@ -158,29 +158,17 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
 
-    def read(fids, check=None):
+    def read(fids, check):
         return ((fid, next(iter(group.values())).timestamp_ns, {n: f.image for n, f in group.items()})
                 for fid, group in _frame_sets(session, names, fids, check))
 
-    if scene is not None:
-        st = SceneTracker(tracker, {n: backgrounds[n] for n in names}, ignore=ignore, options=scene,
-                          segmentation=segmentation, floor=floor_test(cams, backgrounds, segmentation), props=props)
-    else:
-        st = ImageTracker(tracker, {n: backgrounds[n] for n in names}, segmentation=segmentation,
-                          floor=floor_test(cams, backgrounds, segmentation), colour=colour)
-    sets = read(frames, stream_check)
+    floor = floor_test(cams, backgrounds, segmentation)
+    ours = {n: backgrounds[n] for n in names}
+    st = (SceneTracker(tracker, ours, ignore=ignore, options=scene, segmentation=segmentation, floor=floor, props=props)
+          if scene is not None else ImageTracker(tracker, ours, segmentation=segmentation, floor=floor, colour=colour))
     per_set = sum(3 * c.width * c.height for c in cams)
-    if retrack:
-        yield from settled_records(st, sets, max_held=max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)),
-                                   stop=stop, on_step=on_step)
-        return
-    for item in sets:
-        if stop is not None and stop():
-            return
-        rec = st.step(*item)
-        if on_step is not None:
-            on_step(rec)
-        yield rec
+    held = max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)) if retrack else 0
+    yield from settled_records(st, read(frames, stream_check), max_held=held, stop=stop, on_step=on_step)
 
 
 class ImageTracker:
@@ -232,24 +220,21 @@ MAX_HELD_BYTES = 1 << 30
 
 
 def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
-                    reread: Callable[[int, int], Iterable[tuple[int, int, Mapping[str, np.ndarray]]]] | None = None,
-                    *, refused: bool = True, max_held: int = MAX_HELD_FRAMES,
-                    stop: Callable[[], bool] | None = None,
+                    *, refused: bool = True, max_held: int = MAX_HELD_FRAMES, stop: Callable[[], bool] | None = None,
                     on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
-    ``st`` has ``step``, ``warming`` and ``retrack``.  A frame is held with its record while ``st.warming``
-    (a scene's warm-up: reverse term off, clutter not yet learned) and, with ``refused``, while the gate
-    refuses its fit (``fit_ok``: the unexplained-boundary check alone only reports; a lost stretch the track
-    found its way out of later); at the next frame that is neither, ``st.retrack`` fits the held frames
-    again latest first from that frame's state, and a held frame's record is the refit's, marked
-    ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are held (the
-    oldest leave with their first records); frames still held when ``sets`` ends, when ``stop()`` (asked
-    before each frame) says so, or when an exception (an interrupt) leaves the loop keep their first records
-    and are yielded first.  ``reread(first, last)``: the sets of frame ids ``first`` to ``last`` read again
-    (so that the held frames' images need not stay in memory while held; None: they are held).  ``on_step(record)``
-    sees every first fit as it is made (progress while frames are held).
+    ``st`` has ``step``, ``warming`` and ``retrack``.  A frame is held, with its images and record, while
+    ``st.warming`` (a scene's warm-up: reverse term off, clutter not yet learned) and, with ``refused``,
+    while the gate refuses its fit (``fit_ok``: the unexplained-boundary check alone only reports; a lost
+    stretch the track found its way out of later); at the next frame that is neither, ``st.retrack`` fits
+    the held frames again latest first from that frame's state, and a held frame's record is the refit's,
+    marked ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are
+    held (the oldest leave with their first records; 0: every frame once, as live); frames still held when
+    ``sets`` ends, when ``stop()`` (asked before each frame) says so, or when an exception (an interrupt)
+    leaves the loop keep their first records and are yielded first.  ``on_step(record)`` sees every first
+    fit as it is made (progress while frames are held).
     """
     held: list[tuple[tuple, dict]] = []
     try:
@@ -260,15 +245,12 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
             if on_step is not None:
                 on_step(rec)
             if st.warming or (refused and not fit_ok(rec)):
-                held.append((item if reread is None else item[:2], rec))
+                held.append((item, rec))
                 if len(held) > max_held:
                     yield held.pop(0)[1]
                 continue
             if held:
-                firsts = {it[0]: r for it, r in held}
-                again = list(held) if reread is None else [(it, firsts[it[0]]) for it in
-                                                            reread(held[0][0][0], held[-1][0][0]) if it[0] in firsts]
-                refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(again)])}
+                refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(held)])}
                 out, held = held, []
                 for (it, first) in out:
                     refit = refits.get(it[0])
