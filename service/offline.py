@@ -221,7 +221,7 @@ MAX_HELD_BYTES = 1 << 30
 
 def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
                     *, refused: bool = True, max_held: int = MAX_HELD_FRAMES, stop: Callable[[], bool] | None = None,
-                    on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
+                    on_step: Callable[[dict], None] | None = None, tail: bool = True) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
@@ -231,15 +231,19 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
     stretch the track found its way out of later); at the next frame that is neither, ``st.retrack`` fits
     the held frames again latest first from that frame's state, and a held frame's record is the refit's,
     marked ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are
-    held (the oldest leave with their first records; 0: every frame once, as live); frames still held when
-    ``sets`` ends, when ``stop()`` (asked before each frame) says so, or when an exception (an interrupt)
-    leaves the loop keep their first records and are yielded first.  ``on_step(record)`` sees every first
+    held (the oldest leave with their first records; 0: every frame once, as live).  With ``tail``, the
+    frames still held when ``sets`` ends (a take that ends refused, or never reached an accepted frame) are
+    fitted again the same way from the last frame's state; frames held when ``stop()`` (asked before each
+    frame) says so, or when an exception (an interrupt) leaves the loop, keep their first records and are
+    yielded first.  ``on_step(record)`` sees every first
     fit as it is made (progress while frames are held).
     """
     held: list[tuple[tuple, dict]] = []
+    stopped = False
     try:
         for item in sets:
             if stop is not None and stop():
+                stopped = True
                 break
             rec = st.step(*item)
             if on_step is not None:
@@ -250,17 +254,25 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
                     yield held.pop(0)[1]
                 continue
             if held:
-                refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(held)])}
-                out, held = held, []
-                for (it, first) in out:
-                    refit = refits.get(it[0])
-                    yield {**refit, "refit": True} if refit is not None and refit_kept(refit, first) else first
+                kept, held = _refitted(st, held), []
+                yield from kept
             yield rec
+        if held and tail and not stopped:
+            kept, held = _refitted(st, held), []
+            yield from kept
     except (Exception, KeyboardInterrupt):
         out, held = held, []
         yield from (r for _, r in out)
         raise
     yield from (r for _, r in held)
+
+
+def _refitted(st, held: list) -> list[dict]:
+    """``held`` (item, first record) fitted again latest first by ``st.retrack``; each frame's kept record,
+    in ``held``'s order."""
+    refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(held)])}
+    return [{**refits[it[0]], "refit": True} if it[0] in refits and refit_kept(refits[it[0]], first) else first
+            for it, first in held]
 
 
 def refit_kept(refit: dict, first: dict) -> bool:

@@ -34,26 +34,28 @@ class _Scripted:
                 | ({} if self.refit_ok[f] else {"failed": self.refit_failed[f]}) for f, _, _ in frames]
 
 
+@pytest.mark.parametrize("tail", [False, True])
 @pytest.mark.parametrize("refused", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
+def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused, tail):
     rng = np.random.default_rng(seed)
     n = 40
     warm = rng.random(n) < 0.5
+    warm[-3:] = True  # every take here ends in a held run
     ok, refit_ok = rng.random(n) < 0.5, rng.random(n) < 0.5
     kinds = (["uncovered"], ["iou"], ["iou", "uncovered"], ["limb_colour"])
     refit_failed = [kinds[k] for k in rng.integers(0, len(kinds), n)]
     st = _Scripted(warm, ok, refit_ok, refit_failed)
     seen = []  # on_step: every first fit as it is made, held or not (what progress shows)
     out = []
-    for r in settled_records(st, ((i, 1000 * i, {}) for i in range(n)), refused=refused,
+    for r in settled_records(st, ((i, 1000 * i, {}) for i in range(n)), refused=refused, tail=tail,
                              on_step=lambda rec: seen.append(rec["frame"])):
         assert seen[-1] >= r["frame"]  # a record is yielded only after its frame was fitted
         out.append(r)
     assert seen == list(range(n))
     assert [r["frame"] for r in out] == list(range(n))
     # every maximal run of held frames (warm, or refused when asked) followed by an accepted frame is
-    # refitted once, latest first
+    # refitted once, latest first; with ``tail`` the run the take ends in too, from the last frame's state
     held = warm | (~ok if refused else False)
     runs, cur = [], []
     for i in range(n):
@@ -62,6 +64,8 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
         elif cur:
             runs.append(cur[::-1])
             cur = []
+    if tail:
+        runs, cur = runs + [cur[::-1]], []
     assert st.retracked == runs
     refitted = {f for run in runs for f in run}
     for r in out:
@@ -73,7 +77,7 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
             passed = refit_ok[f] or refit_failed[f] == ["uncovered"]
             kept = passed or (not ok[f] and f % 5 >= f % 7)
             assert r["pass"] == ("refit" if kept else "first")
-    # the held frames at the end (no accepted frame after them) keep their first records
+    # without ``tail`` the held frames at the end (no accepted frame after them) keep their first records
     assert all(out[f]["pass"] == "first" for f in cur)
 
 
@@ -133,26 +137,34 @@ def test_refit_rules_without_a_pose_without_an_iou_and_for_the_uncovered_check_a
     assert out[2]["params"] == [2.0] and out[3]["params"] == [1.0] and out[5]["ok"]
 
 
-@pytest.mark.parametrize("how", ["interrupt", "stop"])
+@pytest.mark.parametrize("how", ["interrupt", "stop", "retrack"])
 def test_held_frames_are_yielded_with_their_first_fits_when_the_run_ends_early(how):
     n = 12
     firsts = {i: {"ok": i < 3, "params": [0.0]} | ({} if i < 3 else {"failed": ["iou"]}) for i in range(n)}
     st = _Records(firsts, {}, raise_at=9 if how == "interrupt" else None)
+    if how == "retrack":  # the tail's refit is interrupted: nothing held is lost, nothing refitted published
+        n = 9
+
+        def retrack(frames):
+            st.retracked.append([f for f, _, _ in frames])
+            raise KeyboardInterrupt
+        st.retrack = retrack
     steps = []
     out = []
     stop = (lambda: len(steps) >= 9) if how == "stop" else None
     st_step = st.step
     st.step = lambda *a: steps.append(a[0]) or st_step(*a)
     gen = settled_records(st, _sets(n), stop=stop)
-    if how == "interrupt":
+    if how != "stop":
         with pytest.raises(KeyboardInterrupt):
             for r in gen:
                 out.append(r)
     else:
-        out = list(gen)
+        out = list(gen)  # a stop (the CPU budget) does not refit the frames still held
     # frames 3-8 were held (refused, no accepted frame after them yet): they leave with their first fits
     assert [r["frame"] for r in out] == list(range(9))
-    assert not any(r.get("refit") for r in out) and st.retracked == []
+    assert not any(r.get("refit") for r in out)
+    assert st.retracked == ([[8, 7, 6, 5, 4, 3]] if how == "retrack" else [])
 
 
 @pytest.fixture(scope="module")
