@@ -128,8 +128,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}, ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (``blob_options``)
-    scene : SceneOptions, optional
-        Contours only: decide which foreground is body (``tracker.fitting.scene``).
+    scene : SceneOptions, optional, contours only: decide which foreground is body (``tracker.fitting.scene``)
     ignore : dict, optional, camera name -> (h, w) bool mask of pixels never body (with ``scene``)
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
@@ -139,13 +138,11 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
         images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
         ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
-    smooth_s : float, seconds; the records' poses smoothed over a centred window that long
-        (``service.smoothed.smoothed_records``, ``window_half`` frames at the session's fps; 0: as fitted)
+    smooth_s : float, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as fitted)
 
     Yields
     ------
-    dict
-        A DESIGN.md pose record per frame id.
+    dict, a DESIGN.md pose record per frame id
     """
     if method not in ("contours", "blobs"):
         raise ValueError(f"method: expected 'contours' or 'blobs', got {method!r}")
