@@ -1,23 +1,23 @@
-"""Centred-window smoothing of pose-parameter trajectories (offline: the frames after a frame are known).
+"""Centred-window smoothing of pose trajectories (offline: the frames after a frame are known).
 
 A trajectory is ``params`` of shape ``(n, n_params)`` (``tracker.body.kinematics``: root translation in
 metres, root rotation vector in radians, then joint angles in radians inside the model's limits), one row per
 consecutive frame, cut into segments by ``breaks`` (a frame with ``breaks[k]`` True starts a new segment: a
-missing pose, a re-initialisation, a mirror switch).  Frame k's smoothed row is the weighted mean of the rows
-k − h … k + h of its own segment, h = min(``half``, frames to the segment's start, frames to its end): the window
-shrinks symmetrically at a segment's ends, so a trajectory linear in time is kept everywhere and a segment's
-first and last frames are unchanged.  Neighbours are weighted by ``weights`` (the frame itself always by 1).
+missing pose, a re-initialisation, a mirror switch).  Frame k's window is the rows k − h … k + h of its own
+segment, h = min(``half``, frames to the segment's start, frames to its end): it shrinks symmetrically at a
+segment's ends, so a trajectory linear in time is kept and a segment's first and last frames are unchanged.
+Neighbours are weighted by ``weights``, the pair k ± d by the lighter of the two (the frame itself by 1).
 
-- Translations and joint angles are averaged as numbers; a mean of angles inside the box of joint limits stays
-  inside it (clamped to the limits against rounding).
-- The root rotation is averaged as unit quaternions of one sign along the segment (the chordal mean), then
-  written back as the rotation vector equivalent to it nearest the frame's own (no wrap at ±π).
-- The root moves as a rigid transform about the model's zero point (the floor under the pelvis), so a
-  rotation swings the pelvis on a lever: the root is averaged as the pelvis's position (``root_centre``) and
-  the rotation, the translation then recomputed from both (averaging rotation and translation apart would move
-  the body by the lever's arc).
+- ``smooth_params``: the window mean of the parameters.  Joint angles are averaged as numbers (a mean inside the
+  box of limits stays inside it).  The root rotation is averaged as unit quaternions of one sign along the
+  segment, written back as the rotation vector nearest the frame's own (no wrap at ±π).  The root turns about
+  the model's origin (the floor under the pelvis), so it is averaged as the pelvis's position (``root_centre``)
+  and the rotation, the translation recomputed from both (apart, they would swing the body on that lever).
+- ``smooth_poses``: the pose of the model nearest the window mean of the joint centres (``fit_joints``, from
+  ``smooth_params``' pose): bone lengths and joint limits hold.
 
-Pure numpy, vectorised over frames and parameters (one pass per window offset).
+Pure numpy, vectorised over frames and parameters (one pass per window offset); the joint fit is one small
+solve per frame.
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ import numpy as np
 from tracker.body.kinematics import forward, joint_centre_array, point_jacobian, so3_exp
 from tracker.body.model import ROOT_ROTATION, ROOT_TRANSLATION, BodyModel
 
-__all__ = ["segment_halves", "window_mean", "smooth_params", "smooth_poses", "fit_joints", "root_centre", "rotvec_to_quat", "quat_to_rotvec", "nearest_rotvec"]
+__all__ = ["segment_halves", "window_mean", "smooth_params", "smooth_poses", "fit_joints", "root_centre",
+           "rotvec_to_quat", "quat_to_rotvec", "nearest_rotvec"]
 
 
 def root_centre(model: BodyModel) -> np.ndarray:
