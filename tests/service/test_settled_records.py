@@ -307,3 +307,11 @@ def test_track_session_smooths_the_poses_and_keeps_every_verdict(hop):
             assert model.within_limits(np.asarray(b["params"]))
             assert max(np.linalg.norm(np.subtract(a["joints"][n], b["joints"][n])) for n in model.joint_names) < 0.1
     assert moved >= len(smoothed) // 2
+
+
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf"])
+def test_track_cli_refuses_a_bad_smoothing_window(hop, tmp_path, capsys, bad):
+    from service.cli import main
+
+    assert main(["track", str(hop), "--out", str(tmp_path / "p.jsonl"), "--smooth-window", bad]) == 2
+    assert "--smooth-window" in capsys.readouterr().err
