@@ -17,8 +17,9 @@ the subject's standing height measured on the rendered body), background models 
 10 rendered empty-room frames per camera, and the session is tracked by
 ``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
 ``knossow40`` model sized from the height) exactly as ``contourcap track --floor-test --no-scene`` does
-(the stretches the gate refused fitted again backwards from the next accepted frame; ``--no-retrack``: every
-frame once, as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
+(the stretches the gate refused fitted again backwards from the next accepted frame, the poses smoothed over a
+centred window, ``service.smoothed``; ``--no-smooth``: as fitted; ``--no-retrack``: every frame once, unsmoothed,
+as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
 ``tracker.blobs`` on the colour frames, initialised by the same silhouette search).  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
@@ -83,6 +84,7 @@ from service.commands.calibrate_subject import auto_calibrate, within_take  # no
 from tracker.fitting.subject_auto import AutoSubjectOptions  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
 from service.offline import floor_test, session_model, track_session, warm_up_kernels  # noqa: E402
+from service.smoothed import SMOOTH_WINDOW_S  # noqa: E402
 from tracker.fitting.tracking import TrackerOptions  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
@@ -180,7 +182,7 @@ def ik_floor_joints_m(motion, subject_index: int, height_m: float, *, fps: float
 
 #: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``; the
 #: floor test of ``segmentation.floor`` unless ``--no-floor-test``: ``contourcap track --floor-test``;
-#: ``--no-retrack``: ``retrack=False``)
+#: ``--no-retrack``: ``retrack=False`` and ``smooth_s=0``; ``--no-smooth``: ``smooth_s=0``)
 TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
                        "options": TrackerOptions(lost_iou_margin=LOST_IOU_MARGIN)}
 
@@ -451,6 +453,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-retrack", action="store_true",
                     help="fit every frame once, as a live tracker does (contourcap track --no-retrack; default: "
                          "the stretches the gate refused are fitted again backwards from the next accepted frame)")
+    ap.add_argument("--no-smooth", action="store_true",
+                    help="score the poses as fitted (contourcap track --no-smooth; default: smoothed over "
+                         "contourcap track's window, service.smoothed; --no-retrack implies it)")
     ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
     ap.add_argument("--calibrate", type=int, default=0, metavar="FRAMES",
@@ -480,6 +485,8 @@ def main(argv=None) -> int:
         TRACK_OPTIONS["segmentation"] = SegmentationParams(floor_test=False)
     if args.no_retrack:
         TRACK_OPTIONS["retrack"] = False
+    if args.no_smooth or args.no_retrack:
+        TRACK_OPTIONS["smooth_s"] = 0.0
     if args.tracker_option:
         TRACK_OPTIONS["options"] = _tracker_options(args.tracker_option, ap, TRACK_OPTIONS["options"])
     if args.blob_option:
@@ -514,7 +521,8 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
-              "retrack": not args.no_retrack, "date": datetime.date.today().isoformat()}
+              "retrack": not args.no_retrack, "smooth_s": TRACK_OPTIONS.get("smooth_s", SMOOTH_WINDOW_S),
+              "date": datetime.date.today().isoformat()}
     per_clip = []
     for s in subjects:
         for j, name in enumerate(clips):

@@ -24,6 +24,7 @@ from segmentation.background import BackgroundModel
 from segmentation.floor import FloorShadows
 from segmentation.pipeline import SegmentationParams, segment_frame
 from service.backgrounds import background_models
+from service.smoothed import SMOOTH_WINDOW_S, smoothed_records, window_half
 from tracker.body.model import BodyModel, load_model
 from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
@@ -112,7 +113,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
                   stream_check: StreamCheck | None = None, props=None, retrack: bool = True,
-                  stop: Callable[[], bool] | None = None,
+                  smooth_s: float = SMOOTH_WINDOW_S, stop: Callable[[], bool] | None = None,
                   on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
@@ -127,8 +128,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}, ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (``blob_options``)
-    scene : SceneOptions, optional
-        Contours only: decide which foreground is body (``tracker.fitting.scene``).
+    scene : SceneOptions, optional, contours only: decide which foreground is body (``tracker.fitting.scene``)
     ignore : dict, optional, camera name -> (h, w) bool mask of pixels never body (with ``scene``)
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
@@ -138,11 +138,11 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
         images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
         ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
+    smooth_s : float, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as fitted)
 
     Yields
     ------
-    dict
-        A DESIGN.md pose record per frame id.
+    dict, a DESIGN.md pose record per frame id
     """
     if method not in ("contours", "blobs"):
         raise ValueError(f"method: expected 'contours' or 'blobs', got {method!r}")
@@ -151,9 +151,10 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     cams = [session.camera_model(n) for n in names]
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
+    half = window_half(smooth_s, session.fps)
     if method == "blobs":
-        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                                stream_check, props=props)
+        yield from _smoothed(_track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options,
+                                          clock, stream_check, props=props), body, half, session.fps)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
@@ -168,7 +169,12 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
           if scene is not None else ImageTracker(tracker, ours, segmentation=segmentation, floor=floor, colour=colour))
     per_set = sum(3 * c.width * c.height for c in cams)
     held = max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)) if retrack else 0
-    yield from settled_records(st, read(frames, stream_check), max_held=held, stop=stop, on_step=on_step)
+    yield from _smoothed(settled_records(st, read(frames, stream_check), max_held=held, stop=stop, on_step=on_step),
+                         body, half, session.fps)
+
+
+def _smoothed(records: Iterator[dict], body: BodyModel, half: int, fps: float) -> Iterator[dict]:
+    return smoothed_records(records, body, half=half, fps=fps) if half > 0 else records
 
 
 class ImageTracker:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from capture.session import load_session
-from service.offline import settled_records, track_session
+from service.offline import session_model, settled_records, track_session
+from service.smoothed import SMOOTH_WINDOW_S
 from service.synthetic_session import make_synthetic_session
 from tracker.fitting.scene import SceneOptions
 from tracker.synthetic.synth import bundled_motion
@@ -218,8 +219,8 @@ def test_retrack_refits_the_warm_up_on_a_copy(hop):
 def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     session = load_session(hop)
     opts = SceneOptions(warmup_frames=4)
-    plain = list(track_session(session, scene=opts, retrack=False))
-    settled = list(track_session(session, scene=opts))
+    plain = list(track_session(session, scene=opts, retrack=False, smooth_s=0.0))
+    settled = list(track_session(session, scene=opts, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     k = 5  # the start frame and the 4 warm-up frames after it
     for a, b in zip(plain[k:], settled[k:]):
@@ -232,8 +233,10 @@ def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     assert any(a["params"] != b["params"] for a, b in zip(plain[:k], settled[:k]))
 
 
-@pytest.mark.parametrize("flag", [[], ["--no-retrack"]])
+@pytest.mark.parametrize("flag", [[], ["--no-retrack"], ["--no-smooth"], ["--smooth-window", "0.3"]])
 def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, flag):
+    """``--no-retrack`` (as live: every frame fitted once, unsmoothed), ``--no-smooth`` and ``--smooth-window``
+    reach ``track_session``."""
     import service.commands.track as track_cmd
     from service.cli import main
 
@@ -246,7 +249,9 @@ def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, 
     monkeypatch.setattr(track_cmd, "track_session", spy)
     out = tmp_path / "poses.jsonl"
     assert main(["track", str(hop), "--out", str(out), "--frames", "0:3", *flag]) == 0
-    assert seen["retrack"] is (not flag)
+    assert seen["retrack"] is ("--no-retrack" not in flag)
+    assert seen["smooth_s"] == (0.0 if {"--no-retrack", "--no-smooth"} & set(flag) else
+                                0.3 if "--smooth-window" in flag else SMOOTH_WINDOW_S)
     assert len(out.read_text().splitlines()) == 3
 
 
@@ -280,8 +285,8 @@ def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(
 
 def test_track_session_without_scene_refits_only_refused_frames(hop):
     session = load_session(hop)
-    plain = list(track_session(session, retrack=False))
-    settled = list(track_session(session))
+    plain = list(track_session(session, retrack=False, smooth_s=0.0))
+    settled = list(track_session(session, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     for a, b in zip(plain, settled):
         if a["ok"]:
@@ -290,3 +295,35 @@ def test_track_session_without_scene_refits_only_refused_frames(hop):
     # accepted frame after it, the gate passes it
     assert not plain[0]["ok"] and settled[0]["ok"], (plain[0].get("reason"), settled[0].get("reason"))
     assert settled[0]["params"] != plain[0]["params"]
+
+
+def test_track_session_smooths_the_poses_and_keeps_every_verdict(hop):
+    """The default offline path smooths the settled records' poses (``service.smoothed``): the same frames in the
+    same order, every verdict and quality figure the fit's, each pose a model pose (joints by forward kinematics
+    of its params, inside the joint limits)."""
+    from tracker.body.kinematics import forward, joint_centre_array
+
+    session = load_session(hop)
+    fitted = list(track_session(session, smooth_s=0.0))
+    smoothed = list(track_session(session))
+    assert [r["frame"] for r in smoothed] == [r["frame"] for r in fitted]
+    model = session_model(session)
+    moved = 0
+    for a, b in zip(fitted, smoothed):
+        assert {k: v for k, v in b.items() if k not in ("params", "joints", "smoothed", "latency_ms")} == \
+            {k: v for k, v in a.items() if k not in ("params", "joints", "latency_ms")}
+        if b.get("smoothed"):
+            moved += 1
+            J = joint_centre_array(model, forward(model, np.asarray(b["params"])))
+            np.testing.assert_allclose([b["joints"][n] for n in model.joint_names], J, atol=1e-9)
+            assert model.within_limits(np.asarray(b["params"]))
+            assert max(np.linalg.norm(np.subtract(a["joints"][n], b["joints"][n])) for n in model.joint_names) < 0.1
+    assert moved >= len(smoothed) // 2
+
+
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf"])
+def test_track_cli_refuses_a_bad_smoothing_window(hop, tmp_path, capsys, bad):
+    from service.cli import main
+
+    assert main(["track", str(hop), "--out", str(tmp_path / "p.jsonl"), "--smooth-window", bad]) == 2
+    assert "--smooth-window" in capsys.readouterr().err
