@@ -41,13 +41,21 @@ machine); quote them as ratios to ``machine_ref_ms``.
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
                                [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--calibrate 100]
-                               [--out result.json]
+                               [--calibrate-from tpose_start] [--out result.json]
 
 ``--calibrate N``: per clip, the subject is also calibrated as ``contourcap track --calibrate-subject
 0:N`` does (``calibrate_clip``: the product's sampling, fit and held-out check; never the truth); an
 adopted body tracks the clip again, a body not adopted leaves the height-only track standing; the
 summary gives both (``mpjpe_mm_mean_height_only`` and the ``*_calibrated`` figures, per-joint means
 ``joint_mm_height_only`` / ``joint_mm_calibrated``, ``calibration_adopted_percent``).
+
+``--calibrate-from MOTION``: as a studio works, each subject is calibrated once, on its MOTION clip (the same
+``calibrate_clip``, frames 0:N with ``--calibrate N``, default 100), and every clip of that subject is tracked
+again with the adopted calibration's subject file (the height-only track stands when it is not adopted); the
+``*_calibrated`` figures cover every clip, the ``*_calibrated_held_out`` and ``*_height_only_held_out`` ones
+only the clips of the other motions (a body judged on the take it was fitted on is flattered), and
+``calibration_bodies`` lists each subject's fitted body beside the rendered subject's lengths. Each clip's
+``calibrated.calibration`` says which calibration it used (``own``, ``source``).
 """
 
 from __future__ import annotations
