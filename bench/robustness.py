@@ -599,14 +599,10 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
-<<<<<<< HEAD
               "retrack": not args.no_retrack, "smooth_s": TRACK_OPTIONS.get("smooth_s", SMOOTH_WINDOW_S),
               "date": datetime.date.today().isoformat()}
-=======
-              "retrack": not args.no_retrack, "date": datetime.date.today().isoformat()}
     if args.calibrate_from is not None:
         header["calibrate_from"] = args.calibrate_from
->>>>>>> onecal
     per_clip = []
     for s in subjects:
         calibration = None  # --calibrate-from: the subject's calibration, made on its first MOTION clip
