@@ -113,7 +113,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
                   stream_check: StreamCheck | None = None, props=None, retrack: bool = True,
-                  smooth_s: float = SMOOTH_WINDOW_S, stop: Callable[[], bool] | None = None,
+                  smooth_s: float | None = None, stop: Callable[[], bool] | None = None,
                   on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
@@ -138,7 +138,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
         images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
         ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
-    smooth_s : float, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as fitted)
+    smooth_s : float or None, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as
+        fitted; None: ``SMOOTH_WINDOW_S``, or 0 without ``retrack``: as live)
 
     Yields
     ------
@@ -151,7 +152,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     cams = [session.camera_model(n) for n in names]
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
-    half = window_half(smooth_s, session.fps)
+    half = window_half((SMOOTH_WINDOW_S if retrack else 0.0) if smooth_s is None else smooth_s, session.fps)
     if method == "blobs":
         yield from _smoothed(_track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options,
                                           clock, stream_check, props=props), body, half, session.fps)
@@ -239,9 +240,9 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
     marked ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are
     held (the oldest leave with their first records; 0: every frame once, as live).  With ``tail``, the
     frames still held when ``sets`` ends (a take that ends refused, or never reached an accepted frame) are
-    fitted again the same way from the last frame's state; frames held when ``stop()`` (asked before each
-    frame) says so, or when an exception (an interrupt) leaves the loop, keep their first records and are
-    yielded first.  ``on_step(record)`` sees every first
+    fitted again the same way from the last frame's state, unless ``stop()`` says so; frames held when
+    ``stop()`` (asked before each frame) ends the run, or when an exception (an interrupt) leaves the loop,
+    keep their first records, yielded before the exception goes on.  ``on_step(record)`` sees every first
     fit as it is made (progress while frames are held).
     """
     held: list[tuple[tuple, dict]] = []
@@ -259,11 +260,13 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
                 if len(held) > max_held:
                     yield held.pop(0)[1]
                 continue
-            if held:
-                kept, held = _refitted(st, held), []
+            if held:  # the accepted frame waits with them: an interrupt in the refit writes it too
+                held.append((item, rec))
+                kept, held = _refitted(st, held[:-1]) + [rec], []
                 yield from kept
+                continue
             yield rec
-        if held and tail and not stopped:
+        if held and tail and not stopped and not (stop is not None and stop()):
             kept, held = _refitted(st, held), []
             yield from kept
     except (Exception, KeyboardInterrupt):

@@ -1,7 +1,7 @@
 """Offline temporal smoothing of a take's pose records (``contourcap track``; live poses are never smoothed).
 
-``smoothed_records`` passes a stream of pose records in frame order (``service.offline.settled_records``) through
-:func:`tracker.body.window.smooth_poses`: each posed frame's pose becomes the model's nearest to the centred-window
+``smoothed_records`` smooths a stream of pose records in frame order (``service.offline.settled_records``) as
+:func:`tracker.body.window.smooth_poses` does: each posed frame's pose becomes the model's nearest to the centred-window
 mean of its neighbours' joint centres, started from the window mean of their ``params`` (root position, root
 rotation, joint angles), and its ``joints`` are recomputed from it by forward kinematics, so bone lengths and
 joint limits hold.  The window never crosses a break (``pose_breaks``): a frame
@@ -40,9 +40,10 @@ def window_half(window_s: float, fps: float) -> int:
 
 
 def _posed(rec: dict, model: BodyModel) -> bool:
-    p = rec.get("params")
+    p, joints = rec.get("params"), rec.get("joints")
     return (p is not None and len(p) == model.n_params and rec.get("model", model.name) == model.name
-            and bool(rec.get("joints")) and bool(np.all(np.isfinite(p))))
+            and isinstance(joints, dict) and all(n in joints for n in model.joint_names)
+            and bool(np.all(np.isfinite(p))))
 
 
 def pose_breaks(records: list[dict], model: BodyModel, *, fps: float,
@@ -76,7 +77,7 @@ def pose_breaks(records: list[dict], model: BodyModel, *, fps: float,
 
 
 def _smooth_window(window: list[dict], model: BodyModel, *, half: int, fps: float, max_speed_mps: float,
-                   refused_weight: float, at: int) -> dict:
+                   at: int) -> dict:
     """``window[at]`` smoothed over ``window`` (the records about it; ``smooth_poses`` for that row alone)."""
     rec = window[at]
     if half == 0 or not _posed(rec, model):
@@ -89,16 +90,15 @@ def _smooth_window(window: list[dict], model: BodyModel, *, half: int, fps: floa
     P = np.array([r["params"] if p else model.zero() for r, p in zip(window, posed)], float)
     J = np.array([[r["joints"][n] for n in model.joint_names] if p else np.zeros((len(model.joint_names), 3))
                   for r, p in zip(window, posed)], float)
-    w = np.array([1.0 if r.get("ok") else refused_weight for r in window])
-    start = smooth_params(model, P, half=half, breaks=breaks, weights=w)[at]
-    row = fit_joints(model, start[None], window_mean(J, h, w)[at][None])[0]
+    start = smooth_params(model, P, half=half, breaks=breaks)[at]
+    row = fit_joints(model, start[None], window_mean(J, h)[at][None])[0]
     joints = joint_centre_array(model, forward(model, row))
     return {**rec, "params": [float(v) for v in row],
             "joints": {n: [float(v) for v in joints[i]] for i, n in enumerate(model.joint_names)}, "smoothed": True}
 
 
 def smoothed_records(records: Iterable[dict], model: BodyModel, *, half: int, fps: float,
-                     max_speed_mps: float = MAX_JOINT_SPEED_MPS, refused_weight: float = 1.0) -> Iterator[dict]:
+                     max_speed_mps: float = MAX_JOINT_SPEED_MPS) -> Iterator[dict]:
     """``records`` (pose records in frame order) with their poses smoothed over a centred window (module docstring).
 
     Parameters
@@ -108,25 +108,24 @@ def smoothed_records(records: Iterable[dict], model: BodyModel, *, half: int, fp
     half : int, ≥ 0, the window's half-width in frames (``window_half``; 0: the records unchanged)
     fps : float, the take's frames per second (the joint step limit of ``pose_breaks``)
     max_speed_mps : float, ``pose_breaks``' joint speed limit, metres per second
-    refused_weight : float, ≥ 0, the weight of a refused (not ok) frame as a neighbour (an ok one's is 1)
 
     Yields
     ------
     dict
         Each record, in the same order, at most ``half`` records after it arrived.
     """
-    if half < 0 or refused_weight < 0:
-        raise ValueError(f"smoothing: expected half >= 0 and refused_weight >= 0, got {half}, {refused_weight}")
+    if half < 0:
+        raise ValueError(f"smoothing: expected half >= 0, got {half}")
     past: list[dict] = []     # up to ``half`` records already yielded (their fitted poses)
     pending: list[dict] = []  # records waiting for their look-ahead
 
     def emit(final: bool) -> Iterator[dict]:
         while pending and (final or len(pending) > half):
             window = past + pending[:half + 1]
-            out = _smooth_window(window, model, half=half, fps=fps, max_speed_mps=max_speed_mps,
-                                 refused_weight=refused_weight, at=len(past))
+            out = _smooth_window(window, model, half=half, fps=fps, max_speed_mps=max_speed_mps, at=len(past))
             past.append(pending.pop(0))
-            del past[:-half or len(past)]
+            if len(past) > half:  # keep the last ``half`` (none when half is 0)
+                del past[:len(past) - half]
             yield out
 
     try:

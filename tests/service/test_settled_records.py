@@ -168,6 +168,33 @@ def test_held_frames_are_yielded_with_their_first_fits_when_the_run_ends_early(h
     assert st.retracked == ([[8, 7, 6, 5, 4, 3]] if how == "retrack" else [])
 
 
+def test_an_interrupted_refit_loses_neither_the_held_frames_nor_the_accepted_frame_after_them():
+    firsts = {i: {"ok": i in (0, 1, 2, 6), "params": [0.0]} | ({} if i in (0, 1, 2, 6) else {"failed": ["iou"]})
+              for i in range(9)}
+    st = _Records(firsts, {})
+
+    def retrack(frames):
+        st.retracked.append([f for f, _, _ in frames])
+        raise KeyboardInterrupt
+    st.retrack = retrack
+    out = []
+    with pytest.raises(KeyboardInterrupt):
+        for r in settled_records(st, _sets(9)):
+            out.append(r)
+    # frames 3-5 were held; accepted frame 6 started their refit, which was interrupted: 0-6 all written, in order
+    assert [r["frame"] for r in out] == list(range(7)) and not any(r.get("refit") for r in out)
+    assert st.retracked == [[5, 4, 3]]
+
+
+def test_the_tail_is_not_refitted_once_stop_says_so():
+    firsts = {i: {"ok": i < 3, "params": [0.0]} | ({} if i < 3 else {"failed": ["iou"]}) for i in range(6)}
+    st = _Records(firsts, {})
+    calls = []
+    out = list(settled_records(st, _sets(6), stop=lambda: calls.append(1) is None and len(calls) > 6))
+    # stop() is asked before each of the 6 frames (False) and once more before the tail's refit (True)
+    assert len(calls) == 7 and [r["frame"] for r in out] == list(range(6)) and st.retracked == []
+
+
 @pytest.fixture(scope="module")
 def hop(tmp_path_factory):
     out = tmp_path_factory.mktemp("hop")
@@ -219,7 +246,7 @@ def test_retrack_refits_the_warm_up_on_a_copy(hop):
 def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     session = load_session(hop)
     opts = SceneOptions(warmup_frames=4)
-    plain = list(track_session(session, scene=opts, retrack=False, smooth_s=0.0))
+    plain = list(track_session(session, scene=opts, retrack=False))
     settled = list(track_session(session, scene=opts, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     k = 5  # the start frame and the 4 warm-up frames after it
@@ -285,7 +312,7 @@ def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(
 
 def test_track_session_without_scene_refits_only_refused_frames(hop):
     session = load_session(hop)
-    plain = list(track_session(session, retrack=False, smooth_s=0.0))
+    plain = list(track_session(session, retrack=False))
     settled = list(track_session(session, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     for a, b in zip(plain, settled):
