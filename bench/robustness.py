@@ -200,12 +200,13 @@ TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
 def _track(session, backgrounds, *, method: str, budget_s: float, model=None) -> tuple[list, list, list, float]:
     """Track ``session`` (``service.offline.track_session`` with ``TRACK_OPTIONS``; ``model``: a
     sized BodyModel, default the session's height-sized knossow40) until ``budget_s`` CPU seconds
-    (0: no limit); returns (records, wall ms per frame, CPU ms per frame, CPU seconds).  The contour tracker
-    is stopped by ``track_session``'s ``stop`` (the frames it held for a refit keep their first fits); its
+    (0: no limit); returns (records, wall ms per frame, CPU ms per frame, CPU seconds).  The tracker is
+    stopped by ``track_session``'s ``stop`` (the frames held for a refit keep their first fits, the smoother's
+    look-ahead is written); its
     per-frame figures are per record yielded, which a refit yields in bursts."""
     records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
     extra = {"model": MODEL[0] if model is None else model}
-    if method == "contours" and budget_s:
+    if budget_s:
         c_start = time.process_time()
         extra["stop"] = lambda: time.process_time() - c_start > budget_s
     it = track_session(session, backgrounds=backgrounds, method=method, **TRACK_OPTIONS, **extra)

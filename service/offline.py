@@ -136,8 +136,8 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
     retrack, stop : bool, callable () -> bool or None; contours: fit a scene's warm-up frames and every refused
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
-        images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
-        ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
+        images held; False: every frame once, as live); ``stop()`` (both methods), asked before each set, True
+        ends the records; contours: ``on_step(record)`` sees each set's first fit as it is made
     smooth_s : float or None, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as
         fitted; None: ``SMOOTH_WINDOW_S``, or 0 without ``retrack``: as live)
 
@@ -155,7 +155,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     half = window_half((SMOOTH_WINDOW_S if retrack else 0.0) if smooth_s is None else smooth_s, session.fps)
     if method == "blobs":
         yield from _smoothed(_track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options,
-                                          clock, stream_check, props=props), body, half, session.fps)
+                                          clock, stream_check, props=props, stop=stop), body, half, session.fps)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
@@ -304,7 +304,7 @@ def refit_kept(refit: dict, first: dict) -> bool:
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                 stream_check=None, props=None) -> Iterator[dict]:
+                 stream_check=None, props=None, stop=None) -> Iterator[dict]:
     from tracker.blobs import BlobOptions, BlobTracker
     from tracker.blobs.start import ContourStart
 
@@ -312,6 +312,8 @@ def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_
                           initialiser=ContourStart(body, cams, backgrounds, props=props or ()),
                           options=blob_options or BlobOptions(), clock=clock, props=props or ())
     for fid, group in _frame_sets(session, [c.name for c in cams], frames, stream_check):
+        if stop is not None and stop():
+            return
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 

@@ -354,3 +354,11 @@ def test_track_cli_refuses_a_bad_smoothing_window(hop, tmp_path, capsys, bad):
 
     assert main(["track", str(hop), "--out", str(tmp_path / "p.jsonl"), "--smooth-window", bad]) == 2
     assert "--smooth-window" in capsys.readouterr().err
+
+
+def test_the_blob_tracker_stops_too(hop):
+    """``track_session``'s ``stop`` ends a blob take as it ends a contour one (the bench's CPU budget)."""
+    session = load_session(hop)
+    asked = []
+    assert list(track_session(session, method="blobs", stop=lambda: asked.append(1) is None)) == []
+    assert asked == [1]
