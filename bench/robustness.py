@@ -340,9 +340,10 @@ def subject_body(info: dict):
 
 
 def truth_lengths(truth: np.ndarray) -> dict:
-    """The rendered subject's segment lengths (m, medians over the frames of ``truth`` (n, 16, 3), the
-    BVH joint centres): thigh, shank, upper arm, forearm (left and right averaged), pelvis to neck
-    (the model's abdomen + torso), hip and shoulder widths (between the joint centres)."""
+    """The rendered subject's joint-centre distances (m, medians over the frames of ``truth`` (n, 16, 3),
+    the BVH joint centres): thigh, shank, upper arm, forearm (left and right averaged), pelvis to neck,
+    hip and shoulder widths.  Compare them with a model's same joint-centre distances, not with its
+    ``segment_lengths`` / ``widths`` entries (the model's ``hip_width`` spaces the thighs' origins)."""
     j = {name: truth[:, i] for i, name in enumerate(JOINT_NAMES)}
 
     def dist(a: str, b: str) -> float:
