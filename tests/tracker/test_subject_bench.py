@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 
@@ -109,3 +110,42 @@ def test_truth_lengths_are_the_joint_distances():
     assert np.isclose(out["upper_arm"], 0.3) and np.isclose(out["forearm"], 0.25)
     assert np.isclose(out["pelvis_to_neck"], 0.5) and np.isclose(out["hip_width"], 0.16)
     assert np.isclose(out["shoulder_width"], 0.4)
+
+
+@pytest.mark.parametrize("all_cameras", [False, True])
+def test_calibrate_from_calibrates_each_subject_once_and_tracks_its_other_clips_with_it(monkeypatch, all_cameras):
+    """``main --calibrate-from``'s wiring: per subject the MOTION clip runs first and it alone is calibrated
+    (``calibrate_frames``; with ``--all-cameras`` at its first camera count), every other run of the subject
+    gets that calibration, each clip keeps its camera count."""
+    import robustness
+
+    calls = []
+
+    def run_clip(name, skeleton, s, n, *, calibrate_frames, calibration, **kw):
+        calls.append((s, name, n, calibrate_frames, None if calibration is None else dict(calibration)))
+        figures = dict.fromkeys(("mpjpe_mm", "ok", "frames", "mirrored", "mirrored_after", "false_ok", "false_alarm",
+                                 "ik_floor_mm", "ms_per_frame_median", "cpu_s", "unprocessed"), 0)
+        return {**figures, "calibrated": {**figures, "calibration": {"adopted": True, "text": f"s{s}"}}}
+
+    monkeypatch.setattr(robustness, "run_clip", run_clip)
+    monkeypatch.setattr(robustness, "machine_ref_ms", lambda: 1.0)
+    monkeypatch.setattr(robustness, "warm_up_kernels", lambda method: 0.0)
+    monkeypatch.setattr(robustness, "load_bvh", lambda path: None)
+    monkeypatch.setattr(robustness, "summarise", lambda per_clip: {})
+    monkeypatch.setattr(robustness, "_emit", lambda result, args: 0)
+    monkeypatch.setattr(robustness, "_calibration_text", lambda info: "")
+    printed = []
+    monkeypatch.setattr("builtins.print", lambda *a, **k: printed.append(a))
+    argv = ["--subject-ids", "1,2", "--clips", "walk_turn,crouch,tpose_start", "--cameras", "4,6",
+            "--calibrate-from", "tpose_start"] + (["--all-cameras"] if all_cameras else [])
+    assert robustness.main(argv) == 0
+    per = 2 if all_cameras else 1
+    assert len(calls) == 2 * 3 * per
+    for s, start in ((1, 0), (2, 3 * per)):
+        own, rest = calls[start], calls[start + 1:start + 3 * per]
+        assert own[:2] == (s, "tpose_start") and own[3] == 100 and own[4] is None
+        assert [c[1] for c in rest] == ["tpose_start"] * (per - 1) + ["walk_turn"] * per + ["crouch"] * per
+        assert all(c[0] == s and c[3] == 0 and c[4]["text"] == f"s{s}" and c[4]["calibrate_from"] == "tpose_start"
+                   and c[4]["source"]["subject"] == s for c in rest)
+        if not all_cameras:  # clip j of subject s keeps cameras[(s + j) % 2] whatever the order it runs in
+            assert [c[2] for c in calls[start:start + 3]] == [[4, 6][(s + 2) % 2], [4, 6][s % 2], [4, 6][(s + 1) % 2]]
