@@ -17,8 +17,9 @@ the subject's standing height measured on the rendered body), background models 
 10 rendered empty-room frames per camera, and the session is tracked by
 ``service.offline.track_session`` (segmentation, ``Tracker`` with automatic initialisation, the
 ``knossow40`` model sized from the height) exactly as ``contourcap track --floor-test --no-scene`` does
-(the stretches the gate refused fitted again backwards from the next accepted frame; ``--no-retrack``: every
-frame once, as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
+(the stretches the gate refused fitted again backwards from the next accepted frame, the poses smoothed over a
+centred window, ``service.smoothed``; ``--no-smooth``: as fitted; ``--no-retrack``: every frame once, unsmoothed,
+as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
 ``tracker.blobs`` on the colour frames, initialised by the same silhouette search).  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
@@ -41,13 +42,21 @@ machine); quote them as ratios to ``machine_ref_ms``.
     python bench/robustness.py [--json] [--quick] [--subjects 6] [--clips walk_turn,crouch]
                                [--cameras 4,6] [--all-cameras] [--frames 75] [--size 320x240]
                                [--fps 30] [--clip-budget-s 20] [--method contours|blobs] [--calibrate 100]
-                               [--out result.json]
+                               [--calibrate-from tpose_start] [--out result.json]
 
 ``--calibrate N``: per clip, the subject is also calibrated as ``contourcap track --calibrate-subject
 0:N`` does (``calibrate_clip``: the product's sampling, fit and held-out check; never the truth); an
 adopted body tracks the clip again, a body not adopted leaves the height-only track standing; the
 summary gives both (``mpjpe_mm_mean_height_only`` and the ``*_calibrated`` figures, per-joint means
 ``joint_mm_height_only`` / ``joint_mm_calibrated``, ``calibration_adopted_percent``).
+
+``--calibrate-from MOTION``: as a studio works, each subject is calibrated once, on its MOTION clip (the same
+``calibrate_clip``, frames 0:N with ``--calibrate N``, default 100), and every clip of that subject is tracked
+again with the adopted calibration's subject file (the height-only track stands when it is not adopted); the
+``*_calibrated`` figures cover every clip, the ``*_calibrated_held_out`` and ``*_height_only_held_out`` ones
+only the clips of the other motions (a body judged on the take it was fitted on is flattered), and
+``calibration_bodies`` lists each subject's fitted body beside the rendered subject's lengths. Each clip's
+``calibrated.calibration`` says which calibration it used (``own``, ``source``).
 """
 
 from __future__ import annotations
@@ -73,6 +82,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from capture.calibration import save_calibration  # noqa: E402
+from capture.tomlio import loads as toml_loads  # noqa: E402
 from capture.session import load_session, write_session_toml  # noqa: E402
 from machine_ref import machine_ref_ms  # noqa: E402
 from subject_frame_offsets import decompose  # noqa: E402
@@ -82,7 +92,9 @@ from tracker.synthetic.bvh import load_bvh  # noqa: E402
 from service.commands.calibrate_subject import auto_calibrate, within_take  # noqa: E402
 from tracker.fitting.subject_auto import AutoSubjectOptions  # noqa: E402
 from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
+from tracker.body.subject import parse_subject, subject_toml  # noqa: E402
 from service.offline import floor_test, session_model, track_session, warm_up_kernels  # noqa: E402
+from service.smoothed import SMOOTH_WINDOW_S  # noqa: E402
 from tracker.fitting.tracking import TrackerOptions  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
@@ -180,7 +192,7 @@ def ik_floor_joints_m(motion, subject_index: int, height_m: float, *, fps: float
 
 #: extra ``service.offline.track_session`` keywords (``--no-front-back``: ``front_back=None``; the
 #: floor test of ``segmentation.floor`` unless ``--no-floor-test``: ``contourcap track --floor-test``;
-#: ``--no-retrack``: ``retrack=False``)
+#: ``--no-retrack``: ``retrack=False`` and ``smooth_s=0``; ``--no-smooth``: ``smooth_s=0``)
 TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
                        "options": TrackerOptions(lost_iou_margin=LOST_IOU_MARGIN)}
 
@@ -188,12 +200,13 @@ TRACK_OPTIONS: dict = {"segmentation": SegmentationParams(floor_test=True),
 def _track(session, backgrounds, *, method: str, budget_s: float, model=None) -> tuple[list, list, list, float]:
     """Track ``session`` (``service.offline.track_session`` with ``TRACK_OPTIONS``; ``model``: a
     sized BodyModel, default the session's height-sized knossow40) until ``budget_s`` CPU seconds
-    (0: no limit); returns (records, wall ms per frame, CPU ms per frame, CPU seconds).  The contour tracker
-    is stopped by ``track_session``'s ``stop`` (the frames it held for a refit keep their first fits); its
+    (0: no limit); returns (records, wall ms per frame, CPU ms per frame, CPU seconds).  The tracker is
+    stopped by ``track_session``'s ``stop`` (the frames held for a refit keep their first fits, the smoother's
+    look-ahead is written); its
     per-frame figures are per record yielded, which a refit yields in bursts."""
     records, pipe_ms, pipe_cpu_ms, cpu_s = [], [], [], 0.0
     extra = {"model": MODEL[0] if model is None else model}
-    if method == "contours" and budget_s:
+    if budget_s:
         c_start = time.process_time()
         extra["stop"] = lambda: time.process_time() - c_start > budget_s
     it = track_session(session, backgrounds=backgrounds, method=method, **TRACK_OPTIONS, **extra)
@@ -313,8 +326,37 @@ def calibrate_clip(session, backgrounds, *, frames: int, samples: int) -> tuple:
                      "held_out_ious": [list(v) for v in res.held_out_ious],
                      "segment_lengths_m": res.fit.segment_lengths, "widths_m": res.fit.widths,
                      "radius_scale": res.fit.radius_scale})
+    if info["adopted"]:  # the subject file contourcap track --calibrate-subject writes (``--calibrate-from``)
+        info["subject_toml"] = subject_toml(res.subject)
     info["cpu_s"] = time.process_time() - c0
     return (res.fit.model if info["adopted"] else None), info
+
+
+def subject_body(info: dict):
+    """The BodyModel of a calibration's subject file (``info["subject_toml"]``, ``calibrate_clip``'s
+    info: the file a studio keeps and tracks other takes with, ``--subject``), None when not adopted."""
+    text = info.get("subject_toml") if info.get("adopted") else None
+    return None if text is None else parse_subject(toml_loads(text), "calibration").body()
+
+
+def truth_lengths(truth: np.ndarray) -> dict:
+    """The rendered subject's joint-centre distances (m, medians over the frames of ``truth`` (n, 16, 3),
+    the BVH joint centres): thigh, shank, upper arm, forearm (left and right averaged), pelvis to neck,
+    hip and shoulder widths.  Compare them with a model's same joint-centre distances, not with its
+    ``segment_lengths`` / ``widths`` entries (the model's ``hip_width`` spaces the thighs' origins)."""
+    j = {name: truth[:, i] for i, name in enumerate(JOINT_NAMES)}
+
+    def dist(a: str, b: str) -> float:
+        return float(np.median(np.linalg.norm(j[a] - j[b], axis=-1)))
+
+    pairs = {"thigh": ("hip", "knee"), "shank": ("knee", "ankle"), "upper_arm": ("shoulder", "elbow"),
+             "forearm": ("elbow", "wrist")}
+    out = {k: round(0.5 * (dist(f"left_{a}", f"left_{b}") + dist(f"right_{a}", f"right_{b}")), 4)
+           for k, (a, b) in pairs.items()}
+    out.update({"pelvis_to_neck": round(dist("pelvis", "neck"), 4),
+                "hip_width": round(dist("left_hip", "right_hip"), 4),
+                "shoulder_width": round(dist("left_shoulder", "right_shoulder"), 4)})
+    return out
 
 
 #: the body model tracked (``--model``: a bundled name or a model file)
@@ -322,13 +364,16 @@ MODEL = ["knossow40"]
 
 def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames: int, fps: float, size,
              ik_floor: bool = True, budget_s: float = 0.0, method: str = "contours",
-             calibrate_frames: int = 0, calibrate_samples: int = 9) -> dict:
+             calibrate_frames: int = 0, calibrate_samples: int = 9, calibration: dict | None = None) -> dict:
     """Render, track and score one clip; returns its per-clip record.
 
     ``budget_s`` > 0: stop tracking once reading, segmenting and tracking this clip has used that
     much CPU time; the frames left are scored as not ok without a pose (``unprocessed``).
     ``calibrate_frames`` > 0: also calibrate the subject on frames 0:that (``calibrate_clip``) and,
-    when adopted, track the whole clip again with the calibrated body (``"calibrated"``)."""
+    when adopted, track the whole clip again with the calibrated body (``"calibrated"``).
+    ``calibration``: instead, a calibration made on another clip of the subject (``calibrate_clip``'s
+    info, ``--calibrate-from``): the clip is tracked again with its subject file's body when adopted;
+    the record's ``calibrated.calibration`` is that info with ``own`` false."""
     t_clip = time.perf_counter()
     motion = clip_motion(name, skeleton, subject=subject_index, frames=frames, fps=fps)
     calibrated = None
@@ -337,8 +382,12 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
         truth, backgrounds, height, render_ms, seg_iou = render_session(root, motion, subject_index, n_cameras, size)
         session = load_session(root)
         records, pipe_ms, pipe_cpu_ms, cpu_s = _track(session, backgrounds, method=method, budget_s=budget_s)
-        if calibrate_frames > 0:
-            body, info = calibrate_clip(session, backgrounds, frames=calibrate_frames, samples=calibrate_samples)
+        if calibrate_frames > 0 or calibration is not None:
+            if calibration is None:
+                body, info = calibrate_clip(session, backgrounds, frames=calibrate_frames, samples=calibrate_samples)
+                info["own"] = True
+            else:
+                body, info = subject_body(calibration), {**calibration, "own": False}
             if body is not None:
                 rec_c, _, _, cpu_c = _track(session, backgrounds, method=method, budget_s=budget_s, model=body)
             else:  # not adopted (or no trusted fit): the height-only track stands
@@ -358,7 +407,7 @@ def run_clip(name: str, skeleton, subject_index: int, n_cameras: int, *, frames:
             for key in _reason_keys(r.get("reason", "")):
                 reasons[key] = reasons.get(key, 0) + 1
     out = {"subject": subject_index, "clip": name, "cameras": n_cameras, "method": method,
-           "height_m": round(height, 3),
+           "height_m": round(height, 3), "truth_lengths_m": truth_lengths(truth),
            **score, "segmentation_iou_median": seg_iou, "unprocessed": len(truth) - len(records), "cpu_s": cpu_s, "ik_floor_mm": floor_mm,
            "not_ok_reasons": reasons, "joint_mm": joint_mm, "ms_per_frame_median": float(np.median(lat)),
            "pipeline_ms_per_frame_median": float(np.median(pipe_ms)), "render_ms_per_frame": render_ms,
@@ -379,14 +428,17 @@ def summarise(per_clip: list[dict]) -> dict:
     pipe = [v for r in per_clip for v in r["pipeline_ms"]]
     pipe_cpu = [v for r in per_clip for v in r.get("pipeline_cpu_ms", [])]
     cal = [r["calibrated"] for r in per_clip if "calibrated" in r]
-    if cal:  # the same clips tracked with the calibrated subject (``--calibrate``)
+    if cal:  # the same clips tracked with the calibrated subject (``--calibrate``, ``--calibrate-from``)
         cal_summary = summarise_clips(cal)
+        own = [c["calibration"] for c in cal if c["calibration"].get("own", True)]  # the calibrations run
         summary = {**summary, "mpjpe_mm_mean_height_only": summary["mpjpe_mm_mean"],
                    **{f"{k}_calibrated": v for k, v in cal_summary.items()},
-                   "calibration_cpu_s_median": float(np.median([c["calibration"]["cpu_s"] for c in cal])),
-                   "calibration_adopted_percent": 100.0 * float(np.mean([bool(c["calibration"].get("adopted", True))
-                                                                         for c in cal])),
+                   "calibrations": len(own), "calibration_cpu_s_total": float(sum(c["cpu_s"] for c in own)),
+                   "calibration_cpu_s_median": float(np.median([c["cpu_s"] for c in own])) if own else None,
+                   "calibration_adopted_percent": 100.0 * float(np.mean([bool(c.get("adopted", True)) for c in own]))
+                   if own else None,
                    "joint_mm_height_only": _joint_means(per_clip), "joint_mm_calibrated": _joint_means(cal)}
+        summary.update(held_out_summary(per_clip))
     summary["error_parts"] = error_parts_means(per_clip)
     if cal:
         summary["error_parts_calibrated"] = error_parts_means(cal)
@@ -396,6 +448,30 @@ def summarise(per_clip: list[dict]) -> dict:
             "ms_per_frame_median": float(np.median(lat)) if lat else None,
             "pipeline_ms_per_frame_median": float(np.median(pipe)) if pipe else None,
             "pipeline_cpu_ms_per_frame_median": float(np.median(pipe_cpu)) if pipe_cpu else None}
+
+
+def held_out_summary(per_clip: list[dict]) -> dict:
+    """``--calibrate-from MOTION``'s figures: ``calibrate_from``, the ``summarise_clips`` figures of the
+    clips of other motions (the takes the body was not fitted on) with the suffixes ``_calibrated_held_out``
+    and ``_height_only_held_out``, and per subject the calibration's body beside the rendered subject's
+    lengths (``calibration_bodies``); {} for records without ``calibrate_from`` (``--calibrate N``)."""
+    froms = {r["calibrated"]["calibration"].get("calibrate_from") for r in per_clip if "calibrated" in r} - {None}
+    if not froms:
+        return {}
+    if len(froms) > 1:
+        raise ValueError(f"clips calibrated from different motions: {sorted(froms)}")
+    motion = froms.pop()
+    held = [r for r in per_clip if "calibrated" in r and r["clip"] != motion]
+    out: dict = {"calibrate_from": motion, "clips_held_out": len(held)}
+    if held:
+        out.update({f"{k}_calibrated_held_out": v for k, v in summarise_clips([r["calibrated"] for r in held]).items()})
+        out.update({f"{k}_height_only_held_out": v for k, v in summarise_clips(held).items()})
+    keys = ("adopted", "held_out_iou", "segment_lengths_m", "widths_m", "radius_scale", "cpu_s")
+    out["calibration_bodies"] = [{"subject": r["subject"], "clip": r["clip"], "cameras": r["cameras"],
+                                  **{k: r["calibrated"]["calibration"].get(k) for k in keys},
+                                  "truth_lengths_m": r.get("truth_lengths_m")}
+                                 for r in per_clip if r.get("calibrated", {}).get("calibration", {}).get("own")]
+    return out
 
 
 def _joint_means(clips: list[dict]) -> dict:
@@ -451,6 +527,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-retrack", action="store_true",
                     help="fit every frame once, as a live tracker does (contourcap track --no-retrack; default: "
                          "the stretches the gate refused are fitted again backwards from the next accepted frame)")
+    ap.add_argument("--no-smooth", action="store_true",
+                    help="score the poses as fitted (contourcap track --no-smooth; default: smoothed over "
+                         "contourcap track's window, service.smoothed; --no-retrack implies it)")
     ap.add_argument("--tracker-option", action="append", default=[], metavar="NAME=VALUE",
                     help="a TrackerOptions field for this run (e.g. min_iou=0.7, iou_every=1); repeatable")
     ap.add_argument("--calibrate", type=int, default=0, metavar="FRAMES",
@@ -458,6 +537,10 @@ def main(argv=None) -> int:
                          "--calibrate-subject 0:FRAMES does (100: its default; cut to the clip) and track each "
                          "clip again with it when adopted: figures with the suffix _calibrated "
                          "beside the height-only ones (0: off)")
+    ap.add_argument("--calibrate-from", default=None, metavar="MOTION",
+                    help="per subject, calibrate once on its MOTION clip (e.g. tpose_start; frames 0:N with "
+                         "--calibrate N, default 100, cut to the clip) and track every clip of the subject again "
+                         "with that body: the _calibrated figures, and _held_out ones without the MOTION clips")
     ap.add_argument("--model", default="knossow40",
                     help="body model: a bundled name or a model TOML file (sized by each clip's height; "
                          "--calibrate needs a bundled one)")
@@ -472,14 +555,16 @@ def main(argv=None) -> int:
     if args.merge:
         return _emit(merge(args.merge), args)
     MODEL[0] = args.model
-    if args.calibrate and Path(args.model).suffix:
-        ap.error("--calibrate needs a bundled --model name")
+    if (args.calibrate or args.calibrate_from) and Path(args.model).suffix:
+        ap.error("--calibrate and --calibrate-from need a bundled --model name")
     if args.no_front_back:
         TRACK_OPTIONS["front_back"] = None
     if args.no_floor_test:
         TRACK_OPTIONS["segmentation"] = SegmentationParams(floor_test=False)
     if args.no_retrack:
         TRACK_OPTIONS["retrack"] = False
+    if args.no_smooth or args.no_retrack:
+        TRACK_OPTIONS["smooth_s"] = 0.0
     if args.tracker_option:
         TRACK_OPTIONS["options"] = _tracker_options(args.tracker_option, ap, TRACK_OPTIONS["options"])
     if args.blob_option:
@@ -493,6 +578,8 @@ def main(argv=None) -> int:
     unknown = [c for c in clips if c not in CLIPS]
     if unknown or not clips:
         ap.error(f"--clips: unknown {unknown}; available: {','.join(CLIPS)}")
+    if args.calibrate_from is not None and args.calibrate_from not in clips:
+        ap.error(f"--calibrate-from {args.calibrate_from!r}: not one of --clips {','.join(clips)}")
     try:
         cams = [int(c) for c in args.cameras.split(",") if c]
         w, h = (int(v) for v in args.size.lower().split("x"))
@@ -514,14 +601,24 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
-              "retrack": not args.no_retrack, "date": datetime.date.today().isoformat()}
+              "retrack": not args.no_retrack, "smooth_s": TRACK_OPTIONS.get("smooth_s", SMOOTH_WINDOW_S),
+              "date": datetime.date.today().isoformat()}
+    if args.calibrate_from is not None:
+        header["calibrate_from"] = args.calibrate_from
     per_clip = []
     for s in subjects:
-        for j, name in enumerate(clips):
+        calibration = None  # --calibrate-from: the subject's calibration, made on its first MOTION clip
+        for j, name in calibration_order(clips, args.calibrate_from):
             for n in (cams if args.all_cameras else [cams[(s + j) % len(cams)]]):
+                own = args.calibrate_from is not None and calibration is None
                 rec = run_clip(name, skeleton, s, n, frames=args.frames, fps=args.fps, size=(w, h),
                                ik_floor=not args.no_ik_floor, budget_s=args.clip_budget_s, method=args.method,
-                               calibrate_frames=args.calibrate, calibrate_samples=args.calibrate_samples)
+                               calibrate_frames=(args.calibrate or 100) if own else
+                               0 if args.calibrate_from else args.calibrate,
+                               calibrate_samples=args.calibrate_samples, calibration=calibration)
+                if own:
+                    calibration = rec["calibrated"]["calibration"]
+                    calibration.update(calibrate_from=name, source={"subject": s, "clip": name, "cameras": n})
                 per_clip.append(rec)
                 if args.out is not None:  # a partial result after every clip (a long run can be read while it runs)
                     args.out.write_text(json.dumps({"partial": True, "subject_ids": subjects, **summarise(per_clip),
@@ -542,11 +639,19 @@ def main(argv=None) -> int:
     return _emit(result, args)
 
 
+def calibration_order(clips: list[str], motion: str | None) -> list[tuple[int, str]]:
+    """(index in ``clips``, name) in the order a subject's clips run: ``motion``'s first (the calibration
+    take of ``--calibrate-from``), the others as given; the index keeps each clip's camera count."""
+    return sorted(enumerate(clips), key=lambda jn: jn[1] != motion)
+
+
 def _calibration_text(info: dict) -> str:
     """One line of a clip's calibration (``calibrate_clip``'s info): adopted or not, held-out IoU, CPU s."""
     iou = info.get("held_out_iou")
     held = "no trusted fits" if iou is None else f"held-out IoU {iou[0]:.3f} -> {iou[1]:.3f}"
-    return f"{'adopted' if info.get('adopted') else 'not adopted'} ({held}), {info['cpu_s']:.0f} s CPU"
+    src = info.get("source")
+    where = "" if info.get("own", True) or src is None else f" from s{src['subject']} {src['clip']} c{src['cameras']}"
+    return f"{'adopted' if info.get('adopted') else 'not adopted'}{where} ({held}), {info['cpu_s']:.0f} s CPU"
 
 
 def _tracker_options(pairs, ap, base, flag: str = "--tracker-option"):

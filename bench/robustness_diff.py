@@ -114,6 +114,32 @@ def compare(a: dict, b: dict, *, tie_mm: float = 0.5, top: int = 5, seed: int = 
             "a": pooled(a), "b": pooled(b)}
 
 
+#: run settings a comparison should hold equal, with the value a result file without the key was run at
+#: (``smooth_s`` and ``calibrate_from`` are newer than the oldest results; None: not recorded)
+SETTINGS = {"method": None, "size": None, "fps": None, "frames_per_clip": None, "clip_budget_s": None,
+            "retrack": None, "smooth_s": 0.0, "calibrate_from": None}
+
+
+def load_settings(path: Path) -> dict:
+    """The run settings (``SETTINGS``) of one result file, a missing key at its default; the file is
+    checked as ``load_clips`` checks it (size, JSON, an object)."""
+    path = Path(path)
+    if path.stat().st_size > MAX_BYTES:
+        raise ValueError(f"{path}: larger than {MAX_BYTES} bytes")
+    try:
+        data = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected an object")
+    return {k: data.get(k, default) for k, default in SETTINGS.items()}
+
+
+def differing_settings(a: dict, b: dict) -> dict:
+    """``{key: [a's, b's]}`` for the settings (``load_settings``) that differ between two runs."""
+    return {k: [a[k], b[k]] for k in SETTINGS if a[k] != b[k]}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("a", type=Path, help="the reference result (A)")
@@ -125,14 +151,18 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     try:
         a, b = (load_clips(p, calibrated=args.calibrated) for p in (args.a, args.b))
+        differ = differing_settings(*(load_settings(p) for p in (args.a, args.b)))
     except (OSError, ValueError) as exc:
         print(f"robustness_diff: {exc}", file=sys.stderr)
         return 2
     out = compare(a, b, tie_mm=args.tie_mm, top=max(0, args.top))
+    out["settings_differ"] = differ
     if args.json:
         print(json.dumps(out))
         return 0
     lo, hi = out["mpjpe_mm_diff_ci95"]
+    if differ:
+        print("settings differ (A vs B): " + ", ".join(f"{k} {va!r} vs {vb!r}" for k, (va, vb) in differ.items()))
     print(f"{out['clips']} clips paired ({out['only_in_a']} only in A, {out['only_in_b']} only in B)")
     print(f"MPJPE B - A: mean {out['mpjpe_mm_diff_mean']:+.2f} mm (95 % bootstrap {lo:+.2f} .. {hi:+.2f}), "
           f"median {out['mpjpe_mm_diff_median']:+.2f}, sd {out['mpjpe_mm_diff_sd']:.2f}; "

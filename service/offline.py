@@ -24,6 +24,7 @@ from segmentation.background import BackgroundModel
 from segmentation.floor import FloorShadows
 from segmentation.pipeline import SegmentationParams, segment_frame
 from service.backgrounds import background_models
+from service.smoothed import SMOOTH_WINDOW_S, smoothed_records, window_half
 from tracker.body.model import BodyModel, load_model
 from tracker.fitting.hypotheses import FrontBackOptions
 from tracker.fitting.scene import SceneOptions, SceneTracker
@@ -112,7 +113,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
                   ignore: dict[str, np.ndarray] | None = None, colour: bool = True,
                   front_back: FrontBackOptions | None = FrontBackOptions(),
                   stream_check: StreamCheck | None = None, props=None, retrack: bool = True,
-                  stop: Callable[[], bool] | None = None,
+                  smooth_s: float | None = None, stop: Callable[[], bool] | None = None,
                   on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
     """Pose records for every frame set of ``session``, in frame-id order.
 
@@ -127,8 +128,7 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     backgrounds : dict, optional, camera name -> BackgroundModel (None: ``service.backgrounds``)
     clock : callable () -> float, seconds for the tracker's timings
     method : {"contours", "blobs"}, ``tracker.fitting.Tracker`` or ``tracker.blobs.BlobTracker`` (``blob_options``)
-    scene : SceneOptions, optional
-        Contours only: decide which foreground is body (``tracker.fitting.scene``).
+    scene : SceneOptions, optional, contours only: decide which foreground is body (``tracker.fitting.scene``)
     ignore : dict, optional, camera name -> (h, w) bool mask of pixels never body (with ``scene``)
     colour, front_back : bool, FrontBackOptions or None
         Frame colours for, and options of, the front/back guard (``tracker.fitting.hypotheses``).
@@ -136,13 +136,14 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     props : sequence of PropBox, optional, world boxes never body (with ``scene``, or blobs; ``tracker.fitting.props``)
     retrack, stop : bool, callable () -> bool or None; contours: fit a scene's warm-up frames and every refused
         stretch again backwards from the next accepted frame (``settled_records``, at most ``MAX_HELD_BYTES`` of
-        images held; False: every frame once, as live); ``stop()``, asked before each set, True ends the records;
-        ``on_step(record)`` sees each set's first fit as it is made (``settled_records``)
+        images held; False: every frame once, as live); ``stop()`` (both methods), asked before each set, True
+        ends the records; contours: ``on_step(record)`` sees each set's first fit as it is made
+    smooth_s : float or None, seconds; the poses smoothed over a centred window that long (``service.smoothed``; 0: as
+        fitted; None: ``SMOOTH_WINDOW_S``, or 0 without ``retrack``: as live)
 
     Yields
     ------
-    dict
-        A DESIGN.md pose record per frame id.
+    dict, a DESIGN.md pose record per frame id
     """
     if method not in ("contours", "blobs"):
         raise ValueError(f"method: expected 'contours' or 'blobs', got {method!r}")
@@ -151,9 +152,10 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
     cams = [session.camera_model(n) for n in names]
     if backgrounds is None:
         backgrounds, _ = background_models(session, names, frames=frames)
+    half = window_half((SMOOTH_WINDOW_S if retrack else 0.0) if smooth_s is None else smooth_s, session.fps)
     if method == "blobs":
-        yield from _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                                stream_check, props=props)
+        yield from _smoothed(_track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options,
+                                          clock, stream_check, props=props, stop=stop), body, half, session.fps)
         return
     tracker = Tracker(body, cams, sliding=sliding, solver=solver, initial_params=initial_params,
                       options=options, clock=clock, front_back=front_back)
@@ -168,7 +170,12 @@ def track_session(session: Session, *, model: str | BodyModel = "knossow40", sli
           if scene is not None else ImageTracker(tracker, ours, segmentation=segmentation, floor=floor, colour=colour))
     per_set = sum(3 * c.width * c.height for c in cams)
     held = max(1, min(MAX_HELD_FRAMES, MAX_HELD_BYTES // per_set)) if retrack else 0
-    yield from settled_records(st, read(frames, stream_check), max_held=held, stop=stop, on_step=on_step)
+    yield from _smoothed(settled_records(st, read(frames, stream_check), max_held=held, stop=stop, on_step=on_step),
+                         body, half, session.fps)
+
+
+def _smoothed(records: Iterator[dict], body: BodyModel, half: int, fps: float) -> Iterator[dict]:
+    return smoothed_records(records, body, half=half, fps=fps) if half > 0 else records
 
 
 class ImageTracker:
@@ -221,7 +228,7 @@ MAX_HELD_BYTES = 1 << 30
 
 def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int, int, Mapping[str, np.ndarray]]],
                     *, refused: bool = True, max_held: int = MAX_HELD_FRAMES, stop: Callable[[], bool] | None = None,
-                    on_step: Callable[[dict], None] | None = None) -> Iterator[dict]:
+                    on_step: Callable[[dict], None] | None = None, tail: bool = True) -> Iterator[dict]:
     """``st``'s pose records for ``sets`` (frame id, timestamp ns, camera name -> BGR image), in order,
     the frames of each warm-up and of each refused stretch fitted again backwards once the track is past them.
 
@@ -231,15 +238,19 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
     stretch the track found its way out of later); at the next frame that is neither, ``st.retrack`` fits
     the held frames again latest first from that frame's state, and a held frame's record is the refit's,
     marked ``"refit": true``, when ``refit_kept``, else the first fit's.  At most ``max_held`` frames are
-    held (the oldest leave with their first records; 0: every frame once, as live); frames still held when
-    ``sets`` ends, when ``stop()`` (asked before each frame) says so, or when an exception (an interrupt)
-    leaves the loop keep their first records and are yielded first.  ``on_step(record)`` sees every first
+    held (the oldest leave with their first records; 0: every frame once, as live).  With ``tail``, the
+    frames still held when ``sets`` ends (a take that ends refused, or never reached an accepted frame) are
+    fitted again the same way from the last frame's state, unless ``stop()`` says so; frames held when
+    ``stop()`` (asked before each frame) ends the run, or when an exception (an interrupt) leaves the loop,
+    keep their first records, yielded before the exception goes on.  ``on_step(record)`` sees every first
     fit as it is made (progress while frames are held).
     """
     held: list[tuple[tuple, dict]] = []
+    stopped = False
     try:
         for item in sets:
             if stop is not None and stop():
+                stopped = True
                 break
             rec = st.step(*item)
             if on_step is not None:
@@ -249,18 +260,28 @@ def settled_records(st: "SceneTracker | ImageTracker", sets: Iterable[tuple[int,
                 if len(held) > max_held:
                     yield held.pop(0)[1]
                 continue
-            if held:
-                refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(held)])}
-                out, held = held, []
-                for (it, first) in out:
-                    refit = refits.get(it[0])
-                    yield {**refit, "refit": True} if refit is not None and refit_kept(refit, first) else first
+            if held:  # the accepted frame waits with them: an interrupt in the refit writes it too
+                held.append((item, rec))
+                kept, held = _refitted(st, held[:-1]) + [rec], []
+                yield from kept
+                continue
             yield rec
+        if held and tail and not stopped and not (stop is not None and stop()):
+            kept, held = _refitted(st, held), []
+            yield from kept
     except (Exception, KeyboardInterrupt):
         out, held = held, []
         yield from (r for _, r in out)
         raise
     yield from (r for _, r in held)
+
+
+def _refitted(st, held: list) -> list[dict]:
+    """``held`` (item, first record) fitted again latest first by ``st.retrack``; each frame's kept record,
+    in ``held``'s order."""
+    refits = {r["frame"]: r for r in st.retrack([it for it, _ in reversed(held)])}
+    return [{**refits[it[0]], "refit": True} if it[0] in refits and refit_kept(refits[it[0]], first) else first
+            for it, first in held]
 
 
 def refit_kept(refit: dict, first: dict) -> bool:
@@ -283,7 +304,7 @@ def refit_kept(refit: dict, first: dict) -> bool:
 
 
 def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_options, clock,
-                 stream_check=None, props=None) -> Iterator[dict]:
+                 stream_check=None, props=None, stop=None) -> Iterator[dict]:
     from tracker.blobs import BlobOptions, BlobTracker
     from tracker.blobs.start import ContourStart
 
@@ -291,6 +312,8 @@ def _track_blobs(session, body, cams, backgrounds, frames, initial_params, blob_
                           initialiser=ContourStart(body, cams, backgrounds, props=props or ()),
                           options=blob_options or BlobOptions(), clock=clock, props=props or ())
     for fid, group in _frame_sets(session, [c.name for c in cams], frames, stream_check):
+        if stop is not None and stop():
+            return
         ts = next(iter(group.values())).timestamp_ns
         yield tracker.step(fid, ts, {n: f.image for n, f in group.items()})
 

@@ -18,6 +18,7 @@ from tracker.body.subject import read_subject
 from segmentation.clutter import ignore_masks, parse_ignore_region, session_ignore_regions
 from tracker.fitting.props import parse_prop
 from service.offline import background_models, session_model, session_props, summarise, track_session, warm_up_kernels
+from service.smoothed import SMOOTH_WINDOW_S
 from segmentation.pipeline import SegmentationParams
 from tracker.fitting.scene import SceneOptions
 from tracker.body.model import available_models
@@ -53,8 +54,16 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-scene", action="store_true",
                         help="take every foreground pixel as body (no clutter learning, no seated initialisation)")
     parser.add_argument("--no-retrack", action="store_true",
-                        help="contours: fit every frame once, as a live tracker does (default: the scene's warm-up frames and "
-                             "every stretch the gate refused are fitted again backwards from the next accepted frame)")
+                        help="contours: fit every frame once and write it unsmoothed, as a live tracker does (default: the "
+                             "scene's warm-up frames and every stretch the gate refused are fitted again backwards "
+                             "from the next accepted frame)")
+    parser.add_argument("--no-smooth", action="store_true",
+                        help="write every frame's pose as fitted (default: each pose smoothed over a centred window "
+                             "of --smooth-window seconds, never across a frame without a pose or a jump; "
+                             "--no-retrack implies it)")
+    parser.add_argument("--smooth-window", type=float, default=SMOOTH_WINDOW_S, metavar="SECONDS",
+                        help=f"the smoothing window's length (default {SMOOTH_WINDOW_S:.3f} s: 5 frames at 30 fps, "
+                             "11 at 60)")
     parser.add_argument("--allow-missing-cameras", action="store_true",
                         help="track on with the cameras that have frames when a camera's video is cut short or "
                              "corrupt (reported per camera: frames read of frames expected); default: exit 2")
@@ -100,6 +109,9 @@ def run(args: argparse.Namespace) -> int:
     frame was tracked (:class:`service.atomic.JsonlWriter`): a failing or interrupted run never
     truncates an existing ``OUT``, and its finished frames are kept (named on stderr)."""
     session = load_session(args.session)
+    if not (args.smooth_window >= 0 and np.isfinite(args.smooth_window)):
+        raise SessionError(f"--smooth-window: expected a number of seconds >= 0, got {args.smooth_window}")
+    smooth_s = 0.0 if args.no_smooth or args.no_retrack else args.smooth_window
     frames = parse_frame_range(args.frames)
     cameras = None if args.cameras is None else [c.strip() for c in args.cameras.split(",") if c.strip()]
     model = session_model(session, args.model) if args.subject is None else read_subject(args.subject).body()
@@ -143,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
                                  method=args.method, stream_check=check, ignore=ignore, props=props,
                                  segmentation=SegmentationParams(floor_test=args.floor_test),
                                  scene=None if args.no_scene or args.method != "contours" else SceneOptions(),
-                                 retrack=not args.no_retrack, on_step=fitted_one):
+                                 retrack=not args.no_retrack, smooth_s=smooth_s, on_step=fitted_one):
             if subject_name is not None:
                 rec["subject"] = subject_name
             out.write(json.dumps(rec).encode())

@@ -121,11 +121,11 @@ print(json.dumps([before, counts(), sum("params" in r for r in recs), [r.get("re
 @pytest.mark.slow
 def test_lossless_blob_worker_equals_offline_and_publishes_hulls(hop, studio):
     """Camera worker -> blob track worker (no segment worker) in lossless mode gives exactly the offline
-    ``contourcap track --method blobs`` poses, and one hull record per fitted set."""
+    ``contourcap track --method blobs --no-smooth`` poses, and one hull record per fitted set."""
     session = load_session(hop)
     names = tuple(session.camera_names)
     init = np.asarray(_truth(hop)[0]["params"])
-    offline = list(track_session(session, method="blobs", initial_params=init))
+    offline = list(track_session(session, method="blobs", initial_params=init, smooth_s=0.0))
     keys, poses = studio.keys, []
     track_s = studio.session(listen=True)
     client = studio.session()

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from capture.session import load_session
-from service.offline import settled_records, track_session
+from service.offline import session_model, settled_records, track_session
+from service.smoothed import SMOOTH_WINDOW_S
 from service.synthetic_session import make_synthetic_session
 from tracker.fitting.scene import SceneOptions
 from tracker.synthetic.synth import bundled_motion
@@ -34,26 +35,28 @@ class _Scripted:
                 | ({} if self.refit_ok[f] else {"failed": self.refit_failed[f]}) for f, _, _ in frames]
 
 
+@pytest.mark.parametrize("tail", [False, True])
 @pytest.mark.parametrize("refused", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
+def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused, tail):
     rng = np.random.default_rng(seed)
     n = 40
     warm = rng.random(n) < 0.5
+    warm[-3:] = True  # every take here ends in a held run
     ok, refit_ok = rng.random(n) < 0.5, rng.random(n) < 0.5
     kinds = (["uncovered"], ["iou"], ["iou", "uncovered"], ["limb_colour"])
     refit_failed = [kinds[k] for k in rng.integers(0, len(kinds), n)]
     st = _Scripted(warm, ok, refit_ok, refit_failed)
     seen = []  # on_step: every first fit as it is made, held or not (what progress shows)
     out = []
-    for r in settled_records(st, ((i, 1000 * i, {}) for i in range(n)), refused=refused,
+    for r in settled_records(st, ((i, 1000 * i, {}) for i in range(n)), refused=refused, tail=tail,
                              on_step=lambda rec: seen.append(rec["frame"])):
         assert seen[-1] >= r["frame"]  # a record is yielded only after its frame was fitted
         out.append(r)
     assert seen == list(range(n))
     assert [r["frame"] for r in out] == list(range(n))
     # every maximal run of held frames (warm, or refused when asked) followed by an accepted frame is
-    # refitted once, latest first
+    # refitted once, latest first; with ``tail`` the run the take ends in too, from the last frame's state
     held = warm | (~ok if refused else False)
     runs, cur = [], []
     for i in range(n):
@@ -62,6 +65,8 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
         elif cur:
             runs.append(cur[::-1])
             cur = []
+    if tail:
+        runs, cur = runs + [cur[::-1]], []
     assert st.retracked == runs
     refitted = {f for run in runs for f in run}
     for r in out:
@@ -73,7 +78,7 @@ def test_held_frames_are_refitted_latest_first_and_kept_in_order(seed, refused):
             passed = refit_ok[f] or refit_failed[f] == ["uncovered"]
             kept = passed or (not ok[f] and f % 5 >= f % 7)
             assert r["pass"] == ("refit" if kept else "first")
-    # the held frames at the end (no accepted frame after them) keep their first records
+    # without ``tail`` the held frames at the end (no accepted frame after them) keep their first records
     assert all(out[f]["pass"] == "first" for f in cur)
 
 
@@ -133,26 +138,61 @@ def test_refit_rules_without_a_pose_without_an_iou_and_for_the_uncovered_check_a
     assert out[2]["params"] == [2.0] and out[3]["params"] == [1.0] and out[5]["ok"]
 
 
-@pytest.mark.parametrize("how", ["interrupt", "stop"])
+@pytest.mark.parametrize("how", ["interrupt", "stop", "retrack"])
 def test_held_frames_are_yielded_with_their_first_fits_when_the_run_ends_early(how):
     n = 12
     firsts = {i: {"ok": i < 3, "params": [0.0]} | ({} if i < 3 else {"failed": ["iou"]}) for i in range(n)}
     st = _Records(firsts, {}, raise_at=9 if how == "interrupt" else None)
+    if how == "retrack":  # the tail's refit is interrupted: nothing held is lost, nothing refitted published
+        n = 9
+
+        def retrack(frames):
+            st.retracked.append([f for f, _, _ in frames])
+            raise KeyboardInterrupt
+        st.retrack = retrack
     steps = []
     out = []
     stop = (lambda: len(steps) >= 9) if how == "stop" else None
     st_step = st.step
     st.step = lambda *a: steps.append(a[0]) or st_step(*a)
     gen = settled_records(st, _sets(n), stop=stop)
-    if how == "interrupt":
+    if how != "stop":
         with pytest.raises(KeyboardInterrupt):
             for r in gen:
                 out.append(r)
     else:
-        out = list(gen)
+        out = list(gen)  # a stop (the CPU budget) does not refit the frames still held
     # frames 3-8 were held (refused, no accepted frame after them yet): they leave with their first fits
     assert [r["frame"] for r in out] == list(range(9))
-    assert not any(r.get("refit") for r in out) and st.retracked == []
+    assert not any(r.get("refit") for r in out)
+    assert st.retracked == ([[8, 7, 6, 5, 4, 3]] if how == "retrack" else [])
+
+
+def test_an_interrupted_refit_loses_neither_the_held_frames_nor_the_accepted_frame_after_them():
+    firsts = {i: {"ok": i in (0, 1, 2, 6), "params": [0.0]} | ({} if i in (0, 1, 2, 6) else {"failed": ["iou"]})
+              for i in range(9)}
+    st = _Records(firsts, {})
+
+    def retrack(frames):
+        st.retracked.append([f for f, _, _ in frames])
+        raise KeyboardInterrupt
+    st.retrack = retrack
+    out = []
+    with pytest.raises(KeyboardInterrupt):
+        for r in settled_records(st, _sets(9)):
+            out.append(r)
+    # frames 3-5 were held; accepted frame 6 started their refit, which was interrupted: 0-6 all written, in order
+    assert [r["frame"] for r in out] == list(range(7)) and not any(r.get("refit") for r in out)
+    assert st.retracked == [[5, 4, 3]]
+
+
+def test_the_tail_is_not_refitted_once_stop_says_so():
+    firsts = {i: {"ok": i < 3, "params": [0.0]} | ({} if i < 3 else {"failed": ["iou"]}) for i in range(6)}
+    st = _Records(firsts, {})
+    calls = []
+    out = list(settled_records(st, _sets(6), stop=lambda: calls.append(1) is None and len(calls) > 6))
+    # stop() is asked before each of the 6 frames (False) and once more before the tail's refit (True)
+    assert len(calls) == 7 and [r["frame"] for r in out] == list(range(6)) and st.retracked == []
 
 
 @pytest.fixture(scope="module")
@@ -207,7 +247,7 @@ def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     session = load_session(hop)
     opts = SceneOptions(warmup_frames=4)
     plain = list(track_session(session, scene=opts, retrack=False))
-    settled = list(track_session(session, scene=opts))
+    settled = list(track_session(session, scene=opts, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     k = 5  # the start frame and the 4 warm-up frames after it
     for a, b in zip(plain[k:], settled[k:]):
@@ -220,8 +260,10 @@ def test_track_session_retrack_changes_only_the_warm_up_and_refused_frames(hop):
     assert any(a["params"] != b["params"] for a, b in zip(plain[:k], settled[:k]))
 
 
-@pytest.mark.parametrize("flag", [[], ["--no-retrack"]])
+@pytest.mark.parametrize("flag", [[], ["--no-retrack"], ["--no-smooth"], ["--smooth-window", "0.3"]])
 def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, flag):
+    """``--no-retrack`` (as live: every frame fitted once, unsmoothed), ``--no-smooth`` and ``--smooth-window``
+    reach ``track_session``."""
     import service.commands.track as track_cmd
     from service.cli import main
 
@@ -234,7 +276,9 @@ def test_track_cli_no_retrack_reaches_track_session(hop, tmp_path, monkeypatch, 
     monkeypatch.setattr(track_cmd, "track_session", spy)
     out = tmp_path / "poses.jsonl"
     assert main(["track", str(hop), "--out", str(out), "--frames", "0:3", *flag]) == 0
-    assert seen["retrack"] is (not flag)
+    assert seen["retrack"] is ("--no-retrack" not in flag)
+    assert seen["smooth_s"] == (0.0 if {"--no-retrack", "--no-smooth"} & set(flag) else
+                                0.3 if "--smooth-window" in flag else SMOOTH_WINDOW_S)
     assert len(out.read_text().splitlines()) == 3
 
 
@@ -269,7 +313,7 @@ def test_image_tracker_retrack_refits_on_a_copy_that_checks_the_iou_every_frame(
 def test_track_session_without_scene_refits_only_refused_frames(hop):
     session = load_session(hop)
     plain = list(track_session(session, retrack=False))
-    settled = list(track_session(session))
+    settled = list(track_session(session, smooth_s=0.0))
     assert [r["frame"] for r in settled] == [r["frame"] for r in plain]
     for a, b in zip(plain, settled):
         if a["ok"]:
@@ -278,3 +322,43 @@ def test_track_session_without_scene_refits_only_refused_frames(hop):
     # accepted frame after it, the gate passes it
     assert not plain[0]["ok"] and settled[0]["ok"], (plain[0].get("reason"), settled[0].get("reason"))
     assert settled[0]["params"] != plain[0]["params"]
+
+
+def test_track_session_smooths_the_poses_and_keeps_every_verdict(hop):
+    """The default offline path smooths the settled records' poses (``service.smoothed``): the same frames in the
+    same order, every verdict and quality figure the fit's, each pose a model pose (joints by forward kinematics
+    of its params, inside the joint limits)."""
+    from tracker.body.kinematics import forward, joint_centre_array
+
+    session = load_session(hop)
+    fitted = list(track_session(session, smooth_s=0.0))
+    smoothed = list(track_session(session))
+    assert [r["frame"] for r in smoothed] == [r["frame"] for r in fitted]
+    model = session_model(session)
+    moved = 0
+    for a, b in zip(fitted, smoothed):
+        assert {k: v for k, v in b.items() if k not in ("params", "joints", "smoothed", "latency_ms")} == \
+            {k: v for k, v in a.items() if k not in ("params", "joints", "latency_ms")}
+        if b.get("smoothed"):
+            moved += 1
+            J = joint_centre_array(model, forward(model, np.asarray(b["params"])))
+            np.testing.assert_allclose([b["joints"][n] for n in model.joint_names], J, atol=1e-9)
+            assert model.within_limits(np.asarray(b["params"]))
+            assert max(np.linalg.norm(np.subtract(a["joints"][n], b["joints"][n])) for n in model.joint_names) < 0.1
+    assert moved >= len(smoothed) // 2
+
+
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf"])
+def test_track_cli_refuses_a_bad_smoothing_window(hop, tmp_path, capsys, bad):
+    from service.cli import main
+
+    assert main(["track", str(hop), "--out", str(tmp_path / "p.jsonl"), "--smooth-window", bad]) == 2
+    assert "--smooth-window" in capsys.readouterr().err
+
+
+def test_the_blob_tracker_stops_too(hop):
+    """``track_session``'s ``stop`` ends a blob take as it ends a contour one (the bench's CPU budget)."""
+    session = load_session(hop)
+    asked = []
+    assert list(track_session(session, method="blobs", stop=lambda: asked.append(1) is None)) == []
+    assert asked == [1]

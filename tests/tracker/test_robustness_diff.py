@@ -98,3 +98,17 @@ def test_the_command_prints_json(tmp_path, capsys):
     assert out["clips"] == 2 and out["mpjpe_mm_diff_mean"] == pytest.approx(-0.5)
     (tmp_path / "notjson.json").write_text("{")
     assert main([str(a), str(tmp_path / "notjson.json")]) == 2
+
+
+def test_runs_made_with_other_settings_are_said_to_differ(tmp_path, capsys):
+    """A result without ``smooth_s`` was not smoothed: against a smoothed run the settings are named."""
+    a = _write(tmp_path, "a.json", {**_result([40.0, 50.0]), "retrack": True, "clip_budget_s": 60.0})
+    b = _write(tmp_path, "b.json", {**_result([41.0, 48.0]), "retrack": True, "clip_budget_s": 60.0,
+                                     "smooth_s": 1 / 6, "calibrate_from": "tpose_start"})
+    assert main([str(a), str(b), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["settings_differ"] == {"smooth_s": [0.0, 1 / 6],
+                                                                      "calibrate_from": [None, "tpose_start"]}
+    assert main([str(a), str(a)]) == 0
+    assert "settings differ" not in capsys.readouterr().out
+    assert main([str(a), str(b)]) == 0
+    assert "settings differ (A vs B): smooth_s 0.0 vs 0.16" in capsys.readouterr().out
