@@ -35,14 +35,15 @@ def test_seated_subject_is_tracked_on_the_person_not_the_chair(shared_data, tmp_
         pytest.skip(f"{src} not found")
     root = tmp_path / "uu"
     import_uu_studio(src, root)
-    records = list(track_session(load_session(root), frames=range(0, 60), scene=SceneOptions()))
+    firsts = []  # every frame's first fit (the records may hold refits made with the clutter learned since)
+    records = list(track_session(load_session(root), frames=range(0, 60), scene=SceneOptions(), on_step=firsts.append))
     assert len(records) == 60 and all("joints" in r for r in records)
     err = {n: np.mean([np.linalg.norm(np.subtract(r["joints"][n], ref)) for r in records])
            for n, ref in REFERENCE.items()}
     assert 1e3 * np.mean(list(err.values())) < 95.0, {n: round(1e3 * e) for n, e in err.items()}
     assert 1e3 * err["left_knee"] < 120.0, {n: round(1e3 * e) for n, e in err.items()}
     # the chair and the board learned as clutter: the IoU checks rise (measured 0.69 -> 0.75-0.76)
-    ious = [r["iou"] for r in records if "iou" in r]
+    ious = [r["iou"] for r in firsts if "iou" in r]
     assert ious and ious[-1] > ious[0] + 0.03, ious
 
 
@@ -54,6 +55,7 @@ def test_a_fit_started_on_the_chair_is_never_reported_ok(shared_data, tmp_path):
     from capture.replay import iter_frame_sets
     from segmentation.pipeline import segment_frame
     from service.offline import background_models, session_model
+    from tracker.body.kinematics import forward, joint_centre_array
     from tracker.search.initialise import initialise
 
     src = shared_data / "uu_studio"
@@ -69,10 +71,12 @@ def test_a_fit_started_on_the_chair_is_never_reported_ok(shared_data, tmp_path):
     segs = {n: segment_frame(backgrounds[n], f.image) for n, f in group.items()}
     start = initialise(model, [session.camera_model(n) for n in names], {n: s.silhouette for n, s in segs.items()},
                        {n: s.chamfer for n, s in segs.items()})
+    at = model.joint_names.index("left_knee")
+    start_knee = joint_centre_array(model, forward(model, np.asarray(start.params)))[at]
+    assert 1e3 * np.linalg.norm(start_knee - REFERENCE["left_knee"]) > 200.0  # the start is on the chair
     records = list(track_session(session, frames=range(0, 100), initial_params=np.asarray(start.params),
                                  backgrounds=backgrounds, scene=SceneOptions()))
     knee = [1e3 * np.linalg.norm(np.subtract(r["joints"]["left_knee"], REFERENCE["left_knee"])) for r in records]
-    assert knee[0] > 200.0, knee[0]  # the start is on the chair
     false_ok = [(r["frame"], round(k)) for r, k in zip(records, knee) if r["ok"] and k > 150.0]
     assert false_ok == []
 
