@@ -19,7 +19,8 @@ the subject's standing height measured on the rendered body), background models 
 ``knossow40`` model sized from the height) exactly as ``contourcap track --floor-test --no-scene`` does
 (the stretches the gate refused fitted again backwards from the next accepted frame, the poses smoothed over a
 centred window, ``service.smoothed``; ``--no-smooth``: as fitted; ``--no-retrack``: every frame once, unsmoothed,
-as live; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
+as live; ``--scene``: the scene tracker, as ``contourcap track`` without ``--no-scene``, ``--scene-option``
+its ``SceneOptions``; ``--no-floor-test``: without ``segmentation.floor``; ``--method blobs``: the blob tracker
 ``tracker.blobs`` on the colour frames, initialised by the same silhouette search).  The poses are
 scored against the BVH joint centres by ``tracker.synthetic.evaluation`` (its docstring defines
 mirrored, false ok, false alarm and PCK).  Per clip also: the median IoU of the segmented
@@ -95,6 +96,7 @@ from tracker.body.model import JOINT_NAMES as MODEL_JOINTS  # noqa: E402
 from tracker.body.subject import parse_subject, subject_toml  # noqa: E402
 from service.offline import floor_test, session_model, track_session, warm_up_kernels  # noqa: E402
 from service.smoothed import SMOOTH_WINDOW_S  # noqa: E402
+from tracker.fitting.scene import SceneOptions  # noqa: E402
 from tracker.fitting.tracking import TrackerOptions  # noqa: E402
 from tracker.synthetic.retarget import retarget_bvh  # noqa: E402
 from tracker.synthetic.scene import fit_ring_cameras  # noqa: E402
@@ -522,6 +524,11 @@ def main(argv=None) -> int:
     ap.add_argument("--no-ik-floor", action="store_true", help="skip the inverse-kinematics floor per clip")
     ap.add_argument("--no-front-back", action="store_true",
                     help="track without the front/back guard (tracker.fitting.hypotheses), for comparison")
+    ap.add_argument("--scene", action="store_true",
+                    help="track with the scene tracker (tracker.fitting.scene: clutter learned, seated start), as "
+                         "contourcap track does without --no-scene (default: every foreground pixel is body)")
+    ap.add_argument("--scene-option", action="append", default=[], metavar="NAME=VALUE",
+                    help="with --scene: a tracker.fitting.scene.SceneOptions field (repeatable)")
     ap.add_argument("--no-floor-test", action="store_true",
                     help="segment each camera alone (no segmentation.floor test), as the live workers do")
     ap.add_argument("--no-retrack", action="store_true",
@@ -561,6 +568,10 @@ def main(argv=None) -> int:
         TRACK_OPTIONS["front_back"] = None
     if args.no_floor_test:
         TRACK_OPTIONS["segmentation"] = SegmentationParams(floor_test=False)
+    if args.scene_option and not args.scene:
+        ap.error("--scene-option needs --scene")
+    if args.scene:
+        TRACK_OPTIONS["scene"] = _tracker_options(args.scene_option, ap, SceneOptions(), flag="--scene-option")
     if args.no_retrack:
         TRACK_OPTIONS["retrack"] = False
     if args.no_smooth or args.no_retrack:
@@ -602,6 +613,7 @@ def main(argv=None) -> int:
     header = {"machine_ref_ms": ref, "kernel_warm_up_s": round(warm_s, 2), "size": [w, h], "fps": args.fps,
               "frames_per_clip": args.frames, "cameras": cams, "motions": clips, "clip_budget_s": args.clip_budget_s,
               "retrack": not args.no_retrack, "smooth_s": TRACK_OPTIONS.get("smooth_s", SMOOTH_WINDOW_S),
+              "scene": dataclasses.asdict(TRACK_OPTIONS["scene"]) if args.scene else False,
               "date": datetime.date.today().isoformat()}
     if args.calibrate_from is not None:
         header["calibrate_from"] = args.calibrate_from

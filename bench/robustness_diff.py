@@ -115,9 +115,9 @@ def compare(a: dict, b: dict, *, tie_mm: float = 0.5, top: int = 5, seed: int = 
 
 
 #: run settings a comparison should hold equal, with the value a result file without the key was run at
-#: (``smooth_s`` and ``calibrate_from`` are newer than the oldest results; None: not recorded)
+#: (``smooth_s``, ``calibrate_from`` and ``scene`` are newer than the oldest results; None: not recorded)
 SETTINGS = {"method": None, "size": None, "fps": None, "frames_per_clip": None, "clip_budget_s": None,
-            "retrack": None, "smooth_s": 0.0, "calibrate_from": None}
+            "retrack": None, "smooth_s": 0.0, "calibrate_from": None, "scene": False}
 
 
 def load_settings(path: Path) -> dict:

@@ -149,3 +149,29 @@ def test_calibrate_from_calibrates_each_subject_once_and_tracks_its_other_clips_
                    and c[4]["source"]["subject"] == s for c in rest)
         if not all_cameras:  # clip j of subject s keeps cameras[(s + j) % 2] whatever the order it runs in
             assert [c[2] for c in calls[start:start + 3]] == [[4, 6][(s + 2) % 2], [4, 6][s % 2], [4, 6][(s + 1) % 2]]
+
+
+def test_scene_options_reach_the_tracker_and_the_header(monkeypatch):
+    """``--scene --scene-option NAME=VALUE``: the bench tracks with those ``SceneOptions`` (``contourcap track``'s
+    default path) and says so in its header; ``--scene-option`` alone is refused."""
+    import robustness
+    from tracker.fitting.scene import SceneOptions
+
+    figures = dict.fromkeys(("mpjpe_mm", "ok", "frames", "mirrored", "mirrored_after", "false_ok", "false_alarm",
+                             "ik_floor_mm", "ms_per_frame_median", "cpu_s", "unprocessed"), 0)
+    seen = {}
+    monkeypatch.setattr(robustness, "TRACK_OPTIONS", dict(robustness.TRACK_OPTIONS))
+    monkeypatch.setattr(robustness, "run_clip", lambda *a, **k: seen.setdefault("scene", robustness.TRACK_OPTIONS.get(
+        "scene")) and dict(figures))
+    monkeypatch.setattr(robustness, "machine_ref_ms", lambda: 1.0)
+    monkeypatch.setattr(robustness, "warm_up_kernels", lambda method: 0.0)
+    monkeypatch.setattr(robustness, "load_bvh", lambda path: None)
+    monkeypatch.setattr(robustness, "summarise", lambda per_clip: {})
+    monkeypatch.setattr(robustness, "_emit", lambda result, args: seen.update(header=result["scene"]) or 0)
+    monkeypatch.setattr("builtins.print", lambda *a, **k: None)
+    assert robustness.main(["--subject-ids", "0", "--clips", "walk_turn", "--scene", "--scene-option", "learn=false",
+                            "--scene-option", "warmup_frames=5"]) == 0
+    assert seen["scene"] == SceneOptions(learn=False, warmup_frames=5)
+    assert seen["header"]["learn"] is False and seen["header"]["warmup_frames"] == 5
+    with pytest.raises(SystemExit):
+        robustness.main(["--scene-option", "learn=false"])
