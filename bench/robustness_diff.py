@@ -24,18 +24,25 @@ MAX_BYTES = 256 * 1024 * 1024
 COUNTS = ("frames", "ok", "false_ok", "false_alarm", "mirrored_after", "posed_after")
 
 
-def load_clips(path: Path, *, calibrated: bool = False) -> dict:
-    """``{(subject, clip, cameras): {"mpjpe_mm": float, "frames": int, ...}}`` of one result file.
-
-    Raises ``ValueError`` naming the file and the key when the file is not a robustness result (too
-    large, not JSON, no ``per_clip`` list, a clip without a needed key or with a value of the wrong type)."""
+def read_result(path: Path):
+    """One result file's JSON value; ``ValueError`` naming the file when it is too large or not JSON."""
     path = Path(path)
     if path.stat().st_size > MAX_BYTES:
         raise ValueError(f"{path}: larger than {MAX_BYTES} bytes")
     try:
-        data = json.loads(path.read_text())
+        return json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
+
+
+def load_clips(path: Path, *, calibrated: bool = False, data=None) -> dict:
+    """``{(subject, clip, cameras): {"mpjpe_mm": float, "frames": int, ...}}`` of one result file (``data``:
+    its ``read_result`` value, when already read).
+
+    Raises ``ValueError`` naming the file and the key when the file is not a robustness result (too
+    large, not JSON, no ``per_clip`` list, a clip without a needed key or with a value of the wrong type)."""
+    path = Path(path)
+    data = read_result(path) if data is None else data
     clips = data.get("per_clip") if isinstance(data, dict) else None
     if not isinstance(clips, list):
         raise ValueError(f"{path}: key 'per_clip': expected a list of clips")
@@ -120,23 +127,14 @@ SETTINGS = {"method": None, "size": None, "fps": None, "frames_per_clip": None, 
             "retrack": None, "smooth_s": 0.0, "calibrate_from": None, "scene": False}
 
 
-def load_settings(path: Path) -> dict:
-    """The run settings (``SETTINGS``) of one result file, a missing key at its default; the file is
-    checked as ``load_clips`` checks it (size, JSON, an object)."""
-    path = Path(path)
-    if path.stat().st_size > MAX_BYTES:
-        raise ValueError(f"{path}: larger than {MAX_BYTES} bytes")
-    try:
-        data = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected an object")
+def settings_of(data: dict) -> dict:
+    """The run settings (``SETTINGS``) of a result (``read_result``'s value, checked by ``load_clips``), a
+    missing key at its default."""
     return {k: data.get(k, default) for k, default in SETTINGS.items()}
 
 
 def differing_settings(a: dict, b: dict) -> dict:
-    """``{key: [a's, b's]}`` for the settings (``load_settings``) that differ between two runs."""
+    """``{key: [a's, b's]}`` for the settings (``settings_of``) that differ between two runs."""
     return {k: [a[k], b[k]] for k in SETTINGS if a[k] != b[k]}
 
 
@@ -150,8 +148,9 @@ def main(argv=None) -> int:
     ap.add_argument("--calibrated", action="store_true", help="compare the calibrated tracks")
     args = ap.parse_args(argv)
     try:
-        a, b = (load_clips(p, calibrated=args.calibrated) for p in (args.a, args.b))
-        differ = differing_settings(*(load_settings(p) for p in (args.a, args.b)))
+        data = [read_result(p) for p in (args.a, args.b)]
+        a, b = (load_clips(p, calibrated=args.calibrated, data=d) for p, d in zip((args.a, args.b), data))
+        differ = differing_settings(*(settings_of(d) for d in data))
     except (OSError, ValueError) as exc:
         print(f"robustness_diff: {exc}", file=sys.stderr)
         return 2
