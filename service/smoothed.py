@@ -46,6 +46,13 @@ def _posed(rec: dict, model: BodyModel) -> bool:
             and bool(np.all(np.isfinite(p))))
 
 
+def _joint_array(records: list[dict], posed, model: BodyModel) -> np.ndarray:
+    """The records' joint centres in ``model.joint_names`` order, zeros for a record not ``posed``;
+    shape (len(records), n_joints, 3), metres."""
+    return np.array([[r["joints"][n] for n in model.joint_names] if p else np.zeros((len(model.joint_names), 3))
+                     for r, p in zip(records, posed)], float)
+
+
 def pose_breaks(records: list[dict], model: BodyModel, *, fps: float,
                 max_speed_mps: float = MAX_JOINT_SPEED_MPS) -> np.ndarray:
     """Where a window may not reach across: True for a record that starts a new segment.
@@ -66,8 +73,7 @@ def pose_breaks(records: list[dict], model: BodyModel, *, fps: float,
     if n == 0:
         return np.zeros(0, bool)
     posed = np.array([_posed(r, model) for r in records])
-    J = np.array([[r["joints"][j] for j in model.joint_names] if p else np.zeros((len(model.joint_names), 3))
-                  for r, p in zip(records, posed)], float)
+    J = _joint_array(records, posed, model)
     frames = np.array([r["frame"] for r in records])
     hyp = [r.get("front_back_reported") for r in records]
     same = np.array([a == b for a, b in zip(hyp[:-1], hyp[1:])], bool)
@@ -88,8 +94,7 @@ def _smooth_window(window: list[dict], model: BodyModel, *, half: int, fps: floa
         return rec
     posed = [_posed(r, model) for r in window]
     P = np.array([r["params"] if p else model.zero() for r, p in zip(window, posed)], float)
-    J = np.array([[r["joints"][n] for n in model.joint_names] if p else np.zeros((len(model.joint_names), 3))
-                  for r, p in zip(window, posed)], float)
+    J = _joint_array(window, posed, model)
     start = smooth_params(model, P, half=half, breaks=breaks)[at]
     row = fit_joints(model, start[None], window_mean(J, h)[at][None])[0]
     joints = joint_centre_array(model, forward(model, row))
